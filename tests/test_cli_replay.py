@@ -335,9 +335,11 @@ def kobuki_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def test_replay_on_the_wrong_robot_fails_and_names_the_right_one(
     kobuki_log: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    """Issue #11: a kobuki log replayed on the default pmir used to print PASS, 14 m off."""
+    """Issue #11: a kobuki log replayed on pmir used to print PASS, 14 m off (pmir was the
+    default then; without --robot the log's PROFILE page now picks kobuki: test_robot_from_log)."""
     report_path = tmp_path / "replay.json"
-    code, out, err = run_cli(capsys, "replay", str(kobuki_log), "--report", str(report_path))
+    code, out, err = run_cli(capsys, "replay", str(kobuki_log), "--robot", "pmir",
+                             "--report", str(report_path))
     said = ("profile mismatch: profile hash differs: the log's firmware runs with the parameters "
             "of robot 'kobuki', not 'pmir' (--robot)")  # its ODOM_STATUS PROFILE page says so
     assert (code, err) == (1, f"warning: {said}\n")  # up front, then as the departure's cause

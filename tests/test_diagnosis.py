@@ -23,7 +23,7 @@ def test_analyze_with_the_wrong_robot_names_the_robot_that_fits(
 ) -> None:
     capsys.readouterr()
     report = tmp_path / "r.json"
-    assert main(["analyze", str(kobuki_log), "--report", str(report)]) == 1  # pmir by default
+    assert main(["analyze", str(kobuki_log), "--robot", "pmir", "--report", str(report)]) == 1
     out = capsys.readouterr().out
     hint = "robot mismatch: the log's poses fit robot 'kobuki', not 'pmir' (--robot)"
     assert hint in out
@@ -59,7 +59,7 @@ def test_analyze_with_the_wrong_integrator_and_robot_names_both(
     kobuki_log: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     capsys.readouterr()
-    assert main(["analyze", str(kobuki_log), "--integrator", "rk2"]) == 1
+    assert main(["analyze", str(kobuki_log), "--robot", "pmir", "--integrator", "rk2"]) == 1
     out = capsys.readouterr().out
     assert "integrator mismatch: the log's ODOM_STATUS reports exact, not rk2" in out
     assert "robot mismatch: the log's poses fit robot 'kobuki', not 'pmir' (--robot)" in out
@@ -74,7 +74,8 @@ def test_a_batch_names_the_robot_mismatch_of_each_log(
     second.write_bytes(kobuki_log.read_bytes())
     reports = tmp_path / "reports"
     capsys.readouterr()
-    assert main(["analyze", str(kobuki_log), str(second), "--report-dir", str(reports)]) == 1
+    assert main(["analyze", str(kobuki_log), str(second), "--robot", "pmir",
+                 "--report-dir", str(reports)]) == 1
     out = capsys.readouterr().out
     hint = "robot mismatch: the log's poses fit robot 'kobuki', not 'pmir' (--robot)"
     assert f"{second}: {hint}" in out

@@ -37,12 +37,13 @@ class DaskUnavailableError(OdocanError):
 
 @dataclass(frozen=True)
 class Job:
-    """What every log is analysed with: robot profile name, integrator (None: the one the log's
+    """What every log is analysed with: robot profile name (None: each log's own, from its
+    PROFILE page, ``host.cli.robotchoice``), integrator (None: the one the log's
     ODOM_STATUS reports), position tolerance in metres, heading tolerance in radians, and the
     DBC path (None: odocan's own), and whether to stream each log (``stream_analysis.streams``:
     auto, always, never)."""
 
-    robot: str
+    robot: str | None
     integrator: str | None
     tolerance_position_m: float
     tolerance_heading_rad: float
@@ -97,6 +98,7 @@ def analyze_one(path: str, job: Job) -> LogResult:
     ``analyze LOG``: the firmware's PROFILE page gives the judges its speed bound and names a
     wrong ``--robot`` (``host.judge.profilepage``), then a failed verdict's pose fit does."""
     from odocan.host.cli.inputs import explained, require_frames
+    from odocan.host.cli.robotchoice import choose_robot
     from odocan.host.cli.subparsers.analyze import load_judges_dbc, log_inputs
     from odocan.host.io.logs import read_log
     from odocan.host.judge.analysis import Tolerance, analyze
@@ -104,11 +106,11 @@ def analyze_one(path: str, job: Job) -> LogResult:
     from odocan.host.judge.profilepage import head_profile, with_bus_speed
     from odocan.host.judge.samples import AnalysisError
     from odocan.host.judge.stream_analysis import FrameCount, NotStreamable, analyze_file, streams
-    from odocan.sim import robot
 
     log = Path(path)
     try:
-        profile = robot.load(job.robot)
+        choice = choose_robot(job.robot, log, from_log=job.dbc is None)
+        profile = choice.profile
         tolerance = Tolerance(job.tolerance_position_m, job.tolerance_heading_rad)
         db = load_judges_dbc(Path(job.dbc)) if job.dbc is not None else None
         streamed: dict[str, Any] | None = None
@@ -141,9 +143,8 @@ def analyze_one(path: str, job: Job) -> LogResult:
                                        job.integrator, tolerance=tolerance)
                 later = later_mismatches(frames, profile, analysis.report["integrator"])
             report = analysis.report
-        report["inputs"] = log_inputs(
-            log, profile, report["integrator"], None if job.dbc is None else Path(job.dbc)
-        )
+        report["inputs"] = choice.recorded(log_inputs(
+            log, profile, report["integrator"], None if job.dbc is None else Path(job.dbc)))
         _diagnose(log, report, profile, running, tolerance, db is None, later)
     except (OdocanError, OSError) as exc:
         return LogResult(path, error=_one_line(exc))

@@ -70,12 +70,17 @@ def add_seed_argument(parser: argparse.ArgumentParser, what: str = "random seed"
     )
 
 
-def add_robot_argument(parser: argparse.ArgumentParser, *, role: str = "profile name") -> None:
-    """``--robot NAME|PATH`` (default pmir)."""
+def add_robot_argument(
+    parser: argparse.ArgumentParser, *, role: str = "profile name", from_log: bool = False
+) -> None:
+    """``--robot NAME|PATH`` (default pmir; ``from_log``: None, the log's PROFILE page picks,
+    ``host.cli.robotchoice``)."""
+    default = ("the shipped robot whose parameters the log's PROFILE page gives, when exactly "
+               "one does (said on stderr); else pmir" if from_log else "pmir")
     parser.add_argument(
         "--robot",
-        default="pmir",
-        help=f"{role} ({', '.join(robot.list_profiles())}) or TOML path (default: pmir)",
+        default=None if from_log else "pmir",
+        help=f"{role} ({', '.join(robot.list_profiles())}) or TOML path (default: {default})",
     )
 
 

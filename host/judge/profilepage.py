@@ -23,6 +23,7 @@ import dataclasses
 import struct
 import zlib
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
@@ -90,34 +91,47 @@ def running_profile(
     last one that holds (MAX_WHEEL_SPEED 0: no bound); None: the log has none. Raw values,
     MAX_WHEEL_SPEED in its 1 mm/s LSB. Only these pages are checked (a handful per minute), so a
     caller need not run the whole log's E2E check for it."""
+    pages = _pages(frames, decoder)
+    return next((page for page in reversed(pages) if page.bounded), pages[-1] if pages else None)
+
+
+def first_page(frames: FrameArrays, decoder: BulkDecoder | None = None) -> RunningProfile | None:
+    """The first PROFILE page of ``frames`` whose E2E CRC holds (None: none): what the firmware
+    ran with where the log begins, before any config it applies in the log (``shipped_robots``)."""
+    pages = _pages(frames, decoder)
+    return pages[0] if pages else None
+
+
+def _pages(frames: FrameArrays, decoder: BulkDecoder | None) -> list[RunningProfile]:
+    """The PROFILE pages of ``frames`` whose E2E CRC holds, in log order."""
     decoder = decoder if decoder is not None else BulkDecoder(default_plan())
     try:
         page = decoder.decode_page(frames, "ODOM_STATUS", PROFILE_PAGE)
         data_ids = _status_data_ids()
     except (DecodeError, KeyError):
-        return None
+        return []
     if "PROFILE_CRC" not in page or data_ids is None:
-        return None
-    unbounded = None
-    for row in range(len(page["index"]) - 1, -1, -1):
-        data = bytes(frames.data[int(page["index"][row])])
-        if frames.dlc[int(page["index"][row])] == 8 and data[0] == crc8h2f_p02_one(
+        return []
+    pages = []
+    for row, position in enumerate(page["index"]):
+        data = bytes(frames.data[int(position)])
+        if frames.dlc[int(position)] == 8 and data[0] == crc8h2f_p02_one(
                 data, data_ids[data[1] & ENC_COUNTER_MASK]):
-            running = RunningProfile(int(page["MAX_WHEEL_SPEED"][row]),
-                                     int(page["PROFILE_CRC"][row]))
-            if running.bounded:
-                return running
-            unbounded = unbounded or running
-    return unbounded
+            pages.append(RunningProfile(int(page["MAX_WHEEL_SPEED"][row]),
+                                        int(page["PROFILE_CRC"][row])))
+    return pages
 
 
-def head_profile(path: Path, head_frames: int = HEAD_FRAMES) -> RunningProfile | None:
-    """``running_profile`` of a log's first ``head_frames`` frames (a streamed analysis: the
-    page comes every 600 ms, so the head of a log holds it); None when they hold none or the
-    log cannot be read (the analysis says why)."""
+def head_profile(
+    path: Path, head_frames: int = HEAD_FRAMES,
+    pick: Callable[[FrameArrays], RunningProfile | None] = running_profile,
+) -> RunningProfile | None:
+    """``pick`` (``running_profile``, ``first_page``) of a log's first ``head_frames`` frames (a
+    streamed analysis: the page comes every 600 ms, so the head of a log holds it); None when
+    they hold none or the log cannot be read (the analysis says why)."""
     try:
         for chunk in iter_log(path, chunk_frames=head_frames, warn=lambda _text: None):
-            return running_profile(chunk)
+            return pick(chunk)
     except (OdocanError, OSError):
         return None
     return None
@@ -212,6 +226,25 @@ def _shipped_fits(running: RunningProfile, given: RobotProfile) -> str | None:
             if any(running.profile_crc == profile_crc(candidate, i) for i in INTEGRATORS):
                 return name
     return None
+
+
+def shipped_robots(running: RunningProfile | None) -> tuple[str, ...]:
+    """The shipped profiles whose parameters ``running``'s PROFILE_CRC is, run with any
+    integrator, with their own speed bound, the page's, or none (a page without a bound):
+    the robot ``analyze`` and ``replay`` take when ``--robot`` is not given and exactly one
+    fits (``host.cli.robotchoice``). Empty without a page."""
+    if running is None:
+        return ()
+    fits = []
+    for name in list_profiles():
+        shipped = robots.load(name)
+        unbounded = dataclasses.replace(shipped, max_wheel_speed_m_s=0.0)
+        candidates = (shipped, with_bus_speed(shipped, running),
+                      *(() if running.bounded else (unbounded,)))
+        if any(running.profile_crc == profile_crc(candidate, integrator)
+               for candidate in candidates for integrator in INTEGRATORS):
+            fits.append(name)
+    return tuple(fits)
 
 
 class _Judges(Protocol):

@@ -40,11 +40,14 @@ def check_junit_path(args: argparse.Namespace) -> None:
     check_writable(getattr(args, "junit", None), "--junit")
 
 
-def write_checks(args: argparse.Namespace, suite: str, checks: list[Check]) -> None:
-    """Write ``checks`` to ``--junit`` (nothing without it); an I/O error names the path."""
+def write_checks(args: argparse.Namespace, suite: str, checks: list[Check],
+                 properties: dict[str, str] | None = None) -> None:
+    """Write ``checks`` to ``--junit`` (nothing without it), with the suite's ``properties``
+    (what it was judged with, e.g. the robot and where it came from); an I/O error names the
+    path."""
     path: Path | None = getattr(args, "junit", None)
     if path is not None:
-        write_text(path, junit_xml(suite, checks), "--junit")
+        write_text(path, junit_xml(suite, checks, properties=properties), "--junit")
 
 
 def analysis_checks(report: dict[str, Any]) -> list[Check]:

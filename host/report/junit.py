@@ -22,8 +22,10 @@ class Check:
     figures: dict[str, object] = field(default_factory=dict)
 
 
-def junit_xml(suite: str, checks: list[Check], *, time_s: float = 0.0) -> str:
-    """The JUnit XML document of ``checks`` as one test suite named ``suite``."""
+def junit_xml(suite: str, checks: list[Check], *, time_s: float = 0.0,
+              properties: dict[str, str] | None = None) -> str:
+    """The JUnit XML document of ``checks`` as one test suite named ``suite``, with the
+    suite's ``properties`` (JUnit's ``<properties>``) when given."""
     import xml.etree.ElementTree as ET  # here: every command without --junit skips it
 
     failures = sum(not check.passed for check in checks)
@@ -32,6 +34,10 @@ def junit_xml(suite: str, checks: list[Check], *, time_s: float = 0.0) -> str:
         root, "testsuite", name=suite, tests=str(len(checks)), failures=str(failures),
         errors="0", skipped="0", time=f"{time_s:.3f}",
     )
+    if properties:
+        listed = ET.SubElement(node, "properties")
+        for name, value in properties.items():
+            ET.SubElement(listed, "property", name=name, value=value)
     for check in checks:
         case = ET.SubElement(node, "testcase", classname=f"odocan.{suite}", name=check.name)
         figures = "\n".join(f"{key} = {value}" for key, value in check.figures.items())

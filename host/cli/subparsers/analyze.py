@@ -4,8 +4,10 @@ The log (``.log`` candump, ``.asc``, ``.blf``, as ``odocan run --log`` or any py
 can-utils tool writes them) is read with ``host.logio.read_log``, decoded with the DBC and the
 on-board pose compared with the float64 reference computed from the logged encoder counts, and
 with the ground truth when ``SIM_TRUTH`` frames are present. The integrator defaults to the one
-the firmware reports in ``ODOM_STATUS``; the robot cannot be read from the bus and defaults to
-pmir. Same ``--report``, ``--plot``, ``--tolerance``, summary and exit codes as ``odocan run``.
+the firmware reports in ``ODOM_STATUS``; the robot, without ``--robot``, is the shipped one whose
+parameters the log's PROFILE page gives, when exactly one does (said on stderr in one line,
+recorded in the report: ``host.cli.robotchoice``), else pmir.
+Same ``--report``, ``--plot``, ``--tolerance``, summary and exit codes as ``odocan run``.
 
 A ``--dbc`` that does not match the log (a message the analysis needs is missing, or none of its
 frames is in the log under the DBC's ID, or none passes its E2E check with the DBC's data IDs)
@@ -71,14 +73,17 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
         description="Decode a CAN log with the DBC and compare the on-board pose with the "
         "float64 reference (and the ground truth when SIM_TRUTH frames are logged). Several "
         "logs or directories (searched for .log, .asc, .blf) are analysed in parallel, one "
-        "summary row and one JSON report (--report-dir) per log. Exit 0 within tolerance, 1 "
-        "not (any log), 2 on bad usage or input (any log unreadable).",
+        "summary row and one JSON report (--report-dir) per log. Without --robot, each log "
+        "is judged as the shipped robot its PROFILE page names, when exactly one fits (one "
+        "line on stderr; the report's inputs.robot.source says where the robot came from). "
+        "Exit 0 within tolerance, 1 not (any log), 2 on bad usage or input (any log "
+        "unreadable).",
     )
     parser.add_argument(
         "log", type=Path, nargs="+", metavar="LOG",
         help="CAN log: .log (candump), .asc, .blf; or a directory of them (recursively)",
     )
-    add_robot_argument(parser)
+    add_robot_argument(parser, from_log=True)
     add_judge_arguments(parser)
     parser.add_argument(
         "-b",
@@ -143,6 +148,7 @@ def _do_analyze(args: argparse.Namespace) -> int:
 def _analyze_single(args: argparse.Namespace) -> int:
     """One log: the full summary, ``--report``, ``--plot``, exports and ``--junit``."""
     from odocan.host.cli.inputs import explained, require_frames
+    from odocan.host.cli.robotchoice import choose_robot
     from odocan.host.io.logs import read_log
     from odocan.host.judge.analysis import analyze
     from odocan.host.judge.configs import later_mismatches, running_before_configs
@@ -153,15 +159,17 @@ def _analyze_single(args: argparse.Namespace) -> int:
     from odocan.host.report.ci import analysis_checks, write_checks
     from odocan.host.report.progress import wall_clock_progress
     from odocan.host.report.summary import finish
-    from odocan.sim import robot
 
-    profile = robot.load(args.robot)
+    choice = choose_robot(args.robot, args.log, from_log=args.dbc is None)
+    profile = choice.profile
     check_output_paths(args)
     check_export_paths(args.parquet, args.mcap)
     check_junit_path(args)
     check_distinct([("--report", args.report), ("--plot", args.plot), ("--junit", args.junit),
                     ("--mcap", args.mcap)], [("LOG", args.log), ("--dbc", args.dbc)])
     db = load_judges_dbc(args.dbc) if args.dbc is not None else None
+    if (line := choice.said("analyze", args.log)) is not None:
+        print(line, file=sys.stderr)
     with wall_clock_progress(f"analysing {args.log}", None):
         streams = _streams(args)
         running = head_profile(args.log) if streams and db is None else None
@@ -185,8 +193,8 @@ def _analyze_single(args: argparse.Namespace) -> int:
 
         assert frames is not None  # -b reads the whole log
         analysis.report["bus"] = busstats.from_frames(frames, args.bitrate).as_dict()
-    analysis.report["inputs"] = log_inputs(args.log, profile, analysis.report["integrator"],
-                                           args.dbc)
+    analysis.report["inputs"] = choice.recorded(
+        log_inputs(args.log, profile, analysis.report["integrator"], args.dbc))
     said = profile_mismatch(running, profile, analysis.report["integrator"])
     hints: list[str] = [] if said is None else [said]  # the firmware's PROFILE page names it
     if frames is not None and db is None:  # the pages after an applied config: its robot's
@@ -204,7 +212,7 @@ def _analyze_single(args: argparse.Namespace) -> int:
     code = finish(analysis, args, title=f"odocan analyze: {args.log}")
     for hint in hints:
         print(f"  - {hint}")
-    write_checks(args, "analyze", analysis_checks(analysis.report))
+    write_checks(args, "analyze", analysis_checks(analysis.report), choice.properties())
     if whole_log is not None:
         write_exports(args, whole_log, analysis, db)
     return code
@@ -281,7 +289,8 @@ def _analyze_many(args: argparse.Namespace) -> int:
         raise ConfigurationError(
             f"{', '.join(single_only)} take a single LOG; for several logs use --report-dir DIR"
         )
-    robot.load(args.robot)  # a bad profile is a usage error before any work
+    if args.robot is not None:
+        robot.load(args.robot)  # a bad profile is a usage error before any work
     if args.dbc is not None:
         load_judges_dbc(args.dbc)
     if args.report_dir is not None:
@@ -304,11 +313,21 @@ def _analyze_many(args: argparse.Namespace) -> int:
         results = batch.analyze_logs(logs, job, jobs=args.jobs)
     if args.report_dir is not None:
         write_reports(results, args.report_dir)
-    for result in results:  # --stream always: the logs read whole after all, and why
-        if result.refused is not None:
-            print(refused_line(result.path, result.refused), file=sys.stderr)
+    _say_choices(results)
     print_batch_summary(results)
     return _batch_exit(results, problems)
+
+
+def _say_choices(results: list[LogResult]) -> None:
+    """On stderr, per log: the robot its PROFILE page chose (``host.cli.robotchoice``), and
+    under ``--stream always`` why it was read whole after all."""
+    from odocan.host.cli.robotchoice import said_of_report
+
+    for result in results:
+        if (line := said_of_report("analyze", result.path, result.report)) is not None:
+            print(line, file=sys.stderr)
+        if result.refused is not None:
+            print(refused_line(result.path, result.refused), file=sys.stderr)
 
 
 def check_report_dir(directory: Path) -> None:

@@ -23,6 +23,7 @@ import numpy.typing as npt
 from rich.console import Console
 
 from odocan.host.cli.options import add_robot_argument, check_log_path, float_in
+from odocan.host.cli.robotchoice import choose_robot
 from odocan.host.cli.subparsers.analyze import log_inputs
 from odocan.host.io.buses import add_bus_arguments, open_bus
 from odocan.host.io.logs import FrameArrays, read_log, warn_on_stderr
@@ -47,7 +48,7 @@ from odocan.host.report.ci import (
 from odocan.host.report.progress import progress
 from odocan.host.report.summary import add_check_arguments, check_output_paths, finish
 from odocan.host.stopped import EXIT_SIGNAL_BASE, stop_code
-from odocan.sim import contract, robot
+from odocan.sim import contract
 from odocan.sim.exceptions import ConfigurationError
 from odocan.sim.rig import INTEGRATORS
 
@@ -64,12 +65,15 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
         help="re-run a recorded drive against the current firmware (or play a log onto a bus)",
         description="Feed a log's WHEEL_ENCODERS frames to the current firmware in lockstep "
         "(one tick per 10 ms encoder period, gaps kept) and check its odometry as odocan run "
-        "does; or, with --realtime, play the log onto a live bus with its original timing.",
+        "does; or, with --realtime, play the log onto a live bus with its original timing. "
+        "Without --robot, the log is replayed on the shipped robot its PROFILE page names, "
+        "when exactly one fits (one line on stderr; the report's inputs.robot.source says "
+        "where the robot came from).",
         epilog="Examples: odocan replay drive.log --integrator rk2 --report r.json; "
         "odocan replay drive.log --realtime -i socketcan -c vcan0 --speed 2",
     )
     parser.add_argument("log", type=Path, metavar="LOG", help="CAN log: .log (candump), .asc, .blf")
-    add_robot_argument(parser)
+    add_robot_argument(parser, from_log=True)
     parser.add_argument(
         "--integrator", choices=INTEGRATORS,
         help="on-board integrator (default: the one the log's ODOM_STATUS reports, else exact)",
@@ -95,13 +99,16 @@ def _do_replay(args: argparse.Namespace) -> int:
     _check_options(args)
     if args.realtime:
         return _play_realtime(read_log(args.log), args)
-    profile = robot.load(args.robot)
+    choice = choose_robot(args.robot, args.log)
+    profile = choice.profile
     check_output_paths(args)
     check_junit_path(args)
     check_log_path(args.log_out)
     check_distinct([("--log", args.log_out), ("--report", args.report), ("--plot", args.plot),
                     ("--junit", args.junit)], [("LOG", args.log)])
     frames = read_log(args.log)
+    if (line := choice.said("replay", args.log)) is not None:
+        print(line, file=sys.stderr)
     feed = ReplayInput.from_log(frames)
     logged = logged_integrator(frames, feed.accepted)
     integrator = args.integrator or logged or "exact"
@@ -119,7 +126,7 @@ def _do_replay(args: argparse.Namespace) -> int:
     )
     section = analysis.report["replay"]
     _print_versus_log(section)
-    analysis.report["inputs"] = log_inputs(args.log, profile, integrator, None)
+    analysis.report["inputs"] = choice.recorded(log_inputs(args.log, profile, integrator, None))
     reasons = departures(section["onboard_vs_log"], args.tolerance)
     blind = unjudged(section["onboard_vs_log"])
     if reasons:  # the firmware's own word on its profile first, then the poses' fit
@@ -139,7 +146,7 @@ def _do_replay(args: argparse.Namespace) -> int:
             write_report(args.report, analysis.report)
         print("\n".join(verdict))
         code = 1
-    write_checks(args, "replay", analysis_checks(analysis.report))
+    write_checks(args, "replay", analysis_checks(analysis.report), choice.properties())
     stopped = analysis.report.get("stopped")
     return code if stopped is None else stop_code(stopped)
 

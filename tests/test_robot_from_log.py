@@ -1,0 +1,218 @@
+"""Without ``--robot``, ``analyze`` and ``replay`` take the robot the log's PROFILE page names
+(``host.cli.robotchoice``): a kobuki log judged as the default pmir FAILed a correct firmware
+only to say "runs with the parameters of robot 'kobuki', not 'pmir' (--robot)" next to it."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import shutil
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import pytest
+
+from odocan.host.cli.app import main
+from odocan.host.judge.profilepage import RunningProfile, profile_crc, shipped_robots
+from odocan.sim import robot
+
+ODD = ('name = "odd"\ncounts_per_rev = 4000\nwheel_radius_left_m = 0.04\n'
+       'wheel_radius_right_m = 0.04\nwheelbase_m = 0.3\ncounter_bits = 32\n')
+
+
+@pytest.fixture(scope="module")
+def logs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """3 s drives of kobuki, pmir and a custom profile ``odd`` (matching no shipped robot)."""
+    folder = tmp_path_factory.mktemp("robots")
+    odd = folder / "odd.toml"
+    odd.write_text(ODD)
+    made = {}
+    for name, arg in (("kobuki", "kobuki"), ("pmir", "pmir"), ("odd", str(odd))):
+        made[name] = folder / f"{name}.log"
+        assert main(["run", "--robot", arg, "--duration", "3", "--seed", "2", "--log",
+                     str(made[name])]) == 0
+    made["odd.toml"] = odd
+    return made
+
+
+def _run(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, str, str]:
+    capsys.readouterr()
+    code = main(list(argv))
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def _chosen(report: Path) -> tuple[str, str, list[str]]:
+    """The report's robot: name, where it came from, the shipped robots the page fits."""
+    said = json.loads(report.read_text())["inputs"]["robot"]
+    return said["name"], said["source"], said["page_fits"]
+
+
+def test_analyze_takes_the_robot_the_logs_page_names(
+    logs: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A kobuki log without ``--robot`` PASSes as kobuki, says so in one stderr line, the JSON
+    report and the JUnit properties; its figures are ``--robot kobuki``'s."""
+    report, junit = tmp_path / "r.json", tmp_path / "r.xml"
+    code, out, err = _run(capsys, "analyze", str(logs["kobuki"]), "--report", str(report),
+                          "--junit", str(junit))
+    assert (code, err) == (0, f"odocan analyze: {logs['kobuki']}: robot 'kobuki' (from the "
+                              "log's PROFILE page)\n")
+    assert "  robot      kobuki, 2578 counts/rev, 16-bit counters" in out.splitlines()
+    assert "mismatch" not in out
+    assert _chosen(report) == ("kobuki", "PROFILE page", ["kobuki"])
+    properties = {p.get("name"): p.get("value") for p in ET.parse(junit).iter("property")}
+    assert properties == {"robot": "kobuki", "robot_source": "PROFILE page"}
+    given = tmp_path / "given.json"
+    assert _run(capsys, "analyze", str(logs["kobuki"]), "--robot", "kobuki", "--report",
+                str(given))[:3:2] == (0, "")  # given: nothing to say on stderr
+    assert _chosen(given) == ("kobuki", "--robot", [])
+    ours, theirs = json.loads(report.read_text()), json.loads(given.read_text())
+    for judged in (ours, theirs):
+        del judged["inputs"]
+    assert ours == theirs
+
+
+@pytest.mark.parametrize("stream", ["never", "always"])
+def test_analyze_streamed_or_whole_chooses_alike(
+    logs: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str], stream: str
+) -> None:
+    report = tmp_path / "r.json"
+    code, _, err = _run(capsys, "analyze", str(logs["kobuki"]), "--stream", stream,
+                        "--report", str(report))
+    assert code == 0
+    assert err.splitlines()[0] == (f"odocan analyze: {logs['kobuki']}: robot 'kobuki' (from "
+                                   "the log's PROFILE page)")
+    assert _chosen(report) == ("kobuki", "PROFILE page", ["kobuki"])
+
+
+def test_replay_takes_the_robot_the_logs_page_names(
+    logs: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Issue #11's trial: ``replay k.log`` FAILed as pmir; it replays kobuki now, bit for bit."""
+    report = tmp_path / "r.json"
+    code, out, err = _run(capsys, "replay", str(logs["kobuki"]), "--report", str(report))
+    assert (code, err) == (0, f"odocan replay: {logs['kobuki']}: robot 'kobuki' (from the "
+                              "log's PROFILE page)\n")
+    assert "departs" not in out
+    assert "mismatch" not in out
+    assert json.loads(report.read_text())["replay"]["passed"] is True
+    assert _chosen(report) == ("kobuki", "PROFILE page", ["kobuki"])
+
+
+def test_a_log_of_the_default_robot_is_judged_quietly(
+    logs: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """pmir's page picks pmir: nothing new to say on stderr; the report says where it came
+    from."""
+    report = tmp_path / "r.json"
+    assert _run(capsys, "analyze", str(logs["pmir"]), "--report", str(report))[::2] == (0, "")
+    assert _chosen(report) == ("pmir", "PROFILE page", ["pmir"])
+
+
+def test_a_custom_robots_log_keeps_the_default_and_its_diagnosis(
+    logs: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A log whose page fits no shipped robot: judged as pmir and diagnosed as before."""
+    report = tmp_path / "r.json"
+    code, out, err = _run(capsys, "analyze", str(logs["odd"]), "--report", str(report))
+    assert code == 1
+    assert "PROFILE page)" not in err
+    assert _chosen(report) == ("pmir", "default", [])
+    crc = profile_crc(robot.load(logs["odd.toml"]), "exact")
+    said = (f"profile mismatch: profile hash differs (log 0x{crc:08X}, --robot pmir "
+            f"0x{profile_crc(robot.load('pmir'), 'exact'):08X})")
+    assert json.loads(report.read_text())["diagnosis"][0] == said
+    assert f"  - {said}" in out.splitlines()
+    code, out, err = _run(capsys, "replay", str(logs["odd"]))
+    assert code == 1
+    assert "PROFILE page)" not in err
+    assert f"warning: {said}" in err.splitlines()
+    assert _run(capsys, "analyze", str(logs["odd"]), "--robot", str(logs["odd.toml"]))[0] == 0
+
+
+@pytest.mark.parametrize("command", ["analyze", "replay"])
+def test_an_explicit_robot_wins_and_is_diagnosed(
+    logs: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str], command: str
+) -> None:
+    report = tmp_path / "r.json"
+    code, out, err = _run(capsys, command, str(logs["kobuki"]), "--robot", "pmir",
+                          "--report", str(report))
+    assert code == 1
+    assert "PROFILE page)" not in err
+    said = ("profile mismatch: profile hash differs: the log's firmware runs with the parameters "
+            "of robot 'kobuki', not 'pmir' (--robot)")
+    assert f"  - {said}" in out.splitlines()
+    assert _chosen(report) == ("pmir", "--robot", [])
+
+
+def test_a_page_several_shipped_robots_fit_keeps_the_default(
+    logs: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Two shipped profiles with kobuki's parameters: the page cannot choose; pmir as before."""
+    shipped = tmp_path / "robots"
+    shipped.mkdir()
+    for name in ("pmir", "kobuki"):
+        shutil.copy(robot.ROBOTS_DIR / f"{name}.toml", shipped)
+    twin = (robot.ROBOTS_DIR / "kobuki.toml").read_text().replace('"kobuki"', '"twin"')
+    (shipped / "twin.toml").write_text(twin)
+    monkeypatch.setattr(robot, "ROBOTS_DIR", shipped)
+    report = tmp_path / "r.json"
+    code, _, err = _run(capsys, "analyze", str(logs["kobuki"]), "--report", str(report))
+    assert code == 1
+    assert "PROFILE page)" not in err
+    assert _chosen(report) == ("pmir", "default", ["kobuki", "twin"])
+
+
+@pytest.mark.parametrize(("jobs", "stream"), [("1", "never"), ("2", "always")])
+def test_a_batch_chooses_each_logs_robot(
+    logs: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str], jobs: str,
+    stream: str,
+) -> None:
+    """kobuki, pmir and odd logs in one folder (worker processes or not, streamed or whole):
+    each is judged with its own page's robot, odd with the default; stderr names the one
+    robot other than the default a page chose (a pmir log is judged as before, quietly)."""
+    folder = tmp_path / "logs"
+    folder.mkdir()
+    for name in ("kobuki", "pmir", "odd"):
+        shutil.copy(logs[name], folder / f"{name}.log")
+    reports = tmp_path / "json"
+    code, out, err = _run(capsys, "analyze", str(folder), "--jobs", jobs, "--stream", stream,
+                          "--report-dir", str(reports))
+    assert code == 1  # odd, judged as pmir
+    assert out.splitlines()[-1] == "2 PASS, 1 FAIL, 0 unreadable"
+    assert [line for line in err.splitlines() if "PROFILE page" in line] == [
+        f"odocan analyze: {folder / 'kobuki.log'}: robot 'kobuki' (from the log's PROFILE page)"]
+    chosen = {path.name: _chosen(path) for path in reports.glob("*.json")}
+    assert chosen == {"kobuki.log.json": ("kobuki", "PROFILE page", ["kobuki"]),
+                      "pmir.log.json": ("pmir", "PROFILE page", ["pmir"]),
+                      "odd.log.json": ("pmir", "default", [])}
+    code, _, err = _run(capsys, "analyze", str(folder), "--jobs", jobs, "--robot", "kobuki",
+                        "--report-dir", str(reports))
+    assert code == 1
+    assert "PROFILE page)" not in err
+    assert {_chosen(path)[:2] for path in reports.glob("*.json")} == {("kobuki", "--robot")}
+
+
+def test_shipped_robots_reads_any_integrator_and_an_unbounded_page() -> None:
+    """The page's CRC with any integrator, the page's own bound, or none (a FAULT page)."""
+    kobuki = robot.load("kobuki")
+    assert shipped_robots(None) == ()
+    assert shipped_robots(RunningProfile(700, profile_crc(kobuki, "rk2"))) == ("kobuki",)
+    faster = dataclasses.replace(kobuki, max_wheel_speed_m_s=1.5)
+    assert shipped_robots(RunningProfile(1500, profile_crc(faster, "exact"))) == ("kobuki",)
+    bare = dataclasses.replace(kobuki, max_wheel_speed_m_s=0.0)
+    assert shipped_robots(RunningProfile(0, profile_crc(bare, "euler"))) == ("kobuki",)
+    assert shipped_robots(RunningProfile(700, profile_crc(kobuki, "exact") ^ 1)) == ()
+
+
+@pytest.mark.parametrize("command", ["analyze", "replay"])
+def test_the_help_says_where_the_robot_comes_from(
+    command: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    with pytest.raises(SystemExit):
+        main([command, "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "the shipped robot whose parameters the log's PROFILE page gives" in text
+    assert "inputs.robot.source" in text
