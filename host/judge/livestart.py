@@ -131,6 +131,7 @@ class Lives:
     def on_counts(self, ok: int, lost: int, proven: bool) -> None:
         """``PoseTracker.on_enc_counts``' start: the page ends a wait, or proves a power-up."""
         boot, tracker = self.boot, self._tracker
+        started = self.power_up_proven  # by the stall (``livefirst``): not started again
         self.power_up_proven |= proven  # (``livefirst``: also when no frame was heard yet)
         if boot is not None and boot[0] < 0:  # the first life's samples wait
             self.finish_first(proven)
@@ -138,7 +139,7 @@ class Lives:
             self.finish_boot(boot[0])
         elif boot is not None and (at := primed_at(tracker.window, ok, lost)) is not None:
             self.finish_boot(at)
-        elif proven and tracker.integrator is not None:
+        elif proven and not started and tracker.integrator is not None:
             self.finish_boot(0, first_life=True)  # the samples judged before keep their errors
 
     def finish_boot(self, primed: int, first_life: bool = False) -> None:
