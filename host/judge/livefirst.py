@@ -41,7 +41,6 @@ PASS that hides its first pose)."""
 from __future__ import annotations
 
 import bisect
-import math
 from collections import deque
 from typing import TYPE_CHECKING, Any
 
@@ -101,23 +100,30 @@ class FirstStall:
             elif self.init_s is None:
                 self.init_s = t_s
 
-    def powered_up(self, tracker: PoseTracker, primed: int, t_s: float) -> bool | None:
+    def powered_up(self, tracker: PoseTracker, t_s: float) -> bool | None:
         """``stallpowerup.stalled_power_up`` live, for the first sample (its ODOM_POSE_Y at
-        ``t_s``) after a stall whose first frame the firmware could have primed on is
-        ``primed`` (seq): True when proven, None when its power-up stalled but the robot moved
-        (or the frames are no longer kept), False when no such power-up."""
+        ``t_s``) after a stall: True when proven, None when its power-up stalled but the robot
+        moved (or the frames are no longer kept), False when no such power-up. The frames it
+        may have primed on: those up to the first heard after its last ODOM_STATUS (counted
+        by that status, not from the window: a stall longer than it)."""
         talked = self.talked_before(t_s)
-        ys = tracker.pairs.halves["y"]
-        before = [float(y) for y in (ys.col("t_s") if len(ys) else ()) if y < t_s]
-        stall_s = max(([talked[0]] if talked else []) + before, default=math.inf)
-        if (self.init_s is None or self.init_s > stall_s
-                or (self.broke_s is not None and self.broke_s <= stall_s)
-                or (self.posed_s is not None and self.posed_s <= stall_s)):
-            return False
-        counts = self._counts(tracker, primed)
+        if (talked is None or self.init_s is None or self.init_s > talked[0]
+                or (self.broke_s is not None and self.broke_s <= talked[0])
+                or (self.posed_s is not None and self.posed_s <= talked[0])):
+            return False  # (no pose half before it: the stall is from that status)
+        counts = self._counts(tracker, talked[1])
         if counts is None:
             return None
         return all(c == counts[0] for c in counts) or None
+
+    def proven_after_all(self, tracker: PoseTracker) -> None:
+        """The first life's reference started at (0, 0, 0) on frame 0 after all (its first
+        count page proved it, ``livestart.Lives.finish_boot``): its first pose judged, no
+        longer unproven nor adopted."""
+        if self.unproven:
+            self.unproven = False
+            adopted = tracker.adopted
+            adopted.life = [a for a in adopted.life if a.cause != UNPROVEN]
 
     def _counts(self, tracker: PoseTracker, upto: int) -> list[tuple[int, int]] | None:
         """The LEFT, RIGHT counts of frames 0 .. ``upto`` (seq), None when not kept."""
@@ -169,7 +175,7 @@ def left_out_first(tracker: PoseTracker, pose: FramePose, t_s: float, queued: bo
     lives = tracker.lives
     if (tracker.raw.odometry is None and not lives.power_up_proven and lives.boot is None
             and not tracker.reference_starts):  # the first life's power-up, its pages lost
-        proven = tracker.first.powered_up(tracker, primed, t_s)
+        proven = tracker.first.powered_up(tracker, t_s)
         lives.power_up_proven = proven is True
         if proven is None:  # the start the judges take: the firmware's own pose
             tracker.adopted.owe(UNPROVEN)

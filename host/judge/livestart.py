@@ -155,6 +155,8 @@ class Lives:
                 tracker.restart_reference()
             return
         tracker.reference_starts -= first_life and tracker.reference_starts > 0
+        if first_life:  # (a stall before its first pose left it unproven: livefirst)
+            tracker.first.proven_after_all(tracker)
         tracker.placer.seen.power_up(primed)  # its boot a page before (gapseen.with_boot)
         tracker.losses.primed(primed)  # ENC_E2E_LOST counted from 0 there
         stalled = tracker.first.stalled_from if first_life and poses else None  # told before
