@@ -51,11 +51,10 @@ from odocan.host.io.logs import read_log
 from odocan.host.judge.analysis import HEADING_LSB_RAD, POSITION_LSB_M, analyze
 from odocan.host.judge.samples import ENC_E2E_PAGE
 from odocan.host.report.summary import kept_unjudged
-from tests import host_frames as hf
-from tests.test_first_second_reboot import DB, _decoded, _written, _wrong
+from tests.test_first_second_reboot import _decoded, _written, _wrong
 from tests.test_stall_before_first_pose import _odometry
 from tests.test_stall_before_first_pose_after_reboot import _live, _poses
-from tests.test_stall_beyond_window import PMIR, _end_verdicts, drive
+from tests.test_stall_beyond_window import PMIR, _end_verdicts, drive, frame_zero_moved
 
 HALTED = 300  # ticks of no MCU after its power-up tick (3 s)
 RESUMED_AT = HALTED + 2  # the encoder frame its first pose names (the merged step's end)
@@ -188,32 +187,14 @@ def test_without_its_first_count_pages_a_wrong_firmware_fails(tmp_path: Path, fr
                                                                       abs=POSITION_LSB_M)
 
 
-def _frame_zero_moved(messages: tuple[can.Message, ...]) -> tuple[can.Message, ...]:
-    """The frames with encoder frame 0's LEFT_COUNT 5 counts back (E2E re-protected): the
-    robot moved between frame 0 and frame 1 (the firmware never took frame 0: its FIFO was
-    drained at tick 0), so which of them it primed on matters and the log cannot tell."""
-    out, done = [], False
-    for m in messages:
-        if not done and m.arbitration_id == fr.WHEEL_ENCODERS_ID:
-            signals = _decoded(m)
-            signals["LEFT_COUNT"] = (int(signals["LEFT_COUNT"]) - 5) % (1 << 24)
-            data = bytearray(DB.encode_message(m.arbitration_id, signals, scaling=False))
-            hf.p02_protect(data, int(signals["COUNTER"]), fr.WHEEL_ENCODERS_DATA_IDS)
-            m = can.Message(arbitration_id=m.arbitration_id, data=bytes(data),
-                            is_extended_id=False, timestamp=m.timestamp)
-            done = True
-        out.append(m)
-    return tuple(out)
-
-
 @pytest.mark.parametrize("bias_lsb", [0, 10_000])
 def test_unproven_it_is_said_never_a_silent_pass_nor_a_false_fail(tmp_path: Path,
                                                                   bias_lsb: int) -> None:
-    """Frame 0 moved (``_frame_zero_moved``): the stall does not prove the power-up. The right
+    """Frame 0 moved (``frame_zero_moved``): the stall does not prove the power-up. The right
     firmware (``bias_lsb`` 0) FAILs no judge; neither it nor one 1 m off from its first pose
     PASSes silently: ``analyze`` says its first pose not judged (a ``power_up_unproven`` event,
     on the verdict's line), the end verdicts are UNJUDGED (the start adopted)."""
-    messages = _frame_zero_moved(_without_first_count_pages(_wrong(_messages(), 0, bias_lsb, 1)))
+    messages = frame_zero_moved(_without_first_count_pages(_wrong(_messages(), 0, bias_lsb, 1)))
     path = _written(messages, tmp_path / "log.log")
     analysis = analyze(read_log(path), PMIR, "exact")
     assert analysis.passed
@@ -225,3 +206,20 @@ def test_unproven_it_is_said_never_a_silent_pass_nor_a_false_fail(tmp_path: Path
     assert monitor.health(end_s)["state"] != "POSE WRONG"
     assert bridge.tracker.wrongs.as_dict()["episodes"] == 0
     assert _end_verdicts(bridge) == ("UNJUDGED", "UNJUDGED")
+
+
+def test_without_its_first_cycle_nothing_is_proven(tmp_path: Path) -> None:
+    """The log without the firmware's first-cycle ODOM_STATUS frames (INIT at UPTIME 0) nor
+    its first count pages: nothing shows the power-up (a recorder started after it), so no
+    judge proves it by the stall, nor says it unproven: fitted, the right firmware PASSes."""
+    messages = tuple(m for m in _without_first_count_pages(_messages())
+                     if not (m.arbitration_id == fr.ODOM_STATUS_ID and m.timestamp < 0.05))
+    analysis = analyze(read_log(_written(messages, tmp_path / "cut.log")), PMIR, "exact")
+    assert analysis.passed
+    assert analysis.report["reference_start"] == "fitted"
+    assert "power_up_unproven" not in [e["kind"] for e in analysis.report["events"]]
+    monitor, bridge, _ = _live(messages)
+    for tracker in (monitor.tracker, bridge.tracker):
+        assert not tracker.lives.power_up_proven
+        assert not tracker.first.unproven
+        assert tracker.wrongs.as_dict()["episodes"] == 0

@@ -360,7 +360,8 @@ def _analyze_life(
     if boot:  # (a stalled MCU's first page misses the frames its FIFO overran: primed_first)
         power_up = saw_only_the_log(frames, accepted, decoder) or primed_first(
             float(np.min(sent_s, initial=np.inf)), enc, alive_s, pose_sent_s)
-    elif not (power_up := starts_at_power_up(frames, accepted, decoder, onboard)):
+    elif not (power_up := starts_at_power_up(frames, accepted, decoder, onboard)) and not (
+            rebase or start_pose):  # the log's first life only
         power_up, unproven = stall_power_up(frames, accepted, decoder, enc, sent_s, alive_s)
     ref_all = build_reference(enc, onboard, robot, integrator, power_up=power_up,
                          max_wheel_speed_mm_s=max_wheel_speed_mm_s, breaks=stalls,
