@@ -20,13 +20,17 @@ comes after the first sample was left out (``livefirst``) the reference starts a
 frame 0 and its position is placed at the next sample within the merge allowance
 (``livestart.start_reference``'s ``stalled_from``), as ``analyze`` places it.
 
-Left (a strict xfail): with the firmware's first two count pages lost on the bus (3.101 s and
-3.701 s), the next one's tick bound no longer reaches the power-up (its ODOM_STATUS COUNTER has
-wrapped past 16), so no judge proves it: ``analyze`` and the live judges start fitted at the
-first sample kept and PASS a firmware 1 m off from its first pose (the monitor DEGRADED only by
-the firmware's POSE_UNCERTAIN). The evidence that remains (the first-cycle summary, INIT at
-UPTIME 0, then a stall before the first pose: ``stalls.primed_first``'s, which ``analyze``
-takes for a reboot's life only) would prove it; the log's start does not use it yet.
+(c) With the firmware's first two count pages lost on the bus (3.101 s and 3.701 s), the next
+one's tick bound no longer reaches the power-up (its ODOM_STATUS COUNTER has wrapped past 16).
+Before, no judge proved it: ``analyze`` and the live judges started fitted at the first sample
+kept and PASSed a firmware 1 m off from its first pose (the monitor DEGRADED only by the
+firmware's POSE_UNCERTAIN; both end verdicts PASS). Now the evidence that remains proves it
+(``host.judge.stallpowerup``, ``stalls.primed_first``'s rule for a reboot's life): the
+first-cycle summary says INIT at UPTIME 0, no pose before the stall, and frames 0 and 1 (the
+firmware's FIFO was drained at tick 0 after frame 0: it primed on one of them) carry the same
+counts. Frame 0 moved 5 counts off, that last condition fails: unproven, no judge PASSes the
+wrong firmware silently (``analyze`` PASSes with a ``power_up_unproven`` event its verdict line
+says; the end verdicts UNJUDGED) and none FAILs the right one.
 
 (b) X 3 LSB off from the 20th pose (0.3 mm): it FAILs ``analyze`` since the reboot's fix of the
 double allowance (``losses.placement_accounted``, which the power-up shares: 0.235 mm beyond the
@@ -46,10 +50,11 @@ from odocan.host.cli.app import main
 from odocan.host.io.logs import read_log
 from odocan.host.judge.analysis import HEADING_LSB_RAD, POSITION_LSB_M, analyze
 from odocan.host.judge.samples import ENC_E2E_PAGE
+from odocan.host.report.summary import kept_unjudged
 from tests.test_first_second_reboot import _decoded, _written, _wrong
 from tests.test_stall_before_first_pose import _odometry
 from tests.test_stall_before_first_pose_after_reboot import _live, _poses
-from tests.test_stall_beyond_window import PMIR, drive
+from tests.test_stall_beyond_window import PMIR, _end_verdicts, drive, frame_zero_moved
 
 HALTED = 300  # ticks of no MCU after its power-up tick (3 s)
 RESUMED_AT = HALTED + 2  # the encoder frame its first pose names (the merged step's end)
@@ -141,22 +146,80 @@ def _without_first_count_pages(messages: tuple[can.Message, ...]) -> tuple[can.M
 
 
 def test_without_its_first_count_pages_the_correct_firmware_passes(tmp_path: Path) -> None:
-    """No judge proves the power-up there (module docstring): fitted, the correct firmware
-    PASSes every judge."""
+    """The stall proves the power-up there (module docstring, (c)): every judge from (0, 0, 0)
+    at frame 0, the correct firmware PASSes every judge, the end verdicts too."""
     messages = _without_first_count_pages(_messages())
-    analysis = analyze(read_log(_written(messages, tmp_path / "right.log")), PMIR, "exact")
-    assert analysis.passed
+    path = _written(messages, tmp_path / "right.log")
+    analysis = analyze(read_log(path), PMIR, "exact")
+    assert analysis.passed, analysis.report["onboard_vs_reference"]
+    assert analysis.report["reference_start"] == "power-up"
+    assert main(["analyze", str(path), "--robot", "pmir", "--integrator", "exact",
+                 "--stream", "always"]) == 0
     monitor, bridge, end_s = _live(messages)
     assert monitor.health(end_s)["pose_wrongs"]["episodes"] == 0
-    assert bridge.tracker.wrongs.as_dict()["episodes"] == 0
+    for tracker in (monitor.tracker, bridge.tracker):
+        assert tracker.lives.power_up_proven
+        assert tracker.wrongs.as_dict()["episodes"] == 0
+        assert tracker.max_beyond_allowance_m <= POSITION_LSB_M
+    assert _end_verdicts(bridge) == ("PASS", "PASS")
 
 
-@pytest.mark.xfail(strict=True, reason="the power-up unproven without the first count pages: "
-                   "every judge starts fitted and absorbs 1 m (module docstring, Left)")
-def test_without_its_first_count_pages_a_wrong_firmware_fails(tmp_path: Path) -> None:
-    messages = _without_first_count_pages(_wrong(_messages(), 0, 10_000, 1))
-    assert _gap_m(messages, 1)[0] > 0.9  # the float64 evidence: 1 m off
-    analysis = analyze(read_log(_written(messages, tmp_path / "wrong.log")), PMIR, "exact")
+@pytest.mark.parametrize(("from_pose", "bias_lsb"), [(0, 10_000), (1, 10_000), (20, 3)])
+def test_without_its_first_count_pages_a_wrong_firmware_fails(tmp_path: Path, from_pose: int,
+                                                              bias_lsb: int) -> None:
+    """X off by ``bias_lsb`` from pose ``from_pose`` on (1 m, or 0.3 mm from the 20th): every
+    judge FAILs it, the end verdicts too (before: all PASSed 1 m, the start fitted)."""
+    messages = _without_first_count_pages(_wrong(_messages(), 0, bias_lsb, from_pose))
+    at = max(from_pose, 1)
+    assert _gap_m(messages, at)[0] > POSITION_LSB_M  # the float64 evidence
+    path = _written(messages, tmp_path / "wrong.log")
+    analysis = analyze(read_log(path), PMIR, "exact")
+    assert not analysis.passed
+    assert main(["analyze", str(path), "--robot", "pmir", "--integrator", "exact",
+                 "--stream", "always"]) == 1
     monitor, bridge, end_s = _live(messages)
-    assert (analysis.passed, monitor.health(end_s)["state"],
-            bridge.tracker.wrongs.as_dict()["episodes"] >= 1) == (False, "POSE WRONG", True)
+    assert monitor.health(end_s)["state"] == "POSE WRONG"
+    assert bridge.tracker.wrongs.as_dict()["episodes"] >= 1
+    assert _end_verdicts(bridge) == ("FAIL", "FAIL")
+    if bias_lsb == 10_000:  # the same start as analyze's: the same error
+        beyond_m = analysis.report["onboard_vs_reference"]["max_position_error_beyond_allowance_m"]
+        assert bridge.tracker.max_beyond_allowance_m == pytest.approx(beyond_m,
+                                                                      abs=POSITION_LSB_M)
+
+
+@pytest.mark.parametrize("bias_lsb", [0, 10_000])
+def test_unproven_it_is_said_never_a_silent_pass_nor_a_false_fail(tmp_path: Path,
+                                                                  bias_lsb: int) -> None:
+    """Frame 0 moved (``frame_zero_moved``): the stall does not prove the power-up. The right
+    firmware (``bias_lsb`` 0) FAILs no judge; neither it nor one 1 m off from its first pose
+    PASSes silently: ``analyze`` says its first pose not judged (a ``power_up_unproven`` event,
+    on the verdict's line), the end verdicts are UNJUDGED (the start adopted)."""
+    messages = frame_zero_moved(_without_first_count_pages(_wrong(_messages(), 0, bias_lsb, 1)))
+    path = _written(messages, tmp_path / "log.log")
+    analysis = analyze(read_log(path), PMIR, "exact")
+    assert analysis.passed
+    assert analysis.report["reference_start"] == "fitted"
+    assert [e["kind"] for e in analysis.report["events"]].count("power_up_unproven") == 1
+    assert "not judged" in "; ".join(kept_unjudged(analysis.report))
+    monitor, bridge, end_s = _live(messages)
+    assert not bridge.tracker.lives.power_up_proven
+    assert monitor.health(end_s)["state"] != "POSE WRONG"
+    assert bridge.tracker.wrongs.as_dict()["episodes"] == 0
+    assert _end_verdicts(bridge) == ("UNJUDGED", "UNJUDGED")
+
+
+def test_without_its_first_cycle_nothing_is_proven(tmp_path: Path) -> None:
+    """The log without the firmware's first-cycle ODOM_STATUS frames (INIT at UPTIME 0) nor
+    its first count pages: nothing shows the power-up (a recorder started after it), so no
+    judge proves it by the stall, nor says it unproven: fitted, the right firmware PASSes."""
+    messages = tuple(m for m in _without_first_count_pages(_messages())
+                     if not (m.arbitration_id == fr.ODOM_STATUS_ID and m.timestamp < 0.05))
+    analysis = analyze(read_log(_written(messages, tmp_path / "cut.log")), PMIR, "exact")
+    assert analysis.passed
+    assert analysis.report["reference_start"] == "fitted"
+    assert "power_up_unproven" not in [e["kind"] for e in analysis.report["events"]]
+    monitor, bridge, _ = _live(messages)
+    for tracker in (monitor.tracker, bridge.tracker):
+        assert not tracker.lives.power_up_proven
+        assert not tracker.first.unproven
+        assert tracker.wrongs.as_dict()["episodes"] == 0

@@ -162,11 +162,32 @@ def test_a_reprime_within_the_window_at_power_up(halted: int) -> None:
     assert _end_verdicts(bridge) == ("FAIL", "FAIL")
 
 
-def _unproven(messages: tuple[can.Message, ...]) -> tuple[can.Message, ...]:
-    """The frames with the first count page's ENC_E2E_OK 1000 off (E2E re-protected): no
-    count the judges read proves the power-up."""
+def frame_zero_moved(messages: tuple[can.Message, ...]) -> tuple[can.Message, ...]:
+    """The frames with encoder frame 0's LEFT_COUNT 5 counts back (E2E re-protected): the
+    robot moved between frame 0 and frame 1 (the firmware never took frame 0: its FIFO was
+    drained at tick 0), so which of them it primed on matters and the stall after its INIT at
+    UPTIME 0 cannot tell (``host.judge.stallpowerup``)."""
     out, done = [], False
     for m in messages:
+        if not done and m.arbitration_id == fr.WHEEL_ENCODERS_ID:
+            signals = _decoded(m)
+            signals["LEFT_COUNT"] = (int(signals["LEFT_COUNT"]) - 5) % (1 << 24)
+            data = bytearray(DB.encode_message(m.arbitration_id, signals, scaling=False))
+            hf.p02_protect(data, int(signals["COUNTER"]), fr.WHEEL_ENCODERS_DATA_IDS)
+            m = can.Message(arbitration_id=m.arbitration_id, data=bytes(data),
+                            is_extended_id=False, timestamp=m.timestamp)
+            done = True
+        out.append(m)
+    return tuple(out)
+
+
+def _unproven(messages: tuple[can.Message, ...]) -> tuple[can.Message, ...]:
+    """The frames with the first count page's ENC_E2E_OK 1000 off (E2E re-protected): no
+    count the judges read proves the power-up; and frame 0 moved (``frame_zero_moved``), so
+    neither does the stall after INIT at UPTIME 0 (``host.judge.stallpowerup``: with frame 0
+    unmoved it proves the power-up, and the re-prime is bounded from (0, 0))."""
+    out, done = [], False
+    for m in frame_zero_moved(messages):
         if not done and m.arbitration_id == fr.ODOM_STATUS_ID and int(_decoded(m)["PAGE"]) == 2:
             signals = _decoded(m)
             signals["ENC_E2E_OK"] = (int(signals["ENC_E2E_OK"]) + 1000) & 0xFFFF

@@ -161,6 +161,7 @@ from odocan.host.judge.samples import (
 )
 from odocan.host.judge.setposekept import Kept, check_cut, mark_kept
 from odocan.host.judge.setposes import cut_lives, set_pose_cuts
+from odocan.host.judge.stallpowerup import stall_power_up
 from odocan.host.judge.stallreprime import reprime_events
 from odocan.host.judge.stalls import after_stalls, alive_times, first_placement, primed_first
 from odocan.host.judge.statuslatch import StatusLatch, firmware_events
@@ -355,11 +356,13 @@ def _analyze_life(
     onboard, stalls = after_stalls(onboard, sent_s, enc, pose_sent_s, alive_s)
     placed = first_placement(sent_s, enc, alive_s, pose_sent_s, onboard)  # no loss span's
     truth = truth_samples(frames, accepted, decoder, enc)
+    unproven: list[dict[str, Any]] = []  # its first count pages lost: said (stallpowerup)
     if boot:  # (a stalled MCU's first page misses the frames its FIFO overran: primed_first)
         power_up = saw_only_the_log(frames, accepted, decoder) or primed_first(
             float(np.min(sent_s, initial=np.inf)), enc, alive_s, pose_sent_s)
-    else:
-        power_up = starts_at_power_up(frames, accepted, decoder, onboard)
+    elif not (power_up := starts_at_power_up(frames, accepted, decoder, onboard)) and not (
+            rebase or start_pose):  # the log's first life only
+        power_up, unproven = stall_power_up(frames, accepted, decoder, enc, sent_s, alive_s)
     ref_all = build_reference(enc, onboard, robot, integrator, power_up=power_up,
                          max_wheel_speed_mm_s=max_wheel_speed_mm_s, breaks=stalls,
                          slack_m=tolerance.position_m, start_pose=start_pose,
@@ -431,7 +434,8 @@ def _analyze_life(
              "detail": restart_detail(e in ref_all.ctrl_restarts, e in ref_all.unseen_restarts,
                                       ambiguous=e in ref_all.ambiguous)}
             for e in ref_all.counter_restarts
-        ] + reprime_events(frames.timestamp_s, enc, ref_all.start, ref_all.stall_reprimes) + [
+        ] + reprime_events(frames.timestamp_s, enc, ref_all.start, ref_all.stall_reprimes) + \
+            unproven + [
             {"kind": "firmware_stall", "t_s": float(frames.timestamp_s[enc.index[e]]),
              "encoder_frame": int(e),
              "detail": STALL_DETAIL}

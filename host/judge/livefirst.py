@@ -25,24 +25,41 @@ ENC_E2E_LOST counts the frames its FIFO overran among them, which open no loss a
 The watch's first ``FIRST_FRAMES`` encoder frames' bus times are kept (``keep_first``): a
 power-up's first count page, made after a stall longer than the window (5 s), is proven by the
 frames heard before its tick bound, long gone from the window (``sources.heard_before_live``;
-issue #11: a 6 s halt at power-up left the live judges unproven, their start adopted)."""
+issue #11: a 6 s halt at power-up left the live judges unproven, their start adopted), and their
+counts (``stallpowerup``'s rule below).
+
+A power-up proven by the stall itself (``host.judge.stallpowerup``, the whole log's rule): when
+the firmware's first count pages are lost, the first sample after a stall at the watch's start
+proves the power-up at frame 0 (``Lives.power_up_proven``, then as the page's proof) when the
+first ODOM_STATUS heard is of its first cycle, its first summary says UPTIME 0, every summary
+up to the stall says INIT, no pose half came before it, and frames 0 .. the one it could first
+have primed on carry the same counts (whichever it primed on, the same start). The firmware
+stalled after such a power-up over a moving robot: not proven, and the start the judges take
+then (the firmware's pose) is said adopted (``UNPROVEN``: the end verdicts UNJUDGED, never a
+PASS that hides its first pose)."""
 
 from __future__ import annotations
 
 import bisect
 from collections import deque
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from odocan.host.judge.livewindow import window_encoders
+from odocan.host.judge.powerup import holds_first_cycle
+from odocan.host.judge.stallpowerup import INIT, UNPROVEN
 from odocan.host.judge.stalls import first_after_stall
+from odocan.host.protocol import busfacts
+from odocan.host.protocol.dbcplan import default_plan
 
 if TYPE_CHECKING:
     from odocan.host.judge.livepose import FramePose
     from odocan.host.judge.tracking import PoseTracker
 
 FIRST_FRAMES = 128  # the watch's first encoder frames whose bus times are kept (1.28 s at 100 Hz)
+_STATE = default_plan().get_message_by_name("ODOM_STATUS").get_signal_by_name("STATE")
+INIT_CODES = frozenset(int(v) for v, n in (_STATE.choices or {}).items() if str(n) == INIT)
 STATUS_KEPT = 8  # the latest ODOM_STATUS frames kept (up to 3 a tick): a sample settles
 # within a cycle of its Y, so the last one before it is among them
 
@@ -56,10 +73,66 @@ class FirstStall:
         self.alive: deque[tuple[float, int]] = deque(maxlen=STATUS_KEPT)
         self.stalled_from: int | None = None  # the frame of the latest stall told (primed)
         self.first_times_s: tuple[float, ...] = ()  # the watch's first frames' bus times (s)
+        self.first_counts: tuple[tuple[int, int], ...] = ()  # ... and their LEFT, RIGHT counts
+        self.init_s: float | None = None  # the first summary's bus time, while it says INIT at
+        self.broke_s: float | None = None  # UPTIME 0; the first ODOM_STATUS that said otherwise
+        self.posed_s: float | None = None  # the first pose half's bus time
+        self.unproven = False  # its power-up stalled over a moving robot (``unproven_why``)
 
-    def keep_first(self, times_s: tuple[float, ...]) -> None:
-        """The bus times of the watch's first ``FIRST_FRAMES`` encoder frames (seq 0 on)."""
-        self.first_times_s = times_s
+    def keep_first(self, times_s: tuple[float, ...],
+                   counts: tuple[tuple[int, int], ...] = ()) -> None:
+        """The bus times of the watch's first ``FIRST_FRAMES`` encoder frames (seq 0 on) and
+        their counts."""
+        self.first_times_s, self.first_counts = times_s, counts
+
+    def on_status(self, t_s: float, signals: dict[str, Any] | None) -> None:
+        """An accepted ODOM_STATUS (raw ``signals``, None: not told) at bus time ``t_s``: does
+        the firmware still say it primed on nothing since its power-up (``stallpowerup``)?"""
+        if self.broke_s is not None:
+            return
+        first = self.init_s is None and not self.alive
+        if signals is None or (first and not holds_first_cycle(int(signals["COUNTER"]))):
+            self.broke_s = t_s
+        elif int(signals.get("PAGE", -1)) == busfacts.SUMMARY_PAGE:
+            init = int(signals["STATE"]) in INIT_CODES
+            if not init or (self.init_s is None and int(signals["UPTIME"]) != 0):
+                self.broke_s = t_s
+            elif self.init_s is None:
+                self.init_s = t_s
+
+    def powered_up(self, tracker: PoseTracker, t_s: float) -> bool | None:
+        """``stallpowerup.stalled_power_up`` live, for the first sample (its ODOM_POSE_Y at
+        ``t_s``) after a stall: True when proven, None when its power-up stalled but the robot
+        moved (or the frames are no longer kept), False when no such power-up. The frames it
+        may have primed on: those up to the first heard after its last ODOM_STATUS (counted
+        by that status, not from the window: a stall longer than it)."""
+        talked = self.talked_before(t_s)
+        if (talked is None or self.init_s is None or self.init_s > talked[0]
+                or (self.broke_s is not None and self.broke_s <= talked[0])
+                or (self.posed_s is not None and self.posed_s <= talked[0])):
+            return False  # (no pose half before it: the stall is from that status)
+        counts = self._counts(tracker, talked[1])
+        if counts is None:
+            return None
+        return all(c == counts[0] for c in counts) or None
+
+    def proven_after_all(self, tracker: PoseTracker) -> None:
+        """The first life's reference started at (0, 0, 0) on frame 0 after all (its first
+        count page proved it, ``livestart.Lives.finish_boot``): its first pose judged, no
+        longer unproven nor adopted."""
+        if self.unproven:
+            self.unproven = False
+            adopted = tracker.adopted
+            adopted.life = [a for a in adopted.life if a.cause != UNPROVEN]
+
+    def _counts(self, tracker: PoseTracker, upto: int) -> list[tuple[int, int]] | None:
+        """The LEFT, RIGHT counts of frames 0 .. ``upto`` (seq), None when not kept."""
+        window = tracker.window
+        if len(window) and int(window.col("seq")[0]) == 0 and upto < len(window):
+            return list(zip(window.col("left")[: upto + 1].tolist(),
+                            window.col("right")[: upto + 1].tolist(), strict=True))
+        kept = self.first_counts
+        return list(kept[: upto + 1]) if upto < len(kept) else None
 
     def heard_first_before(self, bound_s: float, made: int) -> int | None:
         """How many of the watch's first frames were heard before ``bound_s``, at most ``made``;
@@ -100,6 +173,13 @@ def left_out_first(tracker: PoseTracker, pose: FramePose, t_s: float, queued: bo
     if primed is None:
         return False
     lives = tracker.lives
+    if (tracker.raw.odometry is None and not lives.power_up_proven and lives.boot is None
+            and not tracker.reference_starts):  # the first life's power-up, its pages lost
+        proven = tracker.first.powered_up(tracker, t_s)
+        lives.power_up_proven = proven is True
+        if proven is None:  # the start the judges take: the firmware's own pose
+            tracker.adopted.owe(UNPROVEN)
+            tracker.first.unproven = True
     if (tracker.raw.odometry is None and lives.power_up_proven and lives.boot is None
             and not tracker.reference_starts and tracker.integrator is not None):
         lives.finish_boot(0, first_life=True)  # from (0, 0, 0) on frame 0, as analyze
@@ -109,3 +189,9 @@ def left_out_first(tracker: PoseTracker, pose: FramePose, t_s: float, queued: bo
         tracker.losses.stalled_first(primed)  # the frames between: the placement's, no loss's
     rule.heard_first(t_s)
     return True
+
+
+def unproven_why(tracker: PoseTracker) -> str | None:
+    """Why the end verdict cannot be a PASS (UNJUDGED): the first life's power-up stalled over
+    a moving robot, its first pose adopted unproven (module docstring); None else."""
+    return f"{UNPROVEN} (an offset there not judged)" if tracker.first.unproven else None

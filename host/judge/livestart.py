@@ -131,6 +131,7 @@ class Lives:
     def on_counts(self, ok: int, lost: int, proven: bool) -> None:
         """``PoseTracker.on_enc_counts``' start: the page ends a wait, or proves a power-up."""
         boot, tracker = self.boot, self._tracker
+        started = self.power_up_proven  # by the stall (``livefirst``): not started again
         self.power_up_proven |= proven  # (``livefirst``: also when no frame was heard yet)
         if boot is not None and boot[0] < 0:  # the first life's samples wait
             self.finish_first(proven)
@@ -138,7 +139,7 @@ class Lives:
             self.finish_boot(boot[0])
         elif boot is not None and (at := primed_at(tracker.window, ok, lost)) is not None:
             self.finish_boot(at)
-        elif proven and tracker.integrator is not None:
+        elif proven and not started and tracker.integrator is not None:
             self.finish_boot(0, first_life=True)  # the samples judged before keep their errors
 
     def finish_boot(self, primed: int, first_life: bool = False) -> None:
@@ -154,6 +155,8 @@ class Lives:
                 tracker.restart_reference()
             return
         tracker.reference_starts -= first_life and tracker.reference_starts > 0
+        if first_life:  # (a stall before its first pose left it unproven: livefirst)
+            tracker.first.proven_after_all(tracker)
         tracker.placer.seen.power_up(primed)  # its boot a page before (gapseen.with_boot)
         tracker.losses.primed(primed)  # ENC_E2E_LOST counted from 0 there
         stalled = tracker.first.stalled_from if first_life and poses else None  # told before

@@ -4,7 +4,8 @@ firmware life in it, starts at the firmware's power-up, so that its reference st
 that powers up off (0, 0, 0) is wrong, and is judged from (0, 0, 0)). The evidence is the
 firmware's own: the first ODOM_STATUS summary (UPTIME 0) and its first ENC_E2E_OK page (it had
 accepted exactly the log's encoder frames). A log cut after the power-up lacks the second, so
-its start is fitted (``host.judge.reference_path``)."""
+its start is fitted (``host.judge.reference_path``); a log whose first count pages were lost
+after a stall at power-up has the stall's evidence instead (``host.judge.stallpowerup``)."""
 
 from __future__ import annotations
 

@@ -166,7 +166,10 @@ class PoseTracker:
         if self.enc_seq % ENC_WINDOW == 0:
             self._forget(self.enc_seq - ENC_WINDOW)
         elif self.enc_seq == FIRST_FRAMES - 1:  # the watch's first frames' times (livefirst)
-            self.first.keep_first(tuple(self.window.col("t_s").tolist()[:FIRST_FRAMES]))
+            self.first.keep_first(tuple(self.window.col("t_s").tolist()[:FIRST_FRAMES]),
+                                  tuple(zip(self.window.col("left").tolist()[:FIRST_FRAMES],
+                                            self.window.col("right").tolist()[:FIRST_FRAMES],
+                                            strict=True)))
         self.truths.frame_heard(counter, self.enc_seq, left, right)
         ref = self.raw.odometry
         if ref is not None:
@@ -198,6 +201,7 @@ class PoseTracker:
     def on_status(self, t_s: float, signals: dict[str, Any] | None = None) -> None:
         """An accepted ODOM_STATUS at bus time ``t_s``: the firmware alive (``livefirst``);
         its raw ``signals``: a summary's word on a re-prime after a stall (``livereprime``)."""
+        self.first.on_status(t_s, signals)  # INIT at UPTIME 0 still (livefirst: stallpowerup)
         self.first.alive.append((t_s, self.enc_seq + 1))
         if signals is not None:
             self.reprime.on_status(signals, t_s)
@@ -209,6 +213,8 @@ class PoseTracker:
 
     def _on_half(self, name: str, half: Half) -> None:
         self.advance(half.t_s)
+        if self.first.posed_s is None:  # the firmware primed by then (livefirst)
+            self.first.posed_s = half.t_s
         self._pos += 1
         half.pos = self._pos
         self.pairs.heard(name, half)

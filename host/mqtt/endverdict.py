@@ -12,6 +12,8 @@ pose (issue #11: the rig never shows OK while the pose it reports is wrong). Now
     fails it)
     UNJUDGED: 1 re-prime declared after a stall before the first pose, the power-up not
     proven: ... (``livereprime.unbounded_why``: a PASS would rest on a pose nothing bounds)
+    UNJUDGED: the firmware stalled before its first pose after its power-up (INIT at UPTIME 0)
+    while the robot moved: ... (``livefirst.unproven_why``: the same)
 
 FAIL (exit 1) when the pose was wrong at any time of the watch, DISTANCE or the twist speeds
 wrong once, two firmwares on the bus, or (``require_firmware``) when nothing was judged; the
@@ -32,6 +34,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 from typing import TYPE_CHECKING, Any, Literal, Protocol
 
+from odocan.host.judge.livefirst import unproven_why
 from odocan.host.judge.livereprime import unbounded_why
 from odocan.host.judge.watchverdict import REQUIRE_FIRMWARE, failures, nothing_judged
 
@@ -111,7 +114,8 @@ def end_verdict(telemetry: RobotTelemetry, *, profile_name: str | None = None,
     if why:
         return EndVerdict("UNJUDGED", f"{why} (--require-firmware fails it)"
                           + _mismatch(telemetry))
-    unbounded = unbounded_why(telemetry.tracker)  # never a PASS on it (livereprime)
+    # never a PASS on an unbounded start (livereprime) nor an unproven one (livefirst)
+    unbounded = unbounded_why(telemetry.tracker) or unproven_why(telemetry.tracker)
     if unbounded:
         return EndVerdict("UNJUDGED", unbounded + _mismatch(telemetry))
     distance, twist = telemetry.distance.samples, telemetry.twist.samples

@@ -21,6 +21,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, cast
 
+from odocan.host.judge.livefirst import unproven_why
 from odocan.host.judge.livefit import pose_wrong
 from odocan.host.judge.livepose import ErrorStats
 from odocan.host.judge.livereprime import unbounded_why
@@ -129,7 +130,8 @@ def watched_verdict(
                           beyond_allowance_m=tracker.max_beyond_allowance_m)
     if verdict["verdict"] in ("PASS", "FAIL") and halted is not None:
         verdict = after_halts(verdict, halted, tracker, telemetry.stretches)
-    unbounded = unbounded_why(tracker)  # a PASS resting on an unbounded start (livereprime)
+    # a PASS resting on an unbounded start (livereprime) or an unproven one (livefirst)
+    unbounded = unbounded_why(tracker) or unproven_why(tracker)
     if verdict["verdict"] == "PASS" and unbounded:
         verdict = {**verdict, "verdict": "UNJUDGED", "reason": unbounded}
     # ODOM_TWIST judged live, the samples waiting at the end included (said, not yet verdicts)

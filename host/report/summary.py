@@ -177,10 +177,13 @@ def kept_unjudged(report: dict[str, Any]) -> list[str]:
     """The set-poses whose check of what their APPLY kept could not be made, or only with a
     bound over ``COARSE_KEPT_LSB`` (merged steps before it: a stall's, a gap's), in words: the
     verdict says so, never a silent PASS (a jump within them is judged by the life's fit
-    alone, which cannot see a jump at its start)."""
+    alone, which cannot see a jump at its start); likewise a power-up whose first pose a stall
+    left unjudged (``host.judge.stallpowerup``)."""
     said = []
     for event in report.get("events") or []:
         kept = event.get("kept")
+        if event.get("kind") == "power_up_unproven":  # its first pose (stallpowerup)
+            said.append(f"the first pose at {event['t_s']:.3f} s not judged ({event['detail']})")
         if event.get("kind") != "set_pose":
             continue
         at = f"what the ODOM_SET_POSE APPLY at {event['t_s']:.3f} s kept"

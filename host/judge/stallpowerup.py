@@ -1,0 +1,123 @@
+"""The log's power-up proven by a stall before the first pose (issue #11: "a PASS/OK must never
+hide a wrong pose"), when the firmware's first count pages that ``host.judge.powerup`` reads are
+lost or no longer reach the power-up (their ODOM_STATUS COUNTER wrapped past the halt).
+
+The evidence is the firmware's own, as ``stalls.primed_first`` reads it for a reboot's life:
+
+* the first ODOM_STATUS frame heard is of the firmware's first cycle (``powerup
+  .holds_first_cycle``) and its first summary says UPTIME 0: the log holds its power-up;
+* every summary it sent before the stall says INIT and it sent no pose half before it: it had
+  primed on no encoder frame when it halted (a firmware primes in the tick that takes its
+  first frame and says so in that tick's summary);
+* then it was silent for ``SILENCE_CYCLES`` cycles or more while the encoder frames went on, on
+  time, until its first sample (``stalls.first_after_stall``): the position ``lo`` of the
+  first encoder frame after its last frame before the stall.
+
+A stalled MCU's receive FIFO keeps the first frames after it halted (``sim/mcu.py``), so it
+primed on the first frame it had not read: one of frames 0 .. ``lo`` (a frame on the bus in the
+tick of its last summary may have come before or after its read; frames before its power-up it
+never heard). The rule holds only when those frames all carry the same counts (the robot did
+not move): then whichever one it primed on, its pose (0, 0, 0) is the reference's at frame 0,
+exactly, and a firmware off from there FAILs. A moving robot there leaves it unproven (the
+start fitted, the reason said: ``stall_power_up``)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from odocan.host.io.logs import FrameArrays
+from odocan.host.judge.powerup import holds_first_cycle
+from odocan.host.judge.samples import Encoders, FloatArray
+from odocan.host.judge.stalls import first_after_stall
+from odocan.host.protocol.decode import BulkDecoder, DecodeError
+
+UNPROVEN_KIND = "power_up_unproven"  # the report's event when the rule cannot prove it
+INIT = "INIT"  # ODOM_STATUS STATE's name (the DBC's VAL_) of a firmware that primed on nothing
+UNPROVEN = ("the firmware stalled before its first pose after its power-up (INIT at UPTIME 0) "
+            "while the robot moved: the encoder frame it primed on is not known, so its first "
+            "pose is not judged (the reference's start fitted)")
+
+
+def stall_proves_power_up(frames: FrameArrays, accepted: npt.NDArray[np.bool_],
+                          decoder: BulkDecoder, enc: Encoders, sent_s: FloatArray,
+                          alive_s: FloatArray) -> bool:
+    """The module docstring's rule on a whole log's first life (``sent_s``: its samples' bus
+    times; ``alive_s``: its accepted ODOM_STATUS frames'): its power-up at encoder frame 0."""
+    return stalled_power_up(frames, accepted, decoder, enc, sent_s, alive_s) is True
+
+
+def stalled_power_up(frames: FrameArrays, accepted: npt.NDArray[np.bool_],
+                     decoder: BulkDecoder, enc: Encoders, sent_s: FloatArray,
+                     alive_s: FloatArray) -> bool | None:
+    """``stall_proves_power_up``, None when the firmware stalled after its power-up but the
+    robot moved over the frames it may have primed on (``stall_power_up``); False when the log
+    shows no such stall."""
+    halves = _pose_half_times(frames, accepted, decoder)
+    if len(sent_s) == 0 or halves is None or not len(alive_s):
+        return False
+    first_s = float(np.min(sent_s))
+    alive = np.sort(np.concatenate((alive_s, halves)))
+    lo = first_after_stall(first_s, enc, alive)
+    if lo is None:
+        return False
+    talked_s = float(alive[int(np.searchsorted(alive, first_s, side="left")) - 1])
+    if np.any(halves <= talked_s) or not _primed_on_nothing(frames, accepted, decoder, talked_s):
+        return False
+    return unmoved(enc.left, enc.right, lo) or None
+
+
+def stall_power_up(frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder,
+                   enc: Encoders, sent_s: FloatArray,
+                   alive_s: FloatArray) -> tuple[bool, list[dict[str, Any]]]:
+    """``stall_proves_power_up`` and the report's events: a ``power_up_unproven`` one (at the
+    first sample's bus time, ``UNPROVEN`` its detail) when ``stalled_power_up`` is None, the
+    verdict's line says it (``host.report.summary.kept_unjudged``): never a silent PASS."""
+    proven = stalled_power_up(frames, accepted, decoder, enc, sent_s, alive_s)
+    if proven is not None:
+        return proven, []
+    return False, [{"kind": UNPROVEN_KIND, "t_s": float(np.min(sent_s)), "detail": UNPROVEN}]
+
+
+def unmoved(left: npt.NDArray[np.int64], right: npt.NDArray[np.int64], lo: int) -> bool:
+    """Encoder frames 0 .. ``lo`` (their wire counts) all carry frame 0's counts."""
+    if lo >= len(left):
+        return False
+    return bool(np.all(left[: lo + 1] == left[0]) and np.all(right[: lo + 1] == right[0]))
+
+
+def _primed_on_nothing(frames: FrameArrays, accepted: npt.NDArray[np.bool_],
+                       decoder: BulkDecoder, talked_s: float) -> bool:
+    """The first ODOM_STATUS frame heard is of the first cycle, the first summary says UPTIME
+    0, and every summary up to bus time ``talked_s`` (the stall's start) says INIT."""
+    try:
+        status = decoder.decode(frames, "ODOM_STATUS")
+        summary = decoder.decode_page(frames, "ODOM_STATUS", 0)
+        choices = dict(decoder.message("ODOM_STATUS").get_signal_by_name("STATE").choices or {})
+    except (DecodeError, KeyError):
+        return False
+    if not {"COUNTER"} <= status.keys() or not {"UPTIME", "STATE"} <= summary.keys():
+        return False
+    counters = status["COUNTER"][accepted[status["index"]]]
+    keep = accepted[summary["index"]] & (summary["timestamp_s"] <= talked_s)
+    init = [code for code, name in choices.items() if str(name) == INIT]
+    if not len(counters) or not holds_first_cycle(int(counters[0])) or not keep.any():
+        return False
+    return int(summary["UPTIME"][keep][0]) == 0 and bool(np.isin(summary["STATE"][keep],
+                                                                 init).all())
+
+
+def _pose_half_times(frames: FrameArrays, accepted: npt.NDArray[np.bool_],
+                     decoder: BulkDecoder) -> FloatArray | None:
+    """The bus times of the accepted ODOM_POSE_X and ODOM_POSE_Y frames (sorted); None when the
+    DBC has neither."""
+    times = []
+    for name in ("ODOM_POSE_X", "ODOM_POSE_Y"):
+        try:
+            rows = decoder.decode(frames, name)
+        except DecodeError:
+            return None
+        times.append(rows["timestamp_s"][accepted[rows["index"]]])
+    return np.sort(np.concatenate(times))
