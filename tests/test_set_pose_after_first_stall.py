@@ -28,7 +28,8 @@ fitted start, so a firmware that moved its X by 1 m there PASSed ``analyze`` (th
 APPLY's rounding plus the merge allowance of the frames since the one the firmware primed on,
 4.1 mm here, the correct firmware 1.26 mm off the fine steps): FAIL. A jump within that
 allowance (1 mm) is not told from the merged steps. Live, with the APPLY 3 ticks after, the
-monitor and the bridge said OK at 1 m off.
+monitor and the bridge said OK at 1 m off (they adopted the next pose: the placement after the
+stall was owed); now they carry the reference and that placement across it: POSE WRONG.
 """
 
 from __future__ import annotations
@@ -130,6 +131,17 @@ def test_a_wrong_apply_judged_from_the_samples_around_it_fails(tmp_path: Path) -
 @pytest.mark.parametrize("after", [2, 3])
 def test_a_wrong_apply_just_after_the_stall_fails(after: int, tmp_path: Path) -> None:
     """Before: PASS, the check not made (module docstring); now judged from the power-up."""
-    report = _report(drive(after, -10_000 * LSB_Q40), tmp_path / "wrong.log")
+    wrong = drive(after, -10_000 * LSB_Q40)
+    report = _report(wrong, tmp_path / "wrong.log")
     assert _set_pose(report)["kept"]["passed"] is False, _set_pose(report).get("kept_not_judged")
     assert not report["passed"]
+
+
+@pytest.mark.parametrize("after", [2, 3])
+def test_a_wrong_apply_just_after_the_stall_is_pose_wrong_live(after: int) -> None:
+    """Before, with the APPLY 3 ticks after: OK (the next pose adopted, ``livesetpose``)."""
+    wrong = drive(after, -10_000 * LSB_Q40)
+    monitor, bridge = _live(wrong)
+    for judge in (monitor, bridge):
+        assert judge.tracker.wrongs.count > 0
+    assert monitor.health(wrong[-1].timestamp)["state"] == "POSE WRONG"
