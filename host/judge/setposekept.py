@@ -76,10 +76,12 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
+from odocan.firmware.errors import ErrorFlag
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.gapbound import gap_allowance_m, period_bounds
 from odocan.host.judge.keptjump import FLOAT_M, FLOAT_RAD, TURN_RAD, jump_judged
 from odocan.host.judge.livesetpose import FIELDS
+from odocan.host.judge.nearthreshold import ResetLog
 from odocan.host.judge.powerup import life_powered_up
 from odocan.host.judge.reference import Geometry, SpeedBound, integrate
 from odocan.host.judge.reference_path import firmware_steps
@@ -106,6 +108,7 @@ if TYPE_CHECKING:
     from odocan.host.judge.setposes import SetPoseCut
     from odocan.host.protocol.dbcplan import DatabaseSpec
 
+REFUSED_BITS = int(ErrorFlag.IMPLAUSIBLE_STEP | ErrorFlag.COUNTER_RESET)  # steps left out
 WINDOW_FRAMES = 512  # log frames read on each side of the APPLY's encoder frame
 NARROW_SAMPLES = 16  # samples on each side whose rounding intervals narrow the check
 HEAD_FRAMES = 64 * WINDOW_FRAMES  # a reboot's life before the APPLY read whole up to this long
@@ -172,7 +175,18 @@ def kept_check(frames: FrameArrays, lo: int, cut: SetPoseCut, robot: RobotProfil
                                                        log_start=log_start),
                       primed=lambda: boot and not log_start and primed_first(
                           float(np.min(sent_s)), enc, alive_times(frames, accepted, decoder),
-                          accepted_rows(frames, accepted, decoder, "ODOM_POSE_Y")["timestamp_s"]))
+                          accepted_rows(frames, accepted, decoder, "ODOM_POSE_Y")["timestamp_s"])
+                      and not _refusal_said(frames, accepted, decoder))
+
+
+def _refusal_said(frames: FrameArrays, accepted: np.ndarray, decoder: BulkDecoder) -> bool:
+    """Whether a summary of ``frames`` says the firmware left a step out (IMPLAUSIBLE_STEP or
+    COUNTER_RESET in ERROR_MASK, or it cannot tell): past ~3.7 s a stalled pmir re-primes on
+    the frame it takes on resuming (``stallreprime``), the stall's motion not in its pose by
+    design, beyond ``_primed_up``'s merged steps (the correct firmware FAILed at 1.55 m)."""
+    log = ResetLog()
+    log.feed(frames, decoder, np.flatnonzero(accepted))
+    return not log.usable or any(bool(np.any(m & REFUSED_BITS)) for m in log.mask)
 
 
 def judge_kept(seen: tuple[Poses, Encoders, FloatArray], c: int, staged: dict[str, float],
