@@ -28,7 +28,8 @@ backlog frame) is bounded by that pose's rounding plus the merge allowance of ev
 the primed one (``stallmerge.merged_allowance_m``: the worst grouping into runs, each run's
 heading exact), as the lone sample before it is placed by ``analyze``; before, not judged, and
 a firmware that moved its X by 1 m at such an APPLY PASSed (4.1 mm allowed after a 3 s stall
-on pmir's circle, the correct firmware 1.26 mm off the fine steps).
+on pmir's circle, the correct firmware 1.26 mm off the fine steps). Not when a summary says a
+step was left out (``_refusal_said``: a re-prime after a long stall is no merged step).
 
 Two samples alone allow a jump of up to two roundings (a firmware moving X by 1.2 LSB at a bare
 APPLY passed, where the live judges, which carry the reference across it, said POSE WRONG). So
