@@ -125,6 +125,7 @@ from odocan.host.judge.evidencechoice import chosen_seen
 from odocan.host.judge.finalstate import firmware_fields, latched_fields
 from odocan.host.judge.gapseen import Seen, seen_in_log
 from odocan.host.judge.holepages import page_numbered
+from odocan.host.judge.keptmark import mark_kept
 from odocan.host.judge.losses import firmware_losses, firmware_ok_spans, loss_allowance
 from odocan.host.judge.powerup import saw_only_the_log, starts_at_power_up
 from odocan.host.judge.reboots import (
@@ -159,7 +160,7 @@ from odocan.host.judge.samples import (
     truth_samples,
     wrap_pi,
 )
-from odocan.host.judge.setposekept import Kept, check_cut, mark_kept
+from odocan.host.judge.setposekept import Kept, check_cut
 from odocan.host.judge.setposes import cut_lives, set_pose_cuts
 from odocan.host.judge.stallpowerup import stall_power_up
 from odocan.host.judge.stallreprime import reprime_events

@@ -23,7 +23,12 @@ up to the merge's error from it (kobuki, a 150 ms stall, a bare APPLY the tick a
 0.17 mm, a correct firmware latched POSE WRONG for good; ``analyze`` fits the life's start
 instead). The reference restarts at the next on-board pose, as ``analyze``'s fitted start, the
 first one after the silence left out (it may name a backlog frame: ``livestall``); what the
-APPLY kept is judged by ``livekept`` across the stall, its bound widened by the merge's.
+APPLY kept is judged by ``livekept`` across the stall, its bound widened by the merge's. But
+a bare APPLY while the placement after a stall before the life's first sample is owed
+(``owed_first``; ``livekept`` cannot judge it: no pose before it) carries the reference and the
+placement owed from the frame the firmware could first have primed on (the pose is kept: the
+next sample is placed as it would have been without the APPLY): a firmware that moved its X by
+1 m there was adopted, OK (``tests/test_set_pose_after_first_stall.py``).
 """
 
 from __future__ import annotations
@@ -122,6 +127,7 @@ def apply_set_pose(tracker: PoseTracker, seq: int, staged: dict[str, float],
     counts = window_counts(tracker.window, seq)
     ref_known = tracker.raw.odometry is not None and tracker.integrator is not None
     merged = ref_known and unplaced(tracker, seq) and any(n not in staged for n in FIELDS)
+    first_owed = owed_first(tracker) if merged and not staged else None
     silence_from_s = tracker.stall.last_t_s
     tracker.new_life()  # the reference restarts, the truth is compared in the new frame
     if all(name in staged for name in FIELDS):  # nothing kept of a pose adopted before
@@ -132,7 +138,8 @@ def apply_set_pose(tracker: PoseTracker, seq: int, staged: dict[str, float],
             tracker.wrongs.new_life(tracker.now_s)
         tracker.adopted.owe(doubt or UNHEARD_SET_POSE)  # the next on-board pose adopted
         return None
-    if merged:  # the kept fields where merged steps put them: the next pose after the silence
+    if merged and first_owed is None:  # the kept fields where merged steps put them: the
+        # next pose after the silence
         tracker.stall.carry_silence(silence_from_s)
         tracker.adopted.owe(MERGED_SET_POSE)
         return None
@@ -140,10 +147,18 @@ def apply_set_pose(tracker: PoseTracker, seq: int, staged: dict[str, float],
     tracker.adopted.cancel()  # the set pose is where it starts, not the firmware's
     pose = FramePose(seq, staged.get("X", at.x_m), staged.get("Y", at.y_m),
                      staged.get("HEADING", at.heading_rad % _TURN))
-    start_reference(tracker, pose, counts, [])
+    start_reference(tracker, pose, counts, [], first_owed)  # a placement owed: still owed
     if all(name in staged for name in ("X", "Y", "HEADING")):
         tracker.fit = LiveFit(pose.x_m, pose.y_m, exact=True)  # the pose set: nothing to fit
     return pose
+
+
+def owed_first(tracker: PoseTracker) -> int | None:
+    """The frame the firmware could first have primed on when the placement owed is the one
+    after a stall before its life's first sample (``livefirst``: none compared since), else
+    None: a bare APPLY keeps the pose, so that placement is still owed after it, from there."""
+    stall, primed = tracker.stall, tracker.first.stalled_from
+    return primed if stall.place_at_next and stall.last_compared == primed else None
 
 
 def unplaced(tracker: PoseTracker, seq: int) -> bool:

@@ -18,7 +18,18 @@ the firmware set what it had not been given: ``passed`` False, a FAIL named in t
 event (``mark_kept``). An APPLY so soon after a reboot that the new firmware sent fewer than
 two poses before it is judged from the firmware's power-up pose instead ((0, 0, 0) at the first
 encoder frame of its life, ``analyze``'s own rule for a reboot's life: ``powerup``), when the
-window starts at that life's first frame.
+window starts at that life's first frame. So is one after a rebooted firmware that stalled
+before its first pose (``stalls.primed_first``, ``analyze``'s rule there too: its first count
+page misses the frames its FIFO overran, so ``powerup`` cannot prove it; the life before the
+APPLY, one pose or none, read whole up to ``HEAD_FRAMES``, ``_primed_up``): the firmware primed
+on the life's first frame and took the frames it missed in merged runs the log cannot name, so
+its position at the first pose after the APPLY (not the first after the stall: it may name a
+backlog frame) is bounded by that pose's rounding plus the merge allowance of every frame from
+the primed one (``stallmerge.merged_allowance_m``: the worst grouping into runs, each run's
+heading exact), as the lone sample before it is placed by ``analyze``; before, not judged, and
+a firmware that moved its X by 1 m at such an APPLY PASSed (4.1 mm allowed after a 3 s stall
+on pmir's circle, the correct firmware 1.26 mm off the fine steps). Not when a summary says a
+step was left out (``_refusal_said``: a re-prime after a long stall is no merged step).
 
 Two samples alone allow a jump of up to two roundings (a firmware moving X by 1.2 LSB at a bare
 APPLY passed, where the live judges, which carry the reference across it, said POSE WRONG). So
@@ -66,9 +77,12 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
+from odocan.firmware.errors import ErrorFlag
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.gapbound import gap_allowance_m, period_bounds
+from odocan.host.judge.keptjump import FLOAT_M, FLOAT_RAD, TURN_RAD, jump_judged
 from odocan.host.judge.livesetpose import FIELDS
+from odocan.host.judge.nearthreshold import ResetLog
 from odocan.host.judge.powerup import life_powered_up
 from odocan.host.judge.reference import Geometry, SpeedBound, integrate
 from odocan.host.judge.reference_path import firmware_steps
@@ -81,10 +95,12 @@ from odocan.host.judge.samples import (
     Encoders,
     FloatArray,
     Poses,
+    accepted_rows,
     encoder_frames,
     onboard_samples,
 )
 from odocan.host.judge.stallmerge import merged_allowance_m, silent_inside
+from odocan.host.judge.stalls import alive_times, primed_first
 from odocan.host.protocol.decode import BulkDecoder
 from odocan.host.protocol.e2e import check_frames
 from odocan.sim.robot import RobotProfile
@@ -93,12 +109,13 @@ if TYPE_CHECKING:
     from odocan.host.judge.setposes import SetPoseCut
     from odocan.host.protocol.dbcplan import DatabaseSpec
 
+REFUSED_BITS = int(ErrorFlag.IMPLAUSIBLE_STEP | ErrorFlag.COUNTER_RESET)  # steps left out
 WINDOW_FRAMES = 512  # log frames read on each side of the APPLY's encoder frame
 NARROW_SAMPLES = 16  # samples on each side whose rounding intervals narrow the check
-_FLOAT_M = 1e-9  # the firmware's Q40 steps against float64 over a few frames, and more
-_FLOAT_RAD = 1e-12
-_TURN = 2.0 * math.pi
+HEAD_FRAMES = 64 * WINDOW_FRAMES  # a reboot's life before the APPLY read whole up to this long
 Kept = dict[str, Any] | str | None  # the check, why it was not made, or None: all staged
+NO_START = ("fewer than two on-board poses before the APPLY in this firmware life, and its "
+            "power-up pose not known")
 
 
 class Odo(NamedTuple):
@@ -124,8 +141,12 @@ def check_cut(read: Callable[[int, int], FrameArrays], head: tuple[int, bool], t
     frames [lo, hi) (whole or streamed alike); ``head``: the first frame of the life before the
     cut, whether it starts at a reboot; ``tail_stop``: the end of the life the cut opens."""
     lo, hi = window(cut.position, head[0], tail_stop)
-    return kept_check(read(lo, hi), lo, cut, robot, integrator, db, max_wheel_speed_mm_s,
+    kept = kept_check(read(lo, hi), lo, cut, robot, integrator, db, max_wheel_speed_mm_s,
                       boot=(head[1] or head[0] == 0) and lo == head[0], log_start=lo == 0)
+    if kept == NO_START and head[1] and head[0] < lo <= head[0] + HEAD_FRAMES:
+        return kept_check(read(head[0], hi), head[0], cut, robot, integrator, db,
+                          max_wheel_speed_mm_s, boot=True)  # a reboot's life read whole
+    return kept
 
 
 def kept_check(frames: FrameArrays, lo: int, cut: SetPoseCut, robot: RobotProfile,
@@ -152,15 +173,32 @@ def kept_check(frames: FrameArrays, lo: int, cut: SetPoseCut, robot: RobotProfil
               max_wheel_speed_mm_s)
     return judge_kept((poses, enc, sent_s), int(at[0]), cut.staged, odo,
                       lambda: boot and life_powered_up(frames, accepted, decoder, poses,
-                                                       log_start=log_start))
+                                                       log_start=log_start),
+                      primed=lambda: boot and not log_start and primed_first(
+                          float(np.min(sent_s)), enc, alive_times(frames, accepted, decoder),
+                          accepted_rows(frames, accepted, decoder, "ODOM_POSE_Y")["timestamp_s"])
+                      and not _refusal_said(frames, accepted, decoder))
+
+
+def _refusal_said(frames: FrameArrays, accepted: np.ndarray, decoder: BulkDecoder) -> bool:
+    """Whether a summary of ``frames`` says the firmware left a step out (IMPLAUSIBLE_STEP or
+    COUNTER_RESET in ERROR_MASK, or it cannot tell): past ~3.7 s a stalled pmir re-primes on
+    the frame it takes on resuming (``stallreprime``), the stall's motion not in its pose by
+    design, beyond ``_primed_up``'s merged steps (the correct firmware FAILed at 1.55 m)."""
+    log = ResetLog()
+    log.feed(frames, decoder, np.flatnonzero(accepted))
+    return not log.usable or any(bool(np.any(m & REFUSED_BITS)) for m in log.mask)
 
 
 def judge_kept(seen: tuple[Poses, Encoders, FloatArray], c: int, staged: dict[str, float],
-               odo: Odo, power_up: Callable[[], bool] = lambda: False) -> Kept:
+               odo: Odo, power_up: Callable[[], bool] = lambda: False, *,
+               primed: Callable[[], bool] = lambda: False) -> Kept:
     """``kept_check``'s rule on the samples and encoder frames ``seen`` (poses, frames, each
     sample's ODOM_POSE_Y bus time s), from a log or heard live (``host.judge.livekept``): the
     APPLY took effect after encoder frame ``c`` (an index into the frames) with ``staged``;
-    ``power_up()``: the frames start at the firmware's power-up (its pose (0, 0, 0) there)."""
+    ``power_up()``: the frames start at the firmware's power-up (its pose (0, 0, 0) there);
+    ``primed()``: they start at a reboot and the firmware stalled before its first pose, primed
+    on their first frame (``stalls.primed_first``), its steps to its first poses merged."""
     poses, enc, sent_s = seen
     before, after = _around(poses, c)
     voiced = _voiced(sent_s, enc.cycle_s, before, after)
@@ -171,9 +209,10 @@ def judge_kept(seen: tuple[Poses, Encoders, FloatArray], c: int, staged: dict[st
     start = _sample(poses, before) if before is not None else None
     if before is None and power_up():
         start = (0, (0.0, 0.0, 0.0))  # applied before two poses: from its power-up pose
+    elif before is None and after is not None and primed():
+        return _primed_up(seen, c, after, staged, odo)
     if start is None:
-        return ("fewer than two on-board poses before the APPLY in this firmware life, and its "
-                "power-up pose not known")
+        return NO_START
     if after is None:
         return "fewer than two on-board poses after the APPLY"
     if voiced is None:
@@ -197,7 +236,7 @@ def _checked(poses: Poses, enc: Encoders, c: int, around: tuple[int | None, int]
     if steps is None:
         return ("the encoder frames between the poses around the APPLY are not plain steps (a "
                 "gap in their sequence, a refused, re-primed or twinned step)")
-    judged = _judged(start, _sample(poses, after), steps, c - start[0], staged, odo.geometry,
+    judged = jump_judged(start, _sample(poses, after), steps, c - start[0], staged, odo.geometry,
                      odo.integrator, exact_start=before is None,
                      gap_m=_gap_m(enc, (start[0], int(poses.enc[after])), steps, odo))
     if judged["passed"] and before is not None:  # narrowed by more samples on each side
@@ -205,6 +244,17 @@ def _checked(poses: Poses, enc: Encoders, c: int, around: tuple[int | None, int]
     elif judged["passed"]:  # from the power-up pose: narrowed by more samples after the APPLY
         judged["passed"] = _from_power_up(poses, after, c, enc, staged, odo, voiced[1])
     return {"fields_kept": [name for name in FIELDS if name not in staged], **judged}
+
+
+def _primed_up(seen: tuple[Poses, Encoders, FloatArray], c: int, after: int,
+               staged: dict[str, float], odo: Odo) -> Kept:
+    """``kept_check`` from the power-up pose of a firmware that stalled before its first pose
+    (``judge_kept``'s ``primed``), as ``_across_stall`` from it: the position within the merge
+    allowance of the steps from the frame it primed on (it took them merged, which ones the log
+    cannot say; its heading exact). Not from its first pose sent (it may name a backlog frame)."""
+    if after == int(np.argmin(seen[2])):
+        return "the first pose after the APPLY the first after a stall before it"
+    return _across_stall(seen, c, (None, after), (0, (0.0, 0.0, 0.0)), staged, odo)
 
 
 def _across_stall(seen: tuple[Poses, Encoders, FloatArray], c: int,
@@ -226,7 +276,7 @@ def _across_stall(seen: tuple[Poses, Encoders, FloatArray], c: int,
     steps = _plain_steps(enc, start[0], int(poses.enc[after]), odo)
     if steps is None:
         return f"{why}, and the encoder frames across it not all heard as plain steps"
-    judged = _judged(start, _sample(poses, after), steps, c - start[0], staged, odo.geometry,
+    judged = jump_judged(start, _sample(poses, after), steps, c - start[0], staged, odo.geometry,
                      odo.integrator, exact_start=before is None,
                      gap_m=merged_allowance_m(*steps, odo.geometry, odo.integrator))
     return {"fields_kept": list(FIELDS), **judged}
@@ -297,14 +347,14 @@ def _agree(lows: list[tuple[float, float]], highs: list[tuple[float, float]],
         if name in staged:
             value = staged[name]
             if k == 2:
-                value = lo_a + (value - lo_a) % _TURN
-            if not lo_a - _FLOAT_M <= value <= hi_a + _FLOAT_M:
+                value = lo_a + (value - lo_a) % TURN_RAD
+            if not lo_a - FLOAT_M <= value <= hi_a + FLOAT_M:
                 return False
         elif k == 2:
-            shift = round((lo_a - lo_b) / _TURN) * _TURN
-            if lo_a - shift > hi_b + _FLOAT_RAD or lo_b > hi_a - shift + _FLOAT_RAD:
+            shift = round((lo_a - lo_b) / TURN_RAD) * TURN_RAD
+            if lo_a - shift > hi_b + FLOAT_RAD or lo_b > hi_a - shift + FLOAT_RAD:
                 return False
-        elif lo_a > hi_b + _FLOAT_M or lo_b > hi_a + _FLOAT_M:
+        elif lo_a > hi_b + FLOAT_M or lo_b > hi_a + FLOAT_M:
             return False
     return True
 
@@ -324,11 +374,11 @@ def _at_cut(poses: Poses, samples: range, c: int, base: int,
         mx, my = cos_c * dx + sin_c * dy, -sin_c * dx + cos_c * dy  # in the frame at c
         h_c = float(poses.heading_rad[i]) - (rel_h[k] - rel_h[c])
         h_first = h_c if h_first is None else h_first
-        h_c = h_first + (h_c - h_first + math.pi) % _TURN - math.pi
+        h_c = h_first + (h_c - h_first + math.pi) % TURN_RAD - math.pi
         x_c = float(poses.x_m[i]) - (math.cos(h_c) * mx - math.sin(h_c) * my)
         y_c = float(poses.y_m[i]) - (math.sin(h_c) * mx + math.cos(h_c) * my)
-        widen = 0.5 * HEADING_LSB_RAD * math.hypot(mx, my) + _FLOAT_M
-        half = [0.5 * POSITION_LSB_M + widen] * 2 + [0.5 * HEADING_LSB_RAD + _FLOAT_RAD]
+        widen = 0.5 * HEADING_LSB_RAD * math.hypot(mx, my) + FLOAT_M
+        half = [0.5 * POSITION_LSB_M + widen] * 2 + [0.5 * HEADING_LSB_RAD + FLOAT_RAD]
         bounds = [(max(lo, v - w), min(hi, v + w))
                   for (lo, hi), v, w in zip(bounds, (x_c, y_c, h_c), half, strict=True)]
     if any(lo > hi for lo, hi in bounds):
@@ -348,7 +398,7 @@ def _settled(poses: Poses, i: int, enc: Encoders, odo: Odo) -> bool:
     after a stall, is not: the samples there cannot pin a jump)."""
     b, a = int(poses.enc[i]), int(poses.enc[i + 1])
     steps = _plain_steps(enc, b, a, odo, one_gap=True)
-    return steps is not None and bool(_judged(
+    return steps is not None and bool(jump_judged(
         _sample(poses, i), _sample(poses, i + 1), steps, 0, {}, odo.geometry,
         odo.integrator, gap_m=_gap_m(enc, (b, a), steps, odo))["passed"])
 
@@ -436,65 +486,4 @@ def _gap_m(enc: Encoders, frames: tuple[int, int], steps: tuple[np.ndarray, np.n
     bounds = period_bounds(odo.geometry, odo.geometry.speed_bound_mm_s(odo.max_wheel_speed_mm_s))
     return gap_allowance_m(int(steps[0][k]), int(steps[1][k]), int(periods[k]), odo.geometry,
                            odo.integrator, bounds)
-
-
-def _moved(pose: tuple[float, float, float], d_left: np.ndarray, d_right: np.ndarray,
-           geometry: Geometry, integrator: str) -> tuple[float, float, float, float]:
-    """``pose`` (x m, y m, heading rad) moved by the steps: the pose, and the path (m)."""
-    if len(d_left) == 0:
-        return (*pose, 0.0)
-    moved = integrate(d_left, d_right, geometry, integrator, x0_m=pose[0], y0_m=pose[1],
-                      heading0_rad=pose[2])
-    return (float(moved.x_m[-1]), float(moved.y_m[-1]), float(moved.heading_rad[-1]),
-            float(moved.distance_m[-1]))
-
-
-def _judged(before: tuple[int, tuple[float, float, float]],
-            after: tuple[int, tuple[float, float, float]], steps: tuple[np.ndarray, np.ndarray],
-            to_cut: int, staged: dict[str, float], geometry: Geometry, integrator: str, *,
-            exact_start: bool = False, gap_m: float = 0.0) -> dict[str, Any]:
-    """The pose ``before`` (encoder frame, pose) moved by the ``to_cut`` steps to the APPLY's
-    frame, the staged fields set there, moved by the rest to the sample ``after``: how far that
-    sample is. ``exact_start``: ``before`` is the power-up pose, no sample: only ``after``'s
-    rounding is left (half an LSB, of position and of heading). ``gap_m``: a merged step's
-    bound on the position (``_gap_m``)."""
-    d_left, d_right = steps
-    x, y, h, head_m = _moved(before[1], d_left[:to_cut], d_right[:to_cut], geometry, integrator)
-    start = (staged.get("X", x), staged.get("Y", y), staged.get("HEADING", h))
-    x, y, h, tail_m = _moved(start, d_left[to_cut:], d_right[to_cut:], geometry, integrator)
-    dx_m, dy_m = after[1][0] - x, after[1][1] - y
-    dh_rad = (after[1][2] - h + math.pi) % _TURN - math.pi
-    if exact_start:  # the power-up pose: the after sample's rounding alone
-        bound_m, bound_rad = 0.5 * POSITION_LSB_M + _FLOAT_M, 0.5 * HEADING_LSB_RAD + _FLOAT_RAD
-    else:  # two samples' roundings, and the start heading's over the path
-        bound_m = POSITION_LSB_M + HEADING_LSB_RAD * (head_m + tail_m) + _FLOAT_M
-        bound_rad = HEADING_LSB_RAD + _FLOAT_RAD
-    bound_m += gap_m
-    passed = max(abs(dx_m), abs(dy_m)) <= bound_m and abs(dh_rad) <= bound_rad
-    return {"encoder_frames": after[0] - before[0],
-            "position_jump_m": math.hypot(dx_m, dy_m), "heading_jump_rad": abs(dh_rad),
-            "bound_m": bound_m, "passed": passed}
-
-
-def mark_kept(report: dict[str, Any], checks: dict[int, Kept]) -> None:
-    """Put each check (by the index of the life the set-pose opened: its event's ``life``)
-    into its ``set_pose`` event (``kept``); a failed one FAILs the report, named there. One
-    not made: ``kept`` null, why in ``kept_not_judged`` and the event's detail."""
-    for event in report["events"]:
-        if event["kind"] != "set_pose" or event.get("life") not in checks or all(
-                event[name] is not None for name in ("x_m", "y_m", "heading_rad")):
-            continue  # every field set: the life starts exactly there, nothing kept
-        check = checks[event["life"]]
-        if isinstance(check, str):
-            event["kept"], event["kept_not_judged"] = None, check
-            event["detail"] += f"; what the APPLY kept not checked: {check} (judged by its fit)"
-            continue
-        event["kept"] = check
-        if check is not None and not check["passed"]:
-            report["passed"] = False
-            event["detail"] += (
-                f"; FAIL: the firmware's pose jumped {check['position_jump_m']:.4f} m, "
-                f"{check['heading_jump_rad']:.5f} rad at an APPLY that kept "
-                f"{', '.join(check['fields_kept'])} (nothing staged for them in this firmware "
-                "life): it set what it was not given")
 

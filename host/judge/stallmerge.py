@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from odocan.host.judge.breaks import MAX_MERGE_FRAMES, path_bound_m
 from odocan.host.judge.losses import step_vector
 from odocan.host.judge.reference import Geometry, integrate
 from odocan.host.judge.samples import SILENCE_CYCLES, FloatArray
@@ -32,10 +33,13 @@ def merged_allowance_m(d_left: np.ndarray, d_right: np.ndarray, geometry: Geomet
     """The largest distance (m) between the reference's position after the count steps
     (``d_left``, ``d_right``: element k into frame k + 1) taken one by one and a firmware's
     that took them in runs of consecutive frames, each run as one merged step (module
-    docstring)."""
+    docstring). Beyond ``breaks.MAX_MERGE_FRAMES`` steps, ``breaks.path_bound_m`` (analyze's own
+    for long spans: the table here grows as the square of the steps, 1 GB at a minute's)."""
     n = len(d_left)
     if n < 2:
         return 0.0
+    if n > MAX_MERGE_FRAMES:
+        return path_bound_m(int(np.sum(np.abs(d_left))), int(np.sum(np.abs(d_right))), geometry)
     fine = integrate(d_left, d_right, geometry, integrator)
     x = np.concatenate(([0.0], fine.x_m))
     y = np.concatenate(([0.0], fine.y_m))

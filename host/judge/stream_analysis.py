@@ -34,6 +34,7 @@ from odocan.host.judge.breaks import placed_offsets
 from odocan.host.judge.configs import in_force
 from odocan.host.judge.distance import DistanceJudge
 from odocan.host.judge.gapfill import gap_or_fill_allowance
+from odocan.host.judge.keptmark import mark_kept
 from odocan.host.judge.nearthreshold import least_of
 from odocan.host.judge.reboots import Life, merge
 from odocan.host.judge.reference import PROFILE_SPEED, Geometry, SpeedBound
@@ -44,7 +45,7 @@ from odocan.host.judge.samples import (
     Encoders,
     require_messages,
 )
-from odocan.host.judge.setposekept import Kept, check_cut, mark_kept
+from odocan.host.judge.setposekept import Kept, check_cut
 from odocan.host.judge.stallreprime import STREAM, any_declared
 from odocan.host.judge.stream import StreamE2E
 from odocan.host.judge.stream_carry import CarriedSpans, carried
