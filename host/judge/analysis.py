@@ -125,7 +125,12 @@ from odocan.host.judge.evidencechoice import chosen_seen
 from odocan.host.judge.finalstate import firmware_fields, latched_fields
 from odocan.host.judge.gapseen import Seen, seen_in_log
 from odocan.host.judge.holepages import page_numbered
-from odocan.host.judge.losses import firmware_losses, firmware_ok_spans, loss_allowance
+from odocan.host.judge.losses import (
+    firmware_losses,
+    firmware_ok_spans,
+    life_placements,
+    loss_allowance,
+)
 from odocan.host.judge.powerup import saw_only_the_log, starts_at_power_up
 from odocan.host.judge.reboots import (
     Life,
@@ -136,11 +141,7 @@ from odocan.host.judge.reboots import (
     two_sources,
 )
 from odocan.host.judge.reference import PROFILE_SPEED, Geometry, SpeedBound
-from odocan.host.judge.reference_path import (
-    build_reference,
-    firmware_steps,
-    restart_detail,
-)
+from odocan.host.judge.reference_path import build_reference, firmware_steps, restart_detail
 from odocan.host.judge.reportfacts import covered_s, frame_counts, realtime, robot_dict
 from odocan.host.judge.resent import worst_sent
 from odocan.host.judge.samples import (
@@ -353,7 +354,7 @@ def _analyze_life(
     pose_sent_s = accepted_rows(frames, accepted, decoder, "ODOM_POSE_Y")["timestamp_s"]
     alive_s = alive_times(frames, accepted, decoder)
     onboard, stalls = after_stalls(onboard, sent_s, enc, pose_sent_s, alive_s)
-    placed = first_placement(sent_s, enc, alive_s, pose_sent_s, onboard)  # no loss span's
+    first = first_placement(sent_s, enc, alive_s, pose_sent_s, onboard)  # no loss span's
     truth = truth_samples(frames, accepted, decoder, enc)
     if boot:  # (a stalled MCU's first page misses the frames its FIFO overran: primed_first)
         power_up = saw_only_the_log(frames, accepted, decoder) or primed_first(
@@ -380,6 +381,7 @@ def _analyze_life(
     vs_truth["distance_travelled_m"] = float(ref.distance_m[-1])
     twist = check_twist(frames, accepted, decoder, enc, robot)
     losses = firmware_losses(frames, accepted, decoder, enc, power_up and start_pose is None)
+    placed = life_placements(first, stalls, onboard.enc, ref_all.start, ref_all.stall_reprimes)
     allowance = loss_allowance(enc, robot, integrator, losses, onboard.enc, onboard.enc, placed)
     vs_ref["loss_allowance_m"] = float(np.max(allowance, initial=0.0))
     after_span = loss_allowance(enc, robot, integrator, losses,
