@@ -22,37 +22,34 @@ Everything comes from the bus (``FrameArrays``, live or from a log), decoded wit
    make one truth sample (named by the simulator, whenever its encoder frame reaches the bus).
 4. **Reference**: ``host.reference.integrate`` over the count deltas of the accepted encoder frames
    (mod 2^min(counter_bits, 24), what the wire carries), started at the first on-board sample.
-   The start pose is exact when the log starts at power-up (``host.judge.powerup``): the
-   firmware starts at pose 0 on the first encoder frame it accepts (by contract; a set-pose is
-   the only other start), so a log whose first ODOM_STATUS summary says UPTIME 0 and whose first
-   ODOM_STATUS page of encoder E2E counts says the firmware had accepted exactly the log's
-   encoder frames (it primed on the log's first: a recorder started late is not a power-up)
-   starts the reference at exactly (0, 0, 0) on its first encoder frame, whatever its first
-   on-board sample reads: a firmware that powers up off (0, 0, 0), by one LSB or by 0.1 m, FAILs.
-   The exact start is not checked against the samples: a wrong firmware drifting from the start
-   must be judged from it, not from a start fitted to its drift. Without that page (other
-   firmwares need not send it) the first sample must also name the first accepted encoder frame
-   and read exactly 0 (X, Y, HEADING, TURNS); then a recorder
-   started in the firmware's first second after the robot moved less than half an LSB would be
-   taken for a power-up. Any other log (mid-drive) has its start fitted to below its resolution: the
-   on-board values are rounded to 0.1 mm and 2 pi/65536 rad, so the start heading is the middle
-   of the overlap of the heading intervals of *every* sample of the log (less the reference's
-   own increments): N samples at varied headings
-   pin it to about 2^-16 turn / N. The heading error rotates the whole reference about the start,
-   so on a drive with little heading variation (a long straight) the rotation is then taken from
-   the positions of all samples (least squares, each segment between gaps of the encoder
-   sequence with an offset of its own, see step 4's gaps below), never leaving the heading overlap:
-   a rotation the heading samples allow is one the log cannot tell from a different start. The
-   start position is the middle of the overlap of the first samples' position intervals.
-   Without that, a start heading off by its residual (7e-8 rad) grows as residual x distance,
-   enough to fail a correct firmware after 600 m.
-   The reference takes the steps the firmware is specified to take (firmware/ecu.py): a frame
-   beyond the plausibility bound (the profile's ``max_wheel_speed_m_s`` over its periods,
+   The start pose is exact when the log starts at power-up (``host.judge.powerup``): the firmware
+   starts at pose 0 on the first encoder frame it accepts (by contract; a set-pose is the only
+   other start), so a log whose first ODOM_STATUS summary says UPTIME 0 and whose first
+   ODOM_STATUS page of encoder E2E counts says the firmware had accepted exactly the log's encoder
+   frames (it primed on the log's first: a recorder started late is not a power-up) starts the
+   reference at exactly (0, 0, 0) on its first encoder frame, whatever its first on-board sample
+   reads: a firmware that powers up off (0, 0, 0), by one LSB or by 0.1 m, FAILs. The exact start
+   is not checked against the samples: a wrong firmware drifting from the start must be judged
+   from it, not from a start fitted to its drift. Without that page (other firmwares need not send
+   it) the first sample must also name the first accepted encoder frame and read exactly 0 (X, Y,
+   HEADING, TURNS); then a recorder started in the firmware's first second after the robot moved
+   less than half an LSB would be taken for a power-up. Any other log (mid-drive) has its start
+   fitted to below its resolution: the on-board values are rounded to 0.1 mm and 2 pi/65536 rad,
+   so the start heading is the middle of the overlap of the heading intervals of *every* sample of
+   the log (less the reference's own increments): N samples at varied headings pin it to about
+   2^-16 turn / N. The heading error rotates the whole reference about the start, so on a drive
+   with little heading variation (a long straight) the rotation is then taken from the positions
+   of all samples (least squares, each segment between gaps of the encoder sequence with an offset
+   of its own, see step 4's gaps below), never leaving the heading overlap: a rotation the heading
+   samples allow is one the log cannot tell from a different start. The start position is the
+   middle of the overlap of the first samples' position intervals. Without that, a start heading
+   off by its residual (7e-8 rad) grows as residual x distance, enough to fail a correct firmware
+   after 600 m. The reference takes the steps the firmware is specified to take (firmware/ecu.py):
+   a frame beyond the plausibility bound (the profile's ``max_wheel_speed_m_s`` over its periods,
    widened by the bus time as the firmware widens them by its clock's: ``step_periods``) is
-   refused,
-   ``RESYNC_FRAMES`` refused frames consistent among themselves are a counter restart,
-   re-primed on the first of them (a
-   ``counter_restart`` event; the motion across it is lost on board and in the reference alike).
+   refused, ``RESYNC_FRAMES`` refused frames consistent among themselves are a counter restart,
+   re-primed on the first of them (a ``counter_restart`` event; the motion across it is lost on
+   board and in the reference alike).
    After the firmware was silent for ``SILENCE_CYCLES`` cycles (a stalled MCU) its first pose,
    naming a backlog frame ENC_COUNTER cannot resolve, is left out, and the position is placed
    again (a ``firmware_stall`` event): the firmware took the frames it missed as one step (or
@@ -126,7 +123,12 @@ from odocan.host.judge.finalstate import firmware_fields, latched_fields
 from odocan.host.judge.gapseen import Seen, seen_in_log
 from odocan.host.judge.holepages import page_numbered
 from odocan.host.judge.keptmark import mark_kept
-from odocan.host.judge.losses import firmware_losses, firmware_ok_spans, loss_allowance
+from odocan.host.judge.losses import (
+    firmware_losses,
+    firmware_ok_spans,
+    life_placements,
+    loss_allowance,
+)
 from odocan.host.judge.powerup import saw_only_the_log, starts_at_power_up
 from odocan.host.judge.reboots import (
     Life,
@@ -137,11 +139,7 @@ from odocan.host.judge.reboots import (
     two_sources,
 )
 from odocan.host.judge.reference import PROFILE_SPEED, Geometry, SpeedBound
-from odocan.host.judge.reference_path import (
-    build_reference,
-    firmware_steps,
-    restart_detail,
-)
+from odocan.host.judge.reference_path import build_reference, firmware_steps, restart_detail
 from odocan.host.judge.reportfacts import covered_s, frame_counts, realtime, robot_dict
 from odocan.host.judge.resent import worst_sent
 from odocan.host.judge.samples import (
@@ -355,7 +353,7 @@ def _analyze_life(
     pose_sent_s = accepted_rows(frames, accepted, decoder, "ODOM_POSE_Y")["timestamp_s"]
     alive_s = alive_times(frames, accepted, decoder)
     onboard, stalls = after_stalls(onboard, sent_s, enc, pose_sent_s, alive_s)
-    placed = first_placement(sent_s, enc, alive_s, pose_sent_s, onboard)  # no loss span's
+    first = first_placement(sent_s, enc, alive_s, pose_sent_s, onboard)  # no loss span's
     truth = truth_samples(frames, accepted, decoder, enc)
     unproven: list[dict[str, Any]] = []  # its first count pages lost: said (stallpowerup)
     if boot:  # (a stalled MCU's first page misses the frames its FIFO overran: primed_first)
@@ -384,6 +382,7 @@ def _analyze_life(
     vs_truth["distance_travelled_m"] = float(ref.distance_m[-1])
     twist = check_twist(frames, accepted, decoder, enc, robot)
     losses = firmware_losses(frames, accepted, decoder, enc, power_up and start_pose is None)
+    placed = life_placements(first, stalls, onboard.enc, ref_all.start, ref_all.stall_reprimes)
     allowance = loss_allowance(enc, robot, integrator, losses, onboard.enc, onboard.enc, placed)
     vs_ref["loss_allowance_m"] = float(np.max(allowance, initial=0.0))
     after_span = loss_allowance(enc, robot, integrator, losses,

@@ -38,12 +38,15 @@ Where the firmware's steps are not the reference's:
 * a stall or hold (``stall_breaks``) and the spans where the firmware lost frames the log holds
   (``loss_spans``, ENC_E2E_LOST grew): it took several fine steps as one, |sum dS_i| <= sum
   |dS_i|, so its path may grow less, by up to the fine path of the span (the reference's own
-  sum over it; ``down``). A stall's span ends at the first sample naming a frame after it;
+  sum over it; ``down``). A stall's span ends at the first sample naming a frame after it.
+  Each frame's fine path counts once, however many such spans hold it (``merged_path_m``: the
+  union; a stall's frames lie in the lossy span of the page after it too);
 * a span where the firmware's ENC_E2E_OK grew by n less than the host's accepted frames
   (``skipped``, ``losses.ok_count_spans``: the host's E2E, judging its window from jittered bus
   times, took frames the firmware refused): its path may grow less by n times the largest
   defect sum |dS_i| - |sum dS_i| of up to n + 1 consecutive steps there (``skipdefect``;
-  ``down``), not the span's whole fine path: 0 where the midpoint does not reverse;
+  ``down``), not the span's whole fine path: 0 where the midpoint does not reverse (past
+  ``skipdefect.MAX_RUN`` frames, its whole fine path: then a span of the union above);
 * an encoder frame with a twin (``twin_paths``): the firmware may have stepped through the
   twin (``up``: the steps into and out of it) or taken it for the frame (``down``: the
   reference's steps into and out of the frame).
@@ -88,7 +91,7 @@ from odocan.host.judge.samples import (
     IntArray,
     match_encoder,
 )
-from odocan.host.judge.skipdefect import SkipDown
+from odocan.host.judge.skipdefect import MAX_RUN, SkipDown
 from odocan.host.protocol.busfacts import ENC_PERIOD_US as ENCODER_PERIOD_US
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.sim.robot import NM_PER_M, RobotProfile
@@ -182,6 +185,28 @@ class Feasible:
             self.excess_mm = max(self.excess_mm, self.lo - self.hi)
 
 
+def merged_path_m(spans: list[tuple[int, int]], anchors: dict[int, int], e: IntArray,
+                  units: IntArray) -> FloatArray:
+    """Per sample (naming encoder frame ``e``, the reference's path ``units`` there): the fine
+    path (m) over the union of the frames (a, min(e, z)] of ``spans`` (a stall's, from the last
+    frame named before it to the first named after; a lossy span's: ``losses.firmware_losses``),
+    ``anchors`` the path at their ends. The firmware merged steps there, so its path may grow
+    less by up to that fine path (module docstring); a stall's frames lie in the span of the
+    page after it too (its FIFO overrun counted lost), and each frame's path may be merged away
+    once, not once per span that holds it (before, summed span by span: a DISTANCE 4.5 m short
+    after a 3 s stall mid-drive passed ``analyze``, 1.5 m of it the stall's path counted twice,
+    ``tests/test_distance_merged_union.py``)."""
+    lower = np.zeros(len(e))
+    covered = np.full(len(e), np.iinfo(np.int64).min)  # the union's end so far (units)
+    for a, z in sorted(spans):  # by first frame: the path units grow with the frame
+        inside = e > a
+        top = np.where(e <= z, units, anchors.get(z, 0)).astype(np.int64)  # exact int sums
+        add = np.maximum(top - np.maximum(anchors[a], covered), 0)
+        lower += np.where(inside, add, 0) / UNITS_PER_M
+        covered = np.where(inside, np.maximum(covered, top), covered)
+    return lower
+
+
 @dataclass
 class DistanceJudge:
     """The judge (module docstring). ``feed_frames`` the encoder frames from e0 in order with the
@@ -210,7 +235,7 @@ class DistanceJudge:
     def __post_init__(self) -> None:
         if self.exact:  # at power-up: 0 at the first frame
             self.feasible = Feasible(0.0, 0.0)
-        self._skip = SkipDown(self.skipped)
+        self._skip = SkipDown([span for span in self.skipped if span[2] <= MAX_RUN])
 
     def feed_frames(self, g: IntArray, d_left: IntArray, d_right: IntArray, seq: IntArray
                     ) -> None:
@@ -245,8 +270,13 @@ class DistanceJudge:
 
     def _wanted(self) -> list[int]:
         """Frames whose path is needed later: the spans' ends."""
-        return ([b - 1 for b in self.stall_breaks] + [a for a, _ in self.loss_spans]
-                + [z for _, z in self.loss_spans] + list(self._stall_ends.values()))
+        return ([b - 1 for b in self.stall_breaks] + [a for a, _ in self._merged_spans()]
+                + [z for _, z in self._merged_spans()] + list(self._stall_ends.values()))
+
+    def _merged_spans(self) -> list[tuple[int, int]]:
+        """The lossy spans, and the skipped ones past ``skipdefect.MAX_RUN`` (their whole
+        fine path bounds them, from the span's first frame to the one after its last)."""
+        return self.loss_spans + [(a, z + 1) for a, z, n in self.skipped if n > MAX_RUN]
 
     def _gap_extra_m(self, periods: IntArray, ds_m: FloatArray) -> FloatArray:
         """Per frame: how far above the merged step the firmware's path may be (a gap)."""
@@ -319,8 +349,10 @@ class DistanceJudge:
         self._trim(int(e[-1]))
 
     def _lower_m(self, e: IntArray, units: IntArray) -> FloatArray:
-        """Per sample: how far below the reference the firmware's merged steps may put it."""
-        lower = np.zeros(len(e))
+        """Per sample: how far below the reference the firmware's merged steps may put it: the
+        fine path over the union of the stalls' and the lossy spans' frames before it
+        (``merged_path_m``), plus the twins'."""
+        spans: list[tuple[int, int]] = []
         for b in self.stall_breaks:
             if b - 1 not in self._anchors:
                 continue
@@ -330,24 +362,14 @@ class DistanceJudge:
                     continue
                 self._stall_ends[b] = int(e[after[0]])
                 self._anchors[int(e[after[0]])] = int(units[after[0]])
-            end = self._stall_ends[b]
-            self._add_span(lower, e, units, b - 1, end)
+            spans.append((b - 1, self._stall_ends[b]))
         first = min(self._anchors, default=0)  # the first frame fed is anchored
-        for a, z in self.loss_spans:  # a span begun before the first frame: from it
-            if max(a, first) in self._anchors and z > first:
-                self._add_span(lower, e, units, max(a, first), z)
+        spans += [(max(a, first), z) for a, z in self._merged_spans()  # begun before it: from it
+                  if max(a, first) in self._anchors and z > first]
+        lower = merged_path_m(spans, self._anchors, e, units)
         for frame, (_, down_m) in self.twins.items():
             lower[e >= frame] += down_m
         return lower
-
-    def _add_span(self, lower: FloatArray, e: IntArray, units: IntArray, a: int, z: int
-                  ) -> None:
-        """Add the fine path over frames (a, min(e, z)] to the samples after ``a``."""
-        inside = e > a
-        if not inside.any():
-            return
-        top = np.where(e <= z, units, self._anchors.get(z, 0))
-        lower[inside] += (top[inside] - self._anchors[a]) / UNITS_PER_M
 
     def _trim(self, last_e: int) -> None:
         """Drop the frames before the last sample's: no sample to come names them."""

@@ -113,6 +113,7 @@ class LiveDistance:
         self._judged_last = False  # the last twist was judged (a resend of it is too)
         self._last_twist: tuple[float, int] = (math.nan, 0)  # bus time, frames heard before
         self._lower_m = 0.0
+        self._last_units = 0  # the path at the last frame judged (``_last_e``)
         self._stalls = -1
         self._page_units: int | None = None
         self._lost: int | None = None
@@ -197,13 +198,14 @@ class LiveDistance:
         if not self._judged_last or at is None:
             return
         if self._stalls >= 0 and tracker.stall.stalls > self._stalls and self._last_e >= 0:
-            before = self._frames.get(self._last_e)  # merged since the last sample
-            self._lower_m += (at[0] - before[0]) / UNITS_PER_M if before else math.inf
+            # merged since the last sample (its path kept: a 3 s stall outlives the frames
+            # kept, and the allowance was unbounded, a DISTANCE 20 m short then PASSed)
+            self._lower_m += (at[0] - self._last_units) / UNITS_PER_M
         elif self._last_e < 0 and (primed := tracker.first.stalled_from) is not None \
                 and self.first_seq is not None and primed >= self.first_seq:
             before = self._frames.get(primed)  # a stall before the first pose (livefirst):
             self._lower_m += (at[0] - (before[0] if before else 0)) / UNITS_PER_M  # merged since
-        self._stalls, self._last_e = tracker.stall.stalls, e
+        self._stalls, self._last_e, self._last_units = tracker.stall.stalls, e, at[0]
         units, n, c, up = at
         diff = raw_mm - units * (1000.0 / UNITS_PER_M)
         r = diff - WIRE_MM * round(diff / WIRE_MM)

@@ -19,7 +19,11 @@ sample, bounded from the frame the firmware could first have primed on), the fra
 two are the placement's, no span's (``losses.placement_accounted``, ``analyze``'s rule): told by
 ``stalled_first``, the placed sample's frame taken at the next ``record``; a span opened before
 the stall was told (a page before the first sample, from the primed frame on) held only such
-frames and is withdrawn."""
+frames and is withdrawn. The same after a stall or hold mid-life (``livestall``: the position
+placed again at the next sample compared, bounded from the last one compared before it): told by
+``stalled_at``, the frames between are the placement's (``analyze``'s ``losses.life_placements``)
+at every page after it was told. A page that came before (the firmware's first ODOM_STATUS after
+the stall sent before its first pose) keeps its span whole: looser, never tighter."""
 
 from __future__ import annotations
 
@@ -56,6 +60,7 @@ class LiveAllowance:
         # the next ``record``), and the spans opened since the power-up before it was told
         self.placed: tuple[int, int | None] | None = None
         self._first_spans: list[tuple[int, float]] | None = None
+        self._placed_before: list[tuple[int, int]] = []  # earlier placements (``stalled_at``)
 
     def record(self, seq: int, error: dict[str, float], fast: bool, t_s: float) -> None:
         """A sample at encoder frame ``seq`` (its ODOM_POSE_Y at bus time ``t_s``), ``error``
@@ -85,6 +90,14 @@ class LiveAllowance:
         self.placed = (primed, None)
         opened, self._first_spans = self._first_spans or [], None
         self.spans = [span for span in self.spans if span not in opened or span[0] < primed]
+
+    def stalled_at(self, last: int) -> None:
+        """A stall or hold mid-life (``livestall``), the position placed again at the next
+        sample compared, its allowance from encoder frame ``last`` (the last sample compared
+        before it; module docstring)."""
+        if self.placed is not None and self.placed[1] is not None:
+            self._placed_before = [*self._placed_before, (self.placed[0], self.placed[1])][-8:]
+        self.placed = (last, None)
 
     def rejudge(self, from_seq: int, until: int | None, shift: tuple[float, float]) -> None:
         """The reference was wrong by ``shift`` (dx, dy m) from encoder frame ``from_seq`` on
@@ -122,7 +135,7 @@ class LiveAllowance:
         """A new reference: the samples so far are settled, no span reaches past it."""
         self.settle(upto, fast)
         self.wrongs.close()  # an episode does not run on into another reference
-        self.spans = []
+        self.spans, self._placed_before = [], []
         self.placed = self._first_spans = None
 
     def primed(self, seq: int) -> None:
@@ -174,12 +187,13 @@ class LiveAllowance:
             if self._first_spans is not None:
                 self._first_spans.append(span)
 
-    def _placed_by(self, upto: int) -> tuple[int, int] | None:
-        """``placed`` at a page whose latest encoder frame is ``upto``: its frames after the
-        primed one all the placement's while its sample is not compared yet."""
+    def _placed_by(self, upto: int) -> list[tuple[int, int]]:
+        """The placements at a page whose latest encoder frame is ``upto``: the latest one's
+        frames after its first all the placement's while its sample is not compared yet."""
         if self.placed is None:
-            return None
-        return self.placed[0], upto + 1 if self.placed[1] is None else self.placed[1]
+            return self._placed_before
+        latest = self.placed[0], upto + 1 if self.placed[1] is None else self.placed[1]
+        return [*self._placed_before, latest]
 
 
 def _quiet(window: Columns, first: int) -> bool:

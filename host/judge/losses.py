@@ -5,6 +5,7 @@ the live judge's form for ``host.judge.tracking``)."""
 
 from __future__ import annotations
 
+from collections.abc import Collection, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -27,6 +28,7 @@ from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.sim.robot import RobotProfile
 
 LOST_PAGE = busfacts.ENC_E2E_PAGE  # ODOM_STATUS page with the WHEEL_ENCODERS E2E counts
+Placements = Sequence[tuple[int, int]]  # (frame before, frame placed at) per stall placement
 
 
 def firmware_losses(
@@ -138,13 +140,13 @@ def overflow_reported_after(
 
 def loss_allowance(
     enc: Encoders, robot: RobotProfile, integrator: str, spans: list[tuple[int, int, int]],
-    at: IntArray, named: IntArray, placed: tuple[int, int] | None = None,
+    at: IntArray, named: IntArray, placed: Placements = (),
 ) -> FloatArray:
     """How far (m) the on-board position may lie from the fine reference at encoder frames
     ``at`` because of the frames the firmware lost (``firmware_losses``): per span, the largest
     sum of ``run_errors`` over runs of lost frames, n frames in all, among its frames (the frames
     ``named`` by on-board samples excepted: the firmware had them; and those a stall's
-    placement before the first sample accounts for, ``placed``: ``placement_accounted``),
+    placement accounts for, ``placed``: ``placement_accounted``),
     summed over the spans that began before the frame. A run of lost frames only changes the
     one step that merges it (the heading after it is exact, a function of the counts), so the
     errors add up as vectors: their sum of lengths bounds them. A run of r frames merged into
@@ -165,28 +167,54 @@ def loss_allowance(
     return allowance
 
 
-def placement_accounted(
-    frames: IntArray | FloatArray, placed: tuple[int, int] | None
-) -> npt.NDArray[np.bool_]:
-    """Per encoder frame (``frames``: their numbers, any increasing numbering): whether the
-    placement after a stall before a life's first sample accounts for it, so that no loss span
-    may lose it (``loss_allowance``; the live judges' ``livelosses.LiveAllowance.on_page``).
-    ``placed``: the frame the firmware could first have primed on (``stalls.first_after_stall``)
-    and the frame of the sample the position is placed at; None: no such placement.
+def stall_placements(breaks: IntArray, sample_enc: IntArray) -> list[tuple[int, int]]:
+    """The placements after the stalls and holds mid-life (``breaks``: the frames the
+    reference's position restarts at, ``stalls.after_stalls``; ``sample_enc``: the kept
+    samples' frames): per break b, frame b - 1 (the last the firmware named before it) and the
+    first frame a kept sample names at or after b, where the position is placed again within
+    the merge allowance of the frames between (``breakspan.break_allowance``'s span); none
+    for a break no kept sample follows."""
+    named = np.unique(np.asarray(sample_enc, dtype=np.int64))
+    k = np.searchsorted(named, breaks)
+    return [(int(b) - 1, int(named[i])) for b, i in zip(breaks.tolist(), k.tolist(), strict=True)
+            if i < len(named)]
+
+
+def life_placements(first: tuple[int, int] | None, breaks: IntArray, sample_enc: IntArray,
+                    start: int, reprimed: Collection[int]) -> list[tuple[int, int]]:
+    """A life's stall placements (``placement_accounted``): the one before its first sample
+    (``first``: ``stalls.first_placement``) and those after its stalls and holds from the
+    reference's start frame ``start`` on (``stall_placements``), but not a stall the firmware
+    re-primed after (``reprimed``: their breaks, from ``start``, ``stallreprime``: the
+    placement there is bounded up to the re-primed frame only, not the placed sample's)."""
+    mid = np.array([b for b in np.asarray(breaks).tolist()
+                    if b > start and b - start not in reprimed], dtype=np.int64)
+    return [*([first] if first is not None else []), *stall_placements(mid, sample_enc)]
+
+
+def placement_accounted(frames: IntArray | FloatArray, placed: Placements) -> npt.NDArray[np.bool_]:
+    """Per encoder frame (``frames``: their numbers, any increasing numbering): whether a
+    stall's placement accounts for it, so that no loss span may lose it (``loss_allowance``;
+    the live judges' ``livelosses.LiveAllowance.on_page``). ``placed``: per placement, the
+    frame before the frames it bounds and the frame of the sample the position is placed at:
+    the frame the firmware could first have primed on after a stall before a life's first
+    sample (``stalls.first_placement``), or the last frame named before a stall or hold mid-life
+    (``stall_placements``).
 
     A stalled MCU's CAN FIFO overran the frames between; the firmware counts them as lost
-    (ENC_E2E_LOST grows by the COUNTER's jump mod 16), and the life's count runs from 0 at its
-    power-up, so its first page opens a loss span over them. But the placement's bound
-    (``breaks.merge_allowance_m``: every set of runs lost between those two frames) already
-    allows what losing them did: granting them again as a loss allowance let a firmware 2 LSB
-    off 1.2 s later PASS (0.18 mm on top of the placement,
-    ``tests/test_stall_before_first_pose_after_reboot.py``). The span's count is kept whole for
-    the frames after the placement (all of it may lie there), so losses there keep their
-    allowance; the frames between are no longer among those it may lose."""
+    (ENC_E2E_LOST grows by the COUNTER's jump mod 16), so a page after the stall opens a loss
+    span over them. But the placement's bound (``breaks.merge_allowance_m``: every set of runs
+    lost between those two frames) already allows what losing them did: granting them again as
+    a loss allowance let a firmware 2 LSB off 1.2 s after a reboot's stall PASS (0.18 mm on top
+    of the placement, ``tests/test_stall_before_first_pose_after_reboot.py``), and 2 LSB off
+    0.1 s after a 3 s stall mid-drive PASS every judge (0.29 mm, 0.18 mm live,
+    ``tests/test_stall_mid_drive_losses.py``). The span's count is kept whole for the frames
+    after the placement (all of it may lie there), so losses there keep their allowance; the
+    frames between are no longer among those it may lose."""
     numbers = np.asarray(frames)
-    if placed is None:
-        return np.zeros(len(numbers), dtype=np.bool_)
-    inside: npt.NDArray[np.bool_] = (numbers > placed[0]) & (numbers < placed[1])
+    inside = np.zeros(len(numbers), dtype=np.bool_)
+    for before, at in placed:
+        inside |= (numbers > before) & (numbers < at)
     return inside
 
 

@@ -277,7 +277,7 @@ def _life(
     breaks = first.breaks
     spans = first.losses.spans(power_up and start_pose is None)
     geometry, bits = Geometry.of(robot), min(robot.counter_bits, WIRE_COUNTER_BITS)
-    drops = SpanDrops(spans, geometry, bits, integrator)
+    drops = SpanDrops(spans, geometry, bits, integrator, [b for b in breaks.tolist() if b > e0])
     across = StreamBreakCounts(breaks[breaks > e0].tolist(), geometry, bits, integrator,
                                max_wheel_speed_mm_s)
 

@@ -27,6 +27,8 @@ from odocan.host.judge.losses import (
     lost_beyond_gaps,
     ok_count_spans,
     overflow_reported_after,
+    placement_accounted,
+    stall_placements,
     step_vector,
     worst_runs_m,
 )
@@ -194,13 +196,16 @@ class SpanDrops:
     heading and single-step displacement (``losses.OneSteps``: continued cumulative sums,
     bit for bit the whole life's), kept only from the frame before each span to the frame
     after it; then each span's weight (``losses.worst_runs_m`` on them, the frames a
-    sample names excepted) and the allowance at any encoder frame (the weights of the spans
-    that began before it, added in the same order)."""
+    sample names excepted, and those a stall's placement accounts for: ``breaks``, the life's
+    stalls and holds, ``losses.stall_placements``) and the allowance at any encoder frame (the
+    weights of the spans that began before it, added in the same order)."""
 
     spans: list[tuple[int, int, int]]
     geometry: Geometry
     bits: int
     integrator: str
+    breaks: list[int] = field(default_factory=list)
+    _placed_at: dict[int, int] = field(default_factory=dict)  # break -> first sample after
     _count: int = 0  # encoder frames fed
     _last: tuple[int, int, int, int, float, float, float] | None = None  # gated l, r; cum l,
     # r; heading, cum x, cum y of the last frame fed
@@ -239,8 +244,14 @@ class SpanDrops:
                       float(heading[-1]), float(cum_x[-1]), float(cum_y[-1]))
 
     def named(self, sample_enc: npt.NDArray[np.int64]) -> None:
-        """Kept on-board samples' encoder frames: a frame a sample names was not lost."""
+        """Kept on-board samples' encoder frames: a frame a sample names was not lost; the
+        first at or after each break is where its placement is made."""
         self._named.update(sample_enc[self._near(sample_enc)].tolist())
+        for b in self.breaks:
+            later = sample_enc[sample_enc >= b]
+            if len(later):
+                first = int(np.min(later))
+                self._placed_at[b] = min(first, self._placed_at.get(b, first))
 
     def allowance(self, at: npt.NDArray[np.int64]) -> FloatArray:
         """``loss_allowance`` at encoder frames ``at`` (0 everywhere without a span)."""
@@ -275,6 +286,9 @@ class SpanDrops:
             np.array([r[4] for r in rows]),
         )
         lost_ok = np.array([g not in self._named for g in range(lo, hi + 1)], dtype=bool)
+        placed = stall_placements(np.array(self.breaks, dtype=np.int64),
+                                  np.array(list(self._placed_at.values()), dtype=np.int64))
+        lost_ok &= ~placement_accounted(np.arange(lo, hi + 1), placed)
         return worst_runs_m(steps, lost_ok, first - lo, last - lo, n)
 
     def _near(self, frames: npt.NDArray[np.int64]) -> npt.NDArray[np.bool_]:

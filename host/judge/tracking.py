@@ -261,7 +261,7 @@ class PoseTracker:
             return None
         started = self.raw.odometry is not None
         if (self.stall.last_t_s is None and left_out_first(self, pose, y.t_s, queued)) or (
-                self.stall.left_out(pose.seq, y.t_s, queued, started)):  # livefirst, livestall
+                self._left_out(pose.seq, y.t_s, queued, started)):  # livefirst, livestall
             if self.raw.odometry is not None or not self.reference_starts:  # (power-up too)
                 self.reprime.stalled(pose.seq, y.t_s, self.first.talked_before(y.t_s),
                                      self.raw.gate.least)
@@ -270,6 +270,16 @@ class PoseTracker:
         if (not started or lives.boot is not None) and lives.waits(pose, self.now_s):
             return None
         return None if self.choice.holds(pose) else self.judge(pose)  # held: livechoice
+
+    def _left_out(self, seq: int, t_s: float, queued: bool, started: bool) -> bool:
+        """``livestall``'s rule on a sample; a stall or hold it finds places the position
+        again from the last sample compared, whose frames since no loss span may lose
+        (``livelosses.LiveAllowance.stalled_at``)."""
+        stalls = self.stall.stalls
+        out = self.stall.left_out(seq, t_s, queued, started)
+        if self.stall.stalls > stalls and self.stall.last_compared >= 0:
+            self.losses.stalled_at(self.stall.last_compared)
+        return out
 
     def judge(self, pose: FramePose) -> FramePose | None:
         """Judge ``pose`` against the reference at its frame, placed again first where owed."""
