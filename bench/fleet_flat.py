@@ -17,9 +17,17 @@ printed too. Pair trees in alternation:
 the CPU per robot-tick of the fleet step (``Fleet.step``), of the bridge's frame handling
 (``Bridge._handle``: E2E, decode, live judge, publications and their JSON queued), of the young
 GC passes (one after each tick, ``fleetrun.TickCollector``), the rest (paho, the socket writes,
-the loop, status and rates) and the socket writes per robot-tick. The bridge's frame handling
-alone, on recorded frames, with a digest of what it publishes (two trees compared without the
-fleet, paho and the loop around it): ``bench/bridge_frames.py``.
+the loop, status and rates) and the socket writes per robot-tick; and the MQTT side split out
+(counted while the clock runs, like ``cpu_s``): the publications queued from the frame handling
+(``RobotLink.publish``: topic, JSON, the link's deque; inside the frame handling's figure), the
+telemetry bursts handed to paho (``LinkClient.publish_batch``), the socket writes
+(``LinkClient.flush`` and ``_write_soon``), the QoS-1 acknowledgements and pings read
+(``LinkClient._read_all``), ``status`` and ``rates`` made and queued (``Bridge._publish_status``,
+``_publish_rates``); the loop is what is left (the event loop, the tasks' wake-ups, the clock).
+``status`` and ``rates`` run on the wall clock (1 Hz a robot): flat out on a loaded machine a tick
+takes longer than 10 ms of wall, so they weigh more per robot-tick than in real time.
+The bridge's frame handling alone, on recorded frames, with a digest of what it publishes (two
+trees compared without the fleet, paho and the loop around it): ``bench/bridge_frames.py``.
 ``--young-gc-every N`` makes the worker's young GC pass one every N ticks instead of every tick
 (``TickCollector.every_ticks``; 0: none while the clock runs): what the pass costs, measured
 whole (its survivors live 20-100 ticks, so rarer passes cost about as much CPU in all, in longer
@@ -116,6 +124,8 @@ class Parts:
         self.step_s = self.handle_s = self.young_gc_s = 0.0
         self._gc_t0_s = 0.0
         self.senders: list[Any] = []
+        self.mqtt_s = dict.fromkeys(MQTT_PARTS, 0.0)  # CPU s of each, while the clock ran
+        self.clocked = False  # the clock runs (``clocked``): the MQTT parts count
 
     def _on_gc(self, phase: str, info: dict[str, Any]) -> None:
         if info["generation"] != 0:
@@ -166,6 +176,47 @@ class Parts:
         setattr(Bridge, "_handle", timed_handle)  # noqa: B010
         setattr(client.CoalescedSend, "__init__", making)  # noqa: B010
         gc.callbacks.append(self._on_gc)
+        self._time_mqtt()
+
+    def _time_mqtt(self) -> None:
+        """Process time of each of ``MQTT_PARTS``' functions, while the clock runs only
+        (``cpu_s`` leaves out the set-up and the stop); an inner call of a part inside another
+        (a write inside a status's queueing) counts in the outer one only."""
+        from odocan.host.mqtt import client, link
+
+        owners = {"publish": link.RobotLink, "status": Bridge, "rates": Bridge}
+        busy = [False]
+        for part, name in MQTT_FUNCTIONS:
+            owner = owners.get(part, client.LinkClient)
+            setattr(owner, name, self._timed(getattr(owner, name), part, busy))
+
+    def _timed(self, function: Callable[..., Any], part: str,
+               busy: list[bool]) -> Callable[..., Any]:
+        parts = self
+
+        def timed(*args: Any) -> Any:
+            if busy[0] or not parts.clocked:
+                return function(*args)
+            busy[0] = True
+            t0_s = time.process_time()
+            try:
+                return function(*args)
+            finally:
+                parts.mqtt_s[part] += time.process_time() - t0_s
+                busy[0] = False
+
+        return timed
+
+    def clocked_run(self, run: Callable[..., Any]) -> Callable[..., Any]:
+        """``run`` (the fleet's clock) with ``clocked`` set while it runs."""
+        async def clocked(*args: Any, **kwargs: Any) -> Any:
+            self.clocked = True
+            try:
+                return await run(*args, **kwargs)
+            finally:
+                self.clocked = False
+
+        return clocked
 
     def line(self, cpu_s: float, robot_ticks: int) -> str:
         """The parts in us per robot-tick, and the socket writes per robot-tick (per
@@ -173,16 +224,29 @@ class Parts:
         per = robot_ticks / 1e6
         rest = (cpu_s - self.step_s - self.handle_s - self.young_gc_s) / per
         writes = sum(sender.writes for sender in self.senders) / robot_ticks
+        mqtt = self.mqtt_s
+        loop = rest - sum(v for k, v in mqtt.items() if k != "publish") / per
+        split = ", ".join(f"{MQTT_PARTS[k]} {v / per:.1f}" for k, v in mqtt.items())
         line = (f"  step {self.step_s / per:.1f}, bridge frame handling "
                 f"{self.handle_s / per:.1f}, young GC passes {self.young_gc_s / per:.1f}, the "
                 f"rest {rest:.1f} us; {writes:.3f} socket writes per robot-tick (the whole run); "
-                f"drives fell back {Parts.fall_backs}, replanned {Parts.replans}")
+                f"drives fell back {Parts.fall_backs}, replanned {Parts.replans}\n"
+                f"  MQTT, us per robot-tick: {split}; the loop and the rest {loop:.1f}")
         self.step_s = self.handle_s = self.young_gc_s = 0.0
+        self.mqtt_s = dict.fromkeys(MQTT_PARTS, 0.0)
         Parts.fall_backs = Parts.replans = 0
         self.senders.clear()
         return line
 
 
+MQTT_PARTS = {  # --parts' MQTT split: part -> its name on the line
+    "publish": "publications queued in the frame handling (JSON)",
+    "batch": "telemetry bursts to paho", "write": "socket writes",
+    "read": "acknowledgements read", "status": "status", "rates": "rates",
+}
+MQTT_FUNCTIONS = (("publish", "publish"), ("batch", "publish_batch"), ("write", "flush"),
+                  ("write", "_write_soon"), ("read", "_read_all"),
+                  ("status", "_publish_status"), ("rates", "_publish_rates"))
 PARTS: Parts | None = None  # --parts
 REAL_TIME = run_realtime  # the product's clock (--clock real), as fleetrun imports it
 
@@ -191,7 +255,9 @@ def one_run(robots: int, ticks: int, publish_hz: float = 10.0,
             firmware: str = "python", clock: str = "flat") -> str:
     """One run of ``robots`` for ``ticks`` ticks (``clock``: flat out or real time); its line
     of figures."""
-    setattr(fleetrun, "run_realtime", run_flat if clock == "flat" else REAL_TIME)  # noqa: B010
+    ticking = run_flat if clock == "flat" else REAL_TIME
+    setattr(fleetrun, "run_realtime",  # noqa: B010
+            ticking if PARTS is None else PARTS.clocked_run(ticking))
     with tempfile.TemporaryDirectory() as tmp:
         started = start_mosquitto(Path(tmp))
         if started is None:

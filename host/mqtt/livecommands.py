@@ -60,7 +60,11 @@ class CommandFollowing:
     twist: LiveTwist
     events: deque[dict[str, Any]]
     profile: ProfileStatus
-    firmware: dict[str, Any]
+
+    @property
+    def firmware(self) -> dict[str, Any]:
+        """The firmware's last ODOM_STATUS pages, by name (``RobotTelemetry``'s)."""
+        raise NotImplementedError
 
     def _init_commands(self) -> None:
         """The followers' state (``db`` set): nothing staged, no ACK awaited."""

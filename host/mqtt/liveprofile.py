@@ -39,7 +39,11 @@ class _Robot(Protocol):
     tracker: PoseTracker
     distance: LiveDistance
     events: deque[dict[str, Any]]
-    firmware: dict[str, Any]
+
+    @property
+    def firmware(self) -> dict[str, Any]:
+        """The firmware's last ODOM_STATUS pages, by name (``RobotTelemetry``'s)."""
+        ...
 
 
 class ProfileStatus:

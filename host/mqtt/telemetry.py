@@ -147,7 +147,7 @@ class RobotTelemetry(CommandFollowing):
         self._truth: dict[str, Any] | None = None  # the latest truth not published yet
         self._truth_pub_t = -math.inf  # bus time of the last truth published (s)
         self._since = SinceLast()  # the samples since the last ``error`` (host.mqtt.errorbatch)
-        self.firmware: dict[str, Any] = {}
+        self._pages: dict[str, dict[str, Any]] = {}  # each ODOM_STATUS page's latest signals
         self.status_seq = 0
         self._status_id = self.db.get_message_by_name("ODOM_STATUS").frame_id
         self._status_ids = e2e_messages(self.db).get(self._status_id)
@@ -413,11 +413,8 @@ class RobotTelemetry(CommandFollowing):
 
     def _on_status(self, s: dict[str, Any], t_s: float) -> list[Publication]:
         page = int(s["PAGE"])
-        signals = self._status_signals
-        fields = {signals[k][0]: named_value(signals[k][1], v) for k, v in s.items()
-                  if k not in ("CHECKSUM", "COUNTER", "PAGE")}
         name = self._page_names.get(page) or page_name(self.db, page)
-        self.firmware[name] = fields
+        self._pages[name] = s  # named when read (``firmware``)
         proven = self.sources.on_page(name, s, self.tracker)  # the power-up rule
         self.tracker.on_status(t_s, s)  # alive (livefirst); a summary: livereprime
         if name == "e2e_wheel_encoders":  # frames the firmware lost: the judge's allowance
@@ -459,6 +456,15 @@ class RobotTelemetry(CommandFollowing):
             "e2e": self.e2e.counts(),
         }
         return ("rates", stamp(payload))
+
+    @property
+    def firmware(self) -> dict[str, Any]:
+        """The firmware's last ODOM_STATUS pages by name, each signal by its lower-case name
+        (enums by DBC name): made when read (``status``, once a second), not per page heard."""
+        signals = self._status_signals
+        return {name: {signals[k][0]: named_value(signals[k][1], v) for k, v in s.items()
+                       if k not in ("CHECKSUM", "COUNTER", "PAGE")}
+                for name, s in self._pages.items()}
 
     def status(self, state: str = "online") -> Publication:
         """``status`` (retained): online, the firmware's last ODOM_STATUS pages, a sequence."""
