@@ -163,6 +163,7 @@ class PoseTracker:
                 self.laps.lapped(self.enc_seq, t_s, self.placer.periods)
         row = (self.enc_seq, self._pos, counter, t_s, left, right, self.placer.periods, uptime)
         self.window.append(*row)
+        self.reprime.quiet.heard(self.window.rows)  # kept when the firmware fell silent
         if self.enc_seq % ENC_WINDOW == 0:
             self._forget(self.enc_seq - ENC_WINDOW)
         elif self.enc_seq == FIRST_FRAMES - 1:  # the watch's first frames' times (livefirst)
@@ -199,6 +200,7 @@ class PoseTracker:
         """An accepted ODOM_STATUS at bus time ``t_s``: the firmware alive (``livefirst``);
         its raw ``signals``: a summary's word on a re-prime after a stall (``livereprime``)."""
         self.first.alive.append((t_s, self.enc_seq + 1))
+        self.reprime.quiet.since = 0  # the firmware talked (``reprimereplay.QuietFrames``)
         if signals is not None:
             self.reprime.on_status(signals, t_s)
 
@@ -209,6 +211,7 @@ class PoseTracker:
 
     def _on_half(self, name: str, half: Half) -> None:
         self.advance(half.t_s)
+        self.reprime.quiet.since = 0  # the firmware talked (``reprimereplay.QuietFrames``)
         self._pos += 1
         half.pos = self._pos
         self.pairs.heard(name, half)
