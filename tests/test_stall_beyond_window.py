@@ -341,7 +341,7 @@ def _off_reprimed_m(messages: tuple[can.Message, ...], at: int, halted: int) -> 
 def _unheard(messages: tuple[can.Message, ...], ticks: range) -> tuple[can.Message, ...]:
     """The frames without the encoder frames of ``ticks`` (a recorder that lost them)."""
     return tuple(m for m in messages if m.arbitration_id != fr.WHEEL_ENCODERS_ID
-                 or round(m.timestamp / TICK_S - 0.5) not in ticks)
+                 or round(m.timestamp / TICK_S) not in ticks)
 
 
 @pytest.mark.parametrize(("start", "halted"), [("reboot", 600), ("mid-drive", 600)])
@@ -363,3 +363,20 @@ def test_a_reprime_whose_frames_were_not_heard_is_never_a_pass(start: str, halte
         said = [e["detail"] for e in judge.events if e["kind"] == "stall_reprime"]
         assert len(said) == 1
         assert "was not replayed" in said[0]
+
+
+@pytest.mark.parametrize("start", ["power-up", "reboot", "mid-drive"])
+@pytest.mark.parametrize("bias_lsb", [0, TEN_MM_LSB])
+def test_a_frame_lost_after_the_reprime_still_lets_it_be_replayed(start: str,
+                                                                   bias_lsb: int) -> None:
+    """One encoder frame after the re-prime lost by the recorder (three after the resumed
+    one, between the samples held): the samples before it replay the re-prime, so the right
+    firmware still PASSes and 10 mm off still FAILs (not the wide bound's UNJUDGED for both)."""
+    messages, at = _drive_at(start, 600)
+    if bias_lsb:
+        messages = _wrong(messages, at, bias_lsb, 1)
+    resumed = (MID if start == "mid-drive" else at) + 602
+    monitor, bridge, end_s = _live(_unheard(messages, range(resumed + 3, resumed + 4)))
+    assert bridge.tracker.reprime.wide == 0
+    assert monitor.health(end_s)["state"] == ("POSE WRONG" if bias_lsb else "DEGRADED")
+    assert _end_verdicts(bridge) == (("FAIL", "FAIL") if bias_lsb else ("PASS", "PASS"))

@@ -81,6 +81,7 @@ class ReprimeHold:
         self._first = -1  # its encoder frame (seq)
         self._anchor: tuple[float, float] | None = None  # the firmware's position before (m)
         self._anchor_pose: FramePose | None = None  # ... its pose on its frame (seq -1: unknown)
+        self._primed = False  # ... the power-up pose of its life, on the frame it primed on
         self.quiet = QuietFrames()  # the frames when the firmware fell silent (reprimereplay)
         self._frozen: tuple[tuple[float, ...], ...] = ()  # ... as kept at the stall held for
         self._power_up = False  # the stall came before the life's first pose, its start unknown
@@ -125,8 +126,9 @@ class ReprimeHold:
         if possible(t_s - talked[0], CYCLE_S, least) and self._mask >= 0:
             self._from_s, self._before, self._stall_s = t_s, self._mask, t_s - talked[0]
             self._first, self._anchor_pose = seq, self._anchored()
-            anchor = self._anchor_pose
+            anchor, last = self._anchor_pose, self._tracker.last_pair
             self._anchor = None if anchor is None else (anchor.x_m, anchor.y_m)
+            self._primed = anchor is not None and (last is None or anchor is not last[0])
             self._frozen = self.quiet.frozen
             self._power_up = self._tracker.raw.odometry is None  # its origin told at release
 
@@ -242,7 +244,8 @@ class ReprimeHold:
         samples = [pose for pose, _, _ in held]
         odometry = Odometry(tracker.geometry, tracker.integrator, tracker.counter_bits)
         recent = window_counts(tracker.window, samples[0].seq - R_SPAN)
-        return replayed(odometry, anchor, self._frozen, recent, samples)
+        return replayed(odometry, anchor, self._frozen, recent, samples,
+                        self._power_up or self._primed)
 
     def _within_reach(self, pose: FramePose, origin: tuple[float, float], reach_m: float
                       ) -> bool:

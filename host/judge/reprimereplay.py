@@ -18,7 +18,10 @@ poses must lie within ``TIGHT_POSITION_M`` and ``TIGHT_HEADING_RAD`` of it (``Re
 the anchor's rounding and the samples', half an LSB each per axis, and the firmware's own
 drift, far below). Before, only a bound from the speed bound (about 0.26 m on pmir) held it,
 and a firmware 10 mm off from its first pose after the re-prime PASSed live while ``analyze``
-FAILed it. None when the frames it needs are not held (the caller falls back and says so).
+FAILed it. None when the frames it needs are not held (the caller falls back and says so): a
+frame of the FIFO's span not kept, a hole of the log among them or before a life's primed frame
+(the firmware may have taken a frame the log lacks), or before the first sample kept; a hole
+after it only leaves the samples beyond it to be judged as they come.
 """
 
 from __future__ import annotations
@@ -108,21 +111,28 @@ class Odometry:
 
 
 def replayed(odometry: Odometry, anchor: FramePose, frozen: Iterable[tuple[float, ...]],
-             recent: list[Counted], samples: list[FramePose]) -> Replayed | None:
+             recent: list[Counted], samples: list[FramePose], primed: bool = False
+             ) -> Replayed | None:
     """The best pair's path (module docstring) from ``anchor`` (the firmware's pose on its
-    frame) over the ``frozen`` rows (``QuietFrames``) and the ``recent`` frames (the window's
-    from the earliest ``r`` on), met with the first ``COMPARED`` ``samples`` held; None when
-    the frames it needs are not held."""
+    frame; ``primed``: a life's power-up pose on the frame it primed on, which must not follow
+    a hole of the log, where it may have primed on a frame the log lacks) over the ``frozen``
+    rows (``QuietFrames``) and the ``recent`` frames (the window's from the earliest ``r``
+    on), met with the first ``COMPARED`` ``samples`` held; None when the frames it needs are
+    not held."""
     samples = samples[:COMPARED]
     first, last = samples[0].seq, samples[-1].seq
     kept: Counts = {int(row[0]): (int(row[4]), int(row[5]), int(row[6])) for row in frozen}
     f_hi = min(anchor.seq + FIFO_SPAN + 1, first - 1)
+    if primed and anchor.seq > 0 and kept.get(anchor.seq, (0, 0, 0))[2] != 1:
+        return None
     before = odometry.walk(anchor, kept, range(anchor.seq, f_hi + 1))
     r_lo = first - R_SPAN
     after: Counts = {c[0]: (c[2], c[3], c[4]) for c in recent}
-    if f_hi not in before or len(odometry.walk(anchor, after, range(r_lo, last + 1))) != (
-            last + 1 - r_lo):  # a frame it may have taken not held, or a hole among them
+    heard = odometry.walk(anchor, after, range(r_lo, last + 1))  # up to a hole of the log
+    if f_hi not in before or first not in heard:  # a frame it may have taken not held
         return None
+    samples = [s for s in samples if s.seq in heard]  # the later ones: judged as they come
+    last = samples[-1].seq
     best: tuple[float, Replayed] | None = None
     for f, at_f in before.items():
         for r in range(max(f + 1, r_lo), first + 1):
