@@ -29,6 +29,7 @@ word cleared get no re-prime (FAIL); a wrong firmware still FAILs every judge.
 
 from __future__ import annotations
 
+import itertools
 import math
 from functools import cache
 from pathlib import Path
@@ -304,3 +305,99 @@ def test_an_undeclared_reprime_gets_no_heading_replacement(messages: Any, at: in
     monitor, bridge, end_s = _live(_undeclared(messages()))
     assert monitor.health(end_s)["pose_wrongs"]["episodes"] >= 1
     assert bridge.tracker.wrongs.as_dict()["episodes"] >= 1
+
+
+TEN_MM_LSB = 100  # X off by 10 mm: beyond analyze's allowance, within the speed bound's reach
+REPLAYED = [*CASES, ("mid-drive", 600), ("mid-drive", 1000)]
+
+
+def _drive_at(start: str, halted: int) -> tuple[tuple[can.Message, ...], int]:
+    """The drive and the tick the poses made wrong are counted from (``_wrong``)."""
+    if start == "mid-drive":
+        return drive_mid(halted), MID + 1
+    return drive(start, halted), _at(start)
+
+
+@pytest.mark.parametrize(("start", "halted"), REPLAYED)
+@pytest.mark.parametrize("from_pose", [0, 1])
+def test_ten_mm_off_after_the_reprime_fails_live(start: str, halted: int, from_pose: int,
+                                                 tmp_path: Path) -> None:
+    """X 10 mm off from the ``from_pose``-th pose after the stall's start (the first after
+    the re-prime on: pose 0 is left out). ``analyze`` FAILs it (the re-primed pose held to the
+    frames the FIFO kept); live, the re-prime's first pose is replayed from those frames
+    (``reprimereplay``) and held to two LSBs of it: POSE WRONG, both end verdicts FAIL, the
+    refusal told. Before: held only to the speed bound's reach (about 0.26 m), the pose was
+    adopted: DEGRADED, both end verdicts PASS. The independent float64 odometry of the frames
+    the firmware took (its FIFO's, then re-primed) puts the right pose 10 mm from the wrong
+    one (power-up and reboot: the poses before a mid-drive stall are the firmware's)."""
+    messages, at = _drive_at(start, halted)
+    wrong = _wrong(messages, at, TEN_MM_LSB, from_pose)
+    if start != "mid-drive":  # the pose after the left-out one, as the firmware made it
+        assert _off_reprimed_m(messages, at, halted) <= POSITION_LSB_M
+        assert _off_reprimed_m(wrong, at, halted) > 0.0099
+    assert not analyze(read_log(_written(wrong, tmp_path / "wrong.log")), PMIR, "exact").passed
+    monitor, bridge, end_s = _live(wrong)
+    assert monitor.health(end_s)["state"] == "POSE WRONG"
+    assert _end_verdicts(bridge) == ("FAIL", "FAIL")
+    for judge in (monitor, bridge):
+        kinds = [e["kind"] for e in judge.events]
+        assert (kinds.count("stall_reprime_refused"), kinds.count("stall_reprime")) == (1, 0)
+
+
+def _off_reprimed_m(messages: tuple[can.Message, ...], at: int, halted: int) -> float:
+    """How far (m) the life's second pose lies from the float64 odometry of the frames the
+    firmware took: primed on ``at + 1``, stepped to ``at + 2`` (its FIFO), re-primed on the
+    resumed frame and stepped frame by frame to the one the pose names (its ENC_COUNTER)."""
+    encoders = [_decoded(m) for m in messages if m.arbitration_id == fr.WHEEL_ENCODERS_ID]
+    pose = _poses(messages, at * TICK_S)[1]
+    resumed = at + halted + 2
+    named = resumed + (int(pose["ENC_COUNTER"]) - resumed) % 16
+    odo = _odometry(encoders, [at + 1, at + 2])
+    for a, b in itertools.pairwise(range(resumed, named + 1)):
+        odo.step(*(round((encoders[b][side] - encoders[a][side] + 32768) % 65536 - 32768)
+                   for side in ("LEFT_COUNT", "RIGHT_COUNT")))
+    return math.hypot(odo.x - pose["X"] * 1e-4, odo.y - pose["Y"] * 1e-4)
+
+
+def _unheard(messages: tuple[can.Message, ...], ticks: range) -> tuple[can.Message, ...]:
+    """The frames without the encoder frames of ``ticks`` (a recorder that lost them)."""
+    return tuple(m for m in messages if m.arbitration_id != fr.WHEEL_ENCODERS_ID
+                 or round(m.timestamp / TICK_S) not in ticks)
+
+
+@pytest.mark.parametrize(("start", "halted"), [("reboot", 600), ("mid-drive", 600)])
+@pytest.mark.parametrize("bias_lsb", [0, TEN_MM_LSB])
+def test_a_reprime_whose_frames_were_not_heard_is_never_a_pass(start: str, halted: int,
+                                                               bias_lsb: int) -> None:
+    """Two of the frames the firmware's FIFO kept lost by the recorder: the live judge cannot
+    replay the re-prime, so it holds the first pose after it to the speed bound's reach only
+    and says so (the event), and the end verdicts are UNJUDGED, the right firmware's and the
+    one 10 mm off alike: never a FAIL of the right one, never a PASS that hides 10 mm
+    (before: PASS, PASS for both)."""
+    messages, at = _drive_at(start, halted)
+    if bias_lsb:
+        messages = _wrong(messages, at, bias_lsb, 1)
+    monitor, bridge, end_s = _live(_unheard(messages, range(at + 1, at + 3)))
+    assert monitor.health(end_s)["state"] == "DEGRADED"
+    assert _end_verdicts(bridge) == ("UNJUDGED", "UNJUDGED")
+    for judge in (monitor, bridge):
+        said = [e["detail"] for e in judge.events if e["kind"] == "stall_reprime"]
+        assert len(said) == 1
+        assert "was not replayed" in said[0]
+
+
+@pytest.mark.parametrize("start", ["power-up", "reboot", "mid-drive"])
+@pytest.mark.parametrize("bias_lsb", [0, TEN_MM_LSB])
+def test_a_frame_lost_after_the_reprime_still_lets_it_be_replayed(start: str,
+                                                                   bias_lsb: int) -> None:
+    """One encoder frame after the re-prime lost by the recorder (three after the resumed
+    one, between the samples held): the samples before it replay the re-prime, so the right
+    firmware still PASSes and 10 mm off still FAILs (not the wide bound's UNJUDGED for both)."""
+    messages, at = _drive_at(start, 600)
+    if bias_lsb:
+        messages = _wrong(messages, at, bias_lsb, 1)
+    resumed = (MID if start == "mid-drive" else at) + 602
+    monitor, bridge, end_s = _live(_unheard(messages, range(resumed + 3, resumed + 4)))
+    assert bridge.tracker.reprime.wide == 0
+    assert monitor.health(end_s)["state"] == ("POSE WRONG" if bias_lsb else "DEGRADED")
+    assert _end_verdicts(bridge) == (("FAIL", "FAIL") if bias_lsb else ("PASS", "PASS"))

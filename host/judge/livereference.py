@@ -13,24 +13,27 @@ from odocan.host.judge.reference import Geometry, ReferenceOdometry
 
 class RawReference:
     """``odometry`` (None until started, again after a restart), ``at`` (its pose at the latest
-    encoder frames, by seq) and ``gate`` (``StepGate``: the frames' steps the firmware takes)."""
+    encoder frames, by seq), ``gate`` (``StepGate``: the frames' steps the firmware takes) and
+    ``started`` (the pose it started at, on the frame it primed on: ``livereprime`` replays a
+    re-prime after a stall before the life's first sample from it)."""
 
-    __slots__ = ("at", "gate", "odometry")
+    __slots__ = ("at", "gate", "odometry", "started")
 
     def __init__(self, gate: StepGate) -> None:
         self.odometry: ReferenceOdometry | None = None
         self.at: dict[int, FramePose] = {}
         self.gate = gate
+        self.started: FramePose | None = None
 
     def start(self, odometry: ReferenceOdometry, geometry: Geometry, counter_bits: int,
               told: RestartLog) -> None:
         """Start at ``odometry`` (its pose the start's), nothing kept, a new gate."""
-        self.odometry, self.at = odometry, {}
+        self.odometry, self.at, self.started = odometry, {}, None
         self.gate = StepGate(geometry, counter_bits, told)
 
     def stop(self) -> None:
         """No reference until the next start (a restart)."""
-        self.odometry, self.at = None, {}
+        self.odometry, self.at, self.started = None, {}, None
 
     def step(self, ref: ReferenceOdometry, frame: Counted) -> tuple[int, int] | None:
         """Step ``ref`` (the started odometry) by ``frame`` as the gate takes it (None: not

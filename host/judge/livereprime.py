@@ -14,21 +14,30 @@ over a second of samples), told by an event with ``stallreprime.detail``; the fi
 DEGRADED state shows. Not declared (or no word in time): the samples held are judged as they
 would have been, by the stall's position placement, the heading exact.
 
-A declared re-prime whose first pose lies farther from the firmware's position before the
-stall (its last sample compared, or the power-up pose) than it can have moved over the frames
-its FIFO kept (at the speed bound) and from the frame it re-primed on (the window's counts) is
-no re-prime's (``_reach_m``): judged as before, POSE WRONG (a firmware X +1 m off after a 6 s
-stall was adopted, DEGRADED only). Known limit (``analyze`` bounds it tighter): within that
-bound (pmir at 4 m/s: about 0.2 m plus the few frames' travel) the new start adopts the
-firmware's pose, so one pose jump there is not judged live; every step after it is.
+A declared re-prime is held to where the frames the firmware took put it, as ``analyze``
+holds it (``reprimereplay``): its pose before the stall (its last sample compared, or the
+power-up pose on the frame its life primed on) stepped over the frames its FIFO kept, then
+re-primed on a frame just before its first sample kept and stepped on, the pair of frames that
+best meets the samples held; its first poses beyond two LSBs of position or heading of that
+are no re-prime's: judged as before, POSE WRONG, with a ``stall_reprime_refused`` event that
+says how far (before, a bound from the speed bound alone, about 0.26 m on pmir, let a firmware
+10 mm off from its first pose after the re-prime PASS live at power-up, after a reboot and
+mid-drive, where ``analyze`` FAILed it). The frames are kept when the firmware falls silent
+(``reprimereplay.QuietFrames``: a stall longer than the window has dropped them from it). Only
+when they are not held (a hole of the log among them, the watch started after them) the first
+pose is held to that wide bound (``_reach_m``: the frames its FIFO kept at the speed bound, and
+from the frame it re-primed on, the window's counts): the event says so and the end verdicts
+say UNJUDGED rather than PASS (``unbounded_why``: an offset within it is not judged). What a
+wrong firmware can still hide, as in ``analyze``: a pose that another pair of those frames
+explains within the two LSBs (the pairs' choice).
 
 A stall before a life's first pose, the reference not started (a power-up's: its first summary
-is the last before the stall), takes the same hold and the same bound from the power-up pose
-(0, 0) once the power-up is proven (its first count page, made after the stall:
-``sources.heard_before_live``; the word waits for it, ``counted``); a jump beyond it starts the
-reference at the nearest point the bound reaches (``_start_within``: X +1 m after a 6 s or
-10 s halt at power-up PASSed the bridge, DEGRADED only). Not proven, the first pose is adopted
-unbounded: the end verdicts say UNJUDGED rather than PASS (``unbounded_why``).
+is the last before the stall), takes the same hold and the same replay from the power-up pose
+(0, 0, 0) on frame 0 once the power-up is proven (its first count page, made after the stall:
+``sources.heard_before_live``; the word waits for it, ``counted``); a first pose the frames do
+not explain starts the reference where they put it (``_start_at``: the samples judged from
+there; with the wide bound, at the nearest point it reaches). Not proven, the first pose is
+adopted unbounded: the end verdicts say UNJUDGED rather than PASS (``unbounded_why``).
 """
 
 from __future__ import annotations
@@ -41,6 +50,7 @@ from odocan.host.judge.livepose import FramePose
 from odocan.host.judge.livestart import start_reference
 from odocan.host.judge.livewindow import CYCLE_S, window_counts
 from odocan.host.judge.nearthreshold import AFTER_PERIODS, COUNTER_RESET_BIT, SUMMARY_PAGE
+from odocan.host.judge.reprimereplay import Odometry, QuietFrames, Replayed, replayed
 from odocan.host.judge.samples import POSITION_LSB_M
 from odocan.host.judge.stallreprime import FIFO_SPAN, R_SPAN, detail, possible
 
@@ -50,6 +60,13 @@ if TYPE_CHECKING:
     from odocan.host.judge.tracking import PoseTracker
 
 WAIT_S = 1.0  # bus time the samples after a long stall wait for the firmware's word (s)
+
+
+def _wide(reach_m: float) -> str:
+    """The event's words for a re-prime held only to the wide bound (``_reach_m``)."""
+    return (f"; held only to {reach_m * 1e3:.0f} mm from its pose before (the speed bound over "
+            "the frames its FIFO kept): the frames it took before re-priming were not heard, so "
+            "its first pose after it was not replayed")
 
 
 class ReprimeHold:
@@ -63,12 +80,19 @@ class ReprimeHold:
         self._from_s = math.inf  # bus time of the stall's first sample (s; inf: no hold)
         self._first = -1  # its encoder frame (seq)
         self._anchor: tuple[float, float] | None = None  # the firmware's position before (m)
+        self._anchor_pose: FramePose | None = None  # ... its pose on its frame (seq -1: unknown)
+        self._primed = False  # ... the power-up pose of its life, on the frame it primed on
+        self.quiet = QuietFrames()  # the frames when the firmware fell silent (reprimereplay)
+        self._frozen: tuple[tuple[float, ...], ...] = ()  # ... as kept at the stall held for
         self._power_up = False  # the stall came before the life's first pose, its start unknown
         self._word = False  # ... its re-prime declared, waiting for the count page's proof
         self._held: list[tuple[FramePose, Half, bool]] = []
         self._samples: dict[int, Sample] = {}
         self.declared = 0  # re-primes declared after a stall (the reference restarted)
         self.unbounded = 0  # ... at a power-up not proven: the first pose adopted unbounded
+        self.wide = 0  # ... bounded by the speed bound alone: the frames replayed not held
+        self.wide_m = 0.0  # ... the widest of those bounds (m)
+        self.refused = 0  # declared, but the frames put its first pose elsewhere: judged
 
     def on_status(self, signals: dict[str, Any], t_s: float) -> None:
         """An accepted ODOM_STATUS (raw signals) at bus time ``t_s``: a summary decides the
@@ -101,18 +125,27 @@ class ReprimeHold:
             return
         if possible(t_s - talked[0], CYCLE_S, least) and self._mask >= 0:
             self._from_s, self._before, self._stall_s = t_s, self._mask, t_s - talked[0]
-            self._first, self._anchor = seq, self._anchored()
+            self._first, self._anchor_pose = seq, self._anchored()
+            anchor, last = self._anchor_pose, self._tracker.last_pair
+            self._anchor = None if anchor is None else (anchor.x_m, anchor.y_m)
+            self._primed = anchor is not None and (last is None or anchor is not last[0])
+            self._frozen = self.quiet.frozen
             self._power_up = self._tracker.raw.odometry is None  # its origin told at release
 
-    def _anchored(self) -> tuple[float, float] | None:
-        """Where the firmware was before the stall: its last sample compared, or the power-up
-        pose the reference runs from (``livefirst``: a stall before the life's first sample);
-        None when unknown (no bound then)."""
+    def _anchored(self) -> FramePose | None:
+        """Where the firmware was before the stall, on its frame: its last sample compared, or
+        the power-up pose the reference runs from (``livefirst``: a stall before the life's
+        first sample), on the frame the reference primed on there (seq -1 when that is not
+        known or the reference did not start there); None when unknown (no bound then)."""
         tracker = self._tracker
         last = tracker.stall.last_compared
         if tracker.last_pair is not None and tracker.last_pair[0].seq == last:
-            return tracker.last_pair[0].x_m, tracker.last_pair[0].y_m
-        return (0.0, 0.0) if tracker.first.stalled_from == last else None
+            return tracker.last_pair[0]
+        if tracker.first.stalled_from != last:
+            return None
+        started = tracker.raw.started
+        at_zero = started is not None and started[1:] == (0.0, 0.0, 0.0)
+        return FramePose(started.seq if started is not None and at_zero else -1, 0.0, 0.0, 0.0)
 
     def _origin(self) -> tuple[float, float] | None:
         """Where the firmware was before the stall, at release: ``_anchor``; after a stall
@@ -168,15 +201,22 @@ class ReprimeHold:
         held, self._held, self._from_s, self._word = self._held, [], math.inf, False
         samples, self._samples = self._samples, {}
         tracker = self._tracker
-        origin = self._origin()
+        origin, said = self._origin(), detail(self._stall_s)
         if declared and held and origin is not None:
-            pose = held[0][0]
-            reach_m = self._reach_m(pose)
-            off_m = math.hypot(pose.x_m - origin[0], pose.y_m - origin[1])
-            if off_m > reach_m:  # a jump no re-prime explains: judged as before (POSE WRONG)
+            replay = self._replay(held)
+            if replay is None:  # the frames not held: the speed bound's (said)
+                reach_m = self._reach_m(held[0][0])
+                self.wide, self.wide_m = self.wide + 1, max(self.wide_m, reach_m)
+                said += _wide(reach_m)
+                declared = self._within_reach(held[0][0], origin, reach_m)
+            elif not replay.within:  # the frames put it elsewhere: judged as before
                 declared = False
-                if self._power_up:  # no reference yet: from the nearest pose a re-prime reaches
-                    self._start_within(pose, origin, reach_m / off_m)
+                self.refused += 1
+                tracker.restarts.events.append({
+                    "t_s": self._from_s_told(held), "kind": "stall_reprime_refused",
+                    "encoder_frame": held[0][0].seq, "detail": f"{said}; but {replay.said()}"})
+                if self._power_up:  # no reference yet: from where the re-prime put it
+                    self._start_at(replay.pose)
         elif declared and self._power_up:  # its first pose adopted, no bound: never a PASS
             self.unbounded += 1
         if declared:
@@ -185,7 +225,7 @@ class ReprimeHold:
             tracker.placer.dark.owe(first)
             tracker.restarts.events.append({"t_s": self._from_s_told(held), "kind":
                                             "stall_reprime", "encoder_frame": first,
-                                            "detail": detail(self._stall_s)})
+                                            "detail": said})
         for pose, y, queued in held:
             tracker.placer.dark.due(pose.seq, tracker.newstart.restart)
             ref = tracker.compare(pose, y, queued)
@@ -193,17 +233,43 @@ class ReprimeHold:
             if sample is not None and ref is not None:
                 tracker.settled.append(sample._replace(reference=ref))
 
-    def _start_within(self, pose: FramePose, origin: tuple[float, float], share: float) -> None:
-        """Start the reference, at a power-up's first pose after a re-prime it cannot explain,
-        at the point nearest ``pose`` that the re-prime reaches from ``origin`` (``share`` of
-        the way), the firmware's heading taken (a re-prime re-places it): the samples are judged
-        from there, at least as far off as the jump beyond the bound."""
-        counts = window_counts(self._tracker.window, pose.seq)
-        if not counts or counts[0][0] != pose.seq:  # its frame not heard: never a PASS
+    def _replay(self, held: list[tuple[FramePose, Half, bool]]) -> Replayed | None:
+        """The re-primed path that best meets the samples ``held`` (``reprimereplay``), from
+        the anchor (a power-up's: (0, 0, 0) on frame 0, proven) over the frames kept when the
+        firmware fell silent and the window's; None when they are not held."""
+        tracker = self._tracker
+        anchor = FramePose(0, 0.0, 0.0, 0.0) if self._power_up else self._anchor_pose
+        if anchor is None or anchor.seq < 0 or tracker.integrator is None:
+            return None
+        samples = [pose for pose, _, _ in held]
+        odometry = Odometry(tracker.geometry, tracker.integrator, tracker.counter_bits)
+        recent = window_counts(tracker.window, samples[0].seq - R_SPAN)
+        return replayed(odometry, anchor, self._frozen, recent, samples,
+                        self._power_up or self._primed)
+
+    def _within_reach(self, pose: FramePose, origin: tuple[float, float], reach_m: float
+                      ) -> bool:
+        """The wide bound (``reach_m``: ``_reach_m``, the frames replayed not held): whether
+        ``pose`` lies within it from ``origin``; beyond it at a power-up, the reference starts
+        at the nearest point the bound reaches (``_start_at``)."""
+        off_m = math.hypot(pose.x_m - origin[0], pose.y_m - origin[1])
+        if off_m <= reach_m:
+            return True
+        if self._power_up:  # no reference yet: from the nearest pose a re-prime reaches
+            share = reach_m / off_m
+            self._start_at(FramePose(pose.seq, origin[0] + share * (pose.x_m - origin[0]),
+                                     origin[1] + share * (pose.y_m - origin[1]),
+                                     pose.heading_rad))
+        return False
+
+    def _start_at(self, start: FramePose) -> None:
+        """Start the reference, at a power-up's first pose after a re-prime the frames or the
+        bound do not explain, at ``start`` (on its frame): the samples are judged from there,
+        at least as far off as the firmware is from it."""
+        counts = window_counts(self._tracker.window, start.seq)
+        if not counts or counts[0][0] != start.seq:  # its frame not heard: never a PASS
             self.unbounded += 1
             return
-        start = FramePose(pose.seq, origin[0] + share * (pose.x_m - origin[0]),
-                          origin[1] + share * (pose.y_m - origin[1]), pose.heading_rad)
         start_reference(self._tracker, start, counts, [])
 
     def _from_s_told(self, held: list[tuple[FramePose, Half, bool]]) -> float:
@@ -214,13 +280,22 @@ class ReprimeHold:
 def unbounded_why(tracker: PoseTracker) -> str | None:
     """Why the end verdict cannot be a PASS (UNJUDGED): a re-prime declared after a stall
     before the first pose of a power-up not proven, its first pose adopted with nothing to
-    bound it by (module docstring); None else."""
-    count = tracker.reprime.unbounded
-    if not count:
-        return None
-    return (f"{count} re-prime{'' if count == 1 else 's'} declared after a stall before the "
-            "first pose, the power-up not proven (or its frame not heard): the reference started "
-            "at the firmware's own pose there, which nothing bounds (an offset not judged)")
+    bound it by, or one held only to the wide bound (its frames not heard: module
+    docstring); None else."""
+    reprime = tracker.reprime
+    count, wide = reprime.unbounded, reprime.wide
+    said = []
+    if count:
+        said.append(f"{count} re-prime{'' if count == 1 else 's'} declared after a stall before "
+                    "the first pose, the power-up not proven (or its frame not heard): the "
+                    "reference started at the firmware's own pose there, which nothing bounds "
+                    "(an offset not judged)")
+    if wide:
+        said.append(f"{wide} re-prime{'' if wide == 1 else 's'} after a stall held only to the "
+                    f"speed bound (up to {reprime.wide_m * 1e3:.0f} mm): the frames the firmware "
+                    "took before re-priming were not heard, so its first pose after it was not "
+                    "replayed (an offset within that bound not judged)")
+    return "; ".join(said) or None
 
 
 def _wrapped(delta: int, bits: int) -> int:

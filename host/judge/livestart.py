@@ -42,6 +42,7 @@ def start_reference(tracker: PoseTracker, pose: FramePose, counts: list[Counted]
     tracker.adopted.started(pose, tracker.fit.exact, tracker.pose_t_s)  # said (liveadopted)
     raw = tracker.raw
     raw.start(ref, tracker.geometry, tracker.counter_bits, tracker.restarts)
+    raw.started = pose._replace(seq=counts[0][0]) if counts else None
     tracker.placer.restart()
     for frame in counts:
         step = raw.step(ref, frame)  # the first primes: stays at pose

@@ -163,6 +163,7 @@ class PoseTracker:
                 self.laps.lapped(self.enc_seq, t_s, self.placer.periods)
         row = (self.enc_seq, self._pos, counter, t_s, left, right, self.placer.periods, uptime)
         self.window.append(*row)
+        self.reprime.quiet.heard(self.window.rows)  # kept when the firmware fell silent
         if self.enc_seq % ENC_WINDOW == 0:
             self._forget(self.enc_seq - ENC_WINDOW)
         elif self.enc_seq == FIRST_FRAMES - 1:  # the watch's first frames' times (livefirst)
@@ -203,6 +204,7 @@ class PoseTracker:
         its raw ``signals``: a summary's word on a re-prime after a stall (``livereprime``)."""
         self.first.on_status(t_s, signals)  # INIT at UPTIME 0 still (livefirst: stallpowerup)
         self.first.alive.append((t_s, self.enc_seq + 1))
+        self.reprime.quiet.since = 0  # the firmware talked (``reprimereplay.QuietFrames``)
         if signals is not None:
             self.reprime.on_status(signals, t_s)
 
@@ -215,6 +217,7 @@ class PoseTracker:
         self.advance(half.t_s)
         if self.first.posed_s is None:  # the firmware primed by then (livefirst)
             self.first.posed_s = half.t_s
+        self.reprime.quiet.since = 0  # the firmware talked (``reprimereplay.QuietFrames``)
         self._pos += 1
         half.pos = self._pos
         self.pairs.heard(name, half)
