@@ -7,9 +7,12 @@ cantools-decoded frames): its first pose is that merged step, as after a reboot'
 (``tests/test_stall_before_first_pose_after_reboot.py``). Unlike the recorded evidence of
 ``tests/test_stall_before_first_pose.py`` (whose first count page came before any frame), its
 first count page comes 80 ms after its first pose, and counts 11 frames (ENC_E2E_OK; the FIFO's
-overrun is in ENC_E2E_LOST): ``analyze`` proves the power-up by the page's tick bound
+overrun is in ENC_E2E_LOST): ``analyze`` proved the power-up by the page's tick bound
 (``powerup.heard_by_tick``: its ODOM_STATUS COUNTER stood still through the halt, so the bound is
-0.1 s after power-up, 11 frames on the bus by then).
+0.1 s after power-up, 11 frames on the bus by then: frame 0 counted, which the firmware never
+took). Across a halt the bound is no evidence (``stallpowerup.log_power_up``): the stall's rule
+proves it (frames 0 and 1 unmoved); with frame 0 moved it is unproven and said, where the bound
+had FAILed the correct firmware by 29.8 mm / 15.8 mrad.
 
 (a) Before: the live judges read that bound on their 32 recent frames only
 (``sources.heard_before_live``), could not prove the power-up, and started the reference fitted
@@ -223,3 +226,65 @@ def test_without_its_first_cycle_nothing_is_proven(tmp_path: Path) -> None:
         assert not tracker.lives.power_up_proven
         assert not tracker.first.unproven
         assert tracker.wrongs.as_dict()["episodes"] == 0
+
+
+def test_frame_zero_moved_with_its_pages_no_judge_fails_the_correct_firmware(
+        tmp_path: Path) -> None:
+    """Frame 0 moved with the count pages kept (``frame_zero_moved``: the firmware, its FIFO
+    drained at tick 0, primed on frame 1). Before, the first page's tick bound counted frame 0
+    (``powerup.heard_by_tick``: the halt held the page's tick 3 s past its bound) and
+    ``analyze`` started the reference there: FAIL by 29.8 mm / 15.8 mrad while the live judges
+    PASSed. Now the halt vetoes the bound (``stallpowerup.log_power_up``), the stall's rule
+    cannot prove it either: unproven, said on the verdict's line; no judge FAILs it."""
+    messages = frame_zero_moved(_messages())
+    path = _written(messages, tmp_path / "right.log")
+    analysis = analyze(read_log(path), PMIR, "exact")
+    assert analysis.passed, analysis.report["onboard_vs_reference"]
+    assert analysis.report["reference_start"] == "fitted"
+    assert [e["kind"] for e in analysis.report["events"]].count("power_up_unproven") == 1
+    assert "not judged" in "; ".join(kept_unjudged(analysis.report))
+    assert main(["analyze", str(path), "--robot", "pmir", "--integrator", "exact",
+                 "--stream", "always"]) == 0
+    monitor, bridge, end_s = _live(messages)
+    assert monitor.health(end_s)["state"] != "POSE WRONG"
+    for tracker in (monitor.tracker, bridge.tracker):
+        assert tracker.wrongs.as_dict()["episodes"] == 0
+    assert "FAIL" not in _end_verdicts(bridge)
+
+
+@pytest.mark.parametrize("from_pose", [0, 1])
+def test_frame_zero_moved_with_its_pages_a_wrong_firmware_never_passes_silently(
+        tmp_path: Path, from_pose: int) -> None:
+    """X 1 m off from pose ``from_pose`` on, frame 0 moved, the pages kept: the live judges
+    FAIL it (POSE WRONG, both end verdicts); ``analyze`` FAILs it or says its start unproven
+    on the verdict's line (the frame it primed on unknown): never a silent PASS."""
+    messages = frame_zero_moved(_wrong(_messages(), 0, 10_000, from_pose))
+    path = _written(messages, tmp_path / "wrong.log")
+    analysis = analyze(read_log(path), PMIR, "exact")
+    assert not analysis.passed or "not judged" in "; ".join(kept_unjudged(analysis.report))
+    monitor, bridge, end_s = _live(messages)
+    assert monitor.health(end_s)["state"] == "POSE WRONG"
+    assert bridge.tracker.wrongs.as_dict()["episodes"] >= 1
+    assert _end_verdicts(bridge) == ("FAIL", "FAIL")
+
+
+def test_frame_zero_moved_without_a_stall_no_false_fail(tmp_path: Path) -> None:
+    """No halt (``drive`` with 0 ticks): the FIFO drained at tick 0, the firmware primes on
+    frame 1, frame 0 moved. Its count page then counts one frame fewer than the log holds
+    before it, no bound matches: no judge proves the power-up from frame 0, none FAILs the
+    correct firmware; X 1 m off from its 2nd pose FAILs every judge."""
+    right = frame_zero_moved(drive("power-up", 0))
+    path = _written(right, tmp_path / "right.log")
+    assert analyze(read_log(path), PMIR, "exact").passed
+    assert main(["analyze", str(path), "--robot", "pmir", "--integrator", "exact",
+                 "--stream", "always"]) == 0
+    monitor, bridge, end_s = _live(right)
+    assert (monitor.health(end_s)["state"], _end_verdicts(bridge)) == ("OK", ("PASS", "PASS"))
+    wrong = frame_zero_moved(_wrong(drive("power-up", 0), 0, 10_000, 1))
+    path = _written(wrong, tmp_path / "wrong.log")
+    assert not analyze(read_log(path), PMIR, "exact").passed
+    assert main(["analyze", str(path), "--robot", "pmir", "--integrator", "exact",
+                 "--stream", "always"]) == 1
+    monitor, bridge, end_s = _live(wrong)
+    assert (monitor.health(end_s)["state"], _end_verdicts(bridge)) == ("POSE WRONG",
+                                                                        ("FAIL", "FAIL"))

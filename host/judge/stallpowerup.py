@@ -29,8 +29,8 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
-from odocan.host.judge.powerup import holds_first_cycle
-from odocan.host.judge.samples import Encoders, FloatArray
+from odocan.host.judge.powerup import holds_first_cycle, starts_at_power_up
+from odocan.host.judge.samples import Encoders, FloatArray, Poses
 from odocan.host.judge.stalls import first_after_stall
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 
@@ -78,6 +78,27 @@ def stall_power_up(frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder
     proven = stalled_power_up(frames, accepted, decoder, enc, sent_s, alive_s)
     if proven is not None:
         return proven, []
+    return False, [{"kind": UNPROVEN_KIND, "t_s": float(np.min(sent_s)), "detail": UNPROVEN}]
+
+
+def log_power_up(frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder,
+                 onboard: Poses, enc: Encoders, sent_s: FloatArray,
+                 alive_s: FloatArray) -> tuple[bool, list[dict[str, Any]]]:
+    """The power-up of the log's first life and the report's events: the firmware's count page
+    (``powerup.starts_at_power_up``), else the stall's rule (``stall_power_up``). When the
+    firmware halted at power-up before it primed (``stalled_power_up`` not False), the page's
+    tick bound (``powerup.heard_by_tick``) proves nothing: it takes one ODOM_STATUS cycle a
+    period on the bus, while the halt held the page's tick seconds past the bound, so the frames
+    on the bus by then are not those the firmware counted. Issue #11: frame 0 moved, the bound
+    counted it, the firmware primed on frame 1 (its FIFO was drained at tick 0): the reference
+    started a frame early and FAILed the correct firmware by 29.8 mm / 15.8 mrad. Then only an
+    exact count (the frames before the page, or the pose before it) proves the power-up, else
+    the stall's rule: frames 0 .. lo unmoved, or unproven and said."""
+    stalled = stalled_power_up(frames, accepted, decoder, enc, sent_s, alive_s)
+    if stalled is False:
+        return starts_at_power_up(frames, accepted, decoder, onboard), []
+    if stalled or starts_at_power_up(frames, accepted, decoder, onboard, by_tick=False):
+        return True, []
     return False, [{"kind": UNPROVEN_KIND, "t_s": float(np.min(sent_s)), "detail": UNPROVEN}]
 
 
