@@ -127,6 +127,7 @@ from odocan.host.judge.gapseen import Seen, seen_in_log
 from odocan.host.judge.holepages import page_numbered
 from odocan.host.judge.losses import firmware_losses, firmware_ok_spans, loss_allowance
 from odocan.host.judge.powerup import saw_only_the_log, starts_at_power_up
+from odocan.host.judge.primedon import each_prime
 from odocan.host.judge.reboots import (
     Life,
     before_two_sources,
@@ -136,11 +137,7 @@ from odocan.host.judge.reboots import (
     two_sources,
 )
 from odocan.host.judge.reference import PROFILE_SPEED, Geometry, SpeedBound
-from odocan.host.judge.reference_path import (
-    build_reference,
-    firmware_steps,
-    restart_detail,
-)
+from odocan.host.judge.reference_path import build_reference, firmware_steps, restart_detail
 from odocan.host.judge.reportfacts import covered_s, frame_counts, realtime, robot_dict
 from odocan.host.judge.resent import worst_sent
 from odocan.host.judge.samples import (
@@ -325,6 +322,7 @@ def _latched_per_firmware(frames: FrameArrays, lives: list[Life],
     return latched_fields(events, latch)
 
 
+@each_prime  # a stall at power-up's unproven start: judged from each frame it may have primed on
 def _analyze_life(
     frames: FrameArrays,
     robot: RobotProfile,
@@ -363,7 +361,8 @@ def _analyze_life(
     elif rebase or start_pose:  # not the log's first life: its count pages only
         power_up = starts_at_power_up(frames, accepted, decoder, onboard)
     else:  # the log's first life: a stall at power-up vetoes the page's tick bound
-        power_up, unproven = log_power_up(frames, accepted, decoder, onboard, enc, sent_s, alive_s)
+        power_up, unproven = log_power_up(frames, accepted, decoder, onboard, enc,
+                                          (sent_s, alive_s), (robot, integrator))
     ref_all = build_reference(enc, onboard, robot, integrator, power_up=power_up,
                          max_wheel_speed_mm_s=max_wheel_speed_mm_s, breaks=stalls,
                          slack_m=tolerance.position_m, start_pose=start_pose,
