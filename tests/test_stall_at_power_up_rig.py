@@ -7,9 +7,12 @@ cantools-decoded frames): its first pose is that merged step, as after a reboot'
 (``tests/test_stall_before_first_pose_after_reboot.py``). Unlike the recorded evidence of
 ``tests/test_stall_before_first_pose.py`` (whose first count page came before any frame), its
 first count page comes 80 ms after its first pose, and counts 11 frames (ENC_E2E_OK; the FIFO's
-overrun is in ENC_E2E_LOST): ``analyze`` proves the power-up by the page's tick bound
+overrun is in ENC_E2E_LOST): ``analyze`` proved the power-up by the page's tick bound
 (``powerup.heard_by_tick``: its ODOM_STATUS COUNTER stood still through the halt, so the bound is
-0.1 s after power-up, 11 frames on the bus by then).
+0.1 s after power-up, 11 frames on the bus by then: frame 0 counted, which the firmware never
+took). Across a halt the bound is no evidence (``stallpowerup.log_power_up``): the stall's rule
+proves it (frames 0 and 1 unmoved); with frame 0 moved it is unproven and said, where the bound
+had FAILed the correct firmware by 29.8 mm / 15.8 mrad.
 
 (a) Before: the live judges read that bound on their 32 recent frames only
 (``sources.heard_before_live``), could not prove the power-up, and started the reference fitted
@@ -28,9 +31,11 @@ firmware's POSE_UNCERTAIN; both end verdicts PASS). Now the evidence that remain
 (``host.judge.stallpowerup``, ``stalls.primed_first``'s rule for a reboot's life): the
 first-cycle summary says INIT at UPTIME 0, no pose before the stall, and frames 0 and 1 (the
 firmware's FIFO was drained at tick 0 after frame 0: it primed on one of them) carry the same
-counts. Frame 0 moved 5 counts off, that last condition fails: unproven, no judge PASSes the
-wrong firmware silently (``analyze`` PASSes with a ``power_up_unproven`` event its verdict line
-says; the end verdicts UNJUDGED) and none FAILs the right one.
+counts. Frame 0 moved 5 counts off, that last condition fails: the frame it primed on is not
+known, and ``analyze`` judges the life from each (``host.judge.primedon``: the right firmware
+PASSes from frame 1, one 1 m off FAILs from both; before, fitted, it PASSed with a
+``power_up_unproven`` line); the live judges leave it unproven (the end verdicts UNJUDGED):
+none PASSes the wrong firmware silently, none FAILs the right one.
 
 (b) X 3 LSB off from the 20th pose (0.3 mm): it FAILs ``analyze`` since the reboot's fix of the
 double allowance (``losses.placement_accounted``, which the power-up shares: 0.235 mm beyond the
@@ -49,8 +54,8 @@ from odocan.firmware import frames as fr
 from odocan.host.cli.app import main
 from odocan.host.io.logs import read_log
 from odocan.host.judge.analysis import HEADING_LSB_RAD, POSITION_LSB_M, analyze
+from odocan.host.judge.primedon import PRIMED_KIND
 from odocan.host.judge.samples import ENC_E2E_PAGE
-from odocan.host.report.summary import kept_unjudged
 from tests.test_first_second_reboot import _decoded, _written, _wrong
 from tests.test_stall_before_first_pose import _odometry
 from tests.test_stall_before_first_pose_after_reboot import _live, _poses
@@ -188,19 +193,24 @@ def test_without_its_first_count_pages_a_wrong_firmware_fails(tmp_path: Path, fr
 
 
 @pytest.mark.parametrize("bias_lsb", [0, 10_000])
-def test_unproven_it_is_said_never_a_silent_pass_nor_a_false_fail(tmp_path: Path,
-                                                                  bias_lsb: int) -> None:
-    """Frame 0 moved (``frame_zero_moved``): the stall does not prove the power-up. The right
-    firmware (``bias_lsb`` 0) FAILs no judge; neither it nor one 1 m off from its first pose
-    PASSes silently: ``analyze`` says its first pose not judged (a ``power_up_unproven`` event,
-    on the verdict's line), the end verdicts are UNJUDGED (the start adopted)."""
+def test_moved_frame_zero_is_judged_from_each_frame_it_may_have_primed_on(
+        tmp_path: Path, bias_lsb: int) -> None:
+    """Frame 0 moved (``frame_zero_moved``), the first count pages lost: the stall does not tell
+    which of frames 0 and 1 the firmware primed on. ``analyze`` judges it from each
+    (``host.judge.primedon``): the right firmware (``bias_lsb`` 0) PASSes from frame 1, one 1 m
+    off from its 2nd pose FAILs from both (before: fitted, it PASSed with its first pose said
+    not judged). The live judges cannot prove the start: never a FAIL of the right one, never
+    a silent PASS (the end verdicts UNJUDGED, the start adopted)."""
     messages = frame_zero_moved(_without_first_count_pages(_wrong(_messages(), 0, bias_lsb, 1)))
     path = _written(messages, tmp_path / "log.log")
     analysis = analyze(read_log(path), PMIR, "exact")
-    assert analysis.passed
-    assert analysis.report["reference_start"] == "fitted"
-    assert [e["kind"] for e in analysis.report["events"]].count("power_up_unproven") == 1
-    assert "not judged" in "; ".join(kept_unjudged(analysis.report))
+    assert analysis.passed is (bias_lsb == 0)
+    assert analysis.report["reference_start"] == "power-up"
+    primed = [e for e in analysis.report["events"] if e["kind"] == PRIMED_KIND]
+    assert len(primed) == 1
+    assert primed[0]["encoder_frame"] == 1 or bias_lsb
+    assert main(["analyze", str(path), "--robot", "pmir", "--integrator", "exact",
+                 "--stream", "always"]) == (0 if bias_lsb == 0 else 1)
     monitor, bridge, end_s = _live(messages)
     assert not bridge.tracker.lives.power_up_proven
     assert monitor.health(end_s)["state"] != "POSE WRONG"
@@ -223,3 +233,68 @@ def test_without_its_first_cycle_nothing_is_proven(tmp_path: Path) -> None:
         assert not tracker.lives.power_up_proven
         assert not tracker.first.unproven
         assert tracker.wrongs.as_dict()["episodes"] == 0
+
+
+def test_frame_zero_moved_with_its_pages_no_judge_fails_the_correct_firmware(
+        tmp_path: Path) -> None:
+    """Frame 0 moved with the count pages kept (``frame_zero_moved``: the firmware, its FIFO
+    drained at tick 0, primed on frame 1). Before, the first page's tick bound counted frame 0
+    (``powerup.heard_by_tick``: the halt held the page's tick 3 s past its bound) and
+    ``analyze`` started the reference there: FAIL by 29.8 mm / 15.8 mrad while the live judges
+    PASSed. Now the halt vetoes the bound (``stallpowerup.log_power_up``) and the life is
+    judged from each frame it may have primed on (``primedon``): PASS from frame 1."""
+    messages = frame_zero_moved(_messages())
+    path = _written(messages, tmp_path / "right.log")
+    analysis = analyze(read_log(path), PMIR, "exact")
+    assert analysis.passed, analysis.report["onboard_vs_reference"]
+    assert analysis.report["reference_start"] == "power-up"
+    assert [(e["kind"], e["encoder_frame"]) for e in analysis.report["events"]
+            if e["kind"] == PRIMED_KIND] == [(PRIMED_KIND, 1)]
+    assert main(["analyze", str(path), "--robot", "pmir", "--integrator", "exact",
+                 "--stream", "always"]) == 0
+    monitor, bridge, end_s = _live(messages)
+    assert monitor.health(end_s)["state"] != "POSE WRONG"
+    for tracker in (monitor.tracker, bridge.tracker):
+        assert tracker.wrongs.as_dict()["episodes"] == 0
+    assert _end_verdicts(bridge) == ("PASS", "PASS")
+
+
+@pytest.mark.parametrize("from_pose", [0, 1])
+def test_frame_zero_moved_with_its_pages_a_wrong_firmware_fails_every_judge(
+        tmp_path: Path, from_pose: int) -> None:
+    """X 1 m off from pose ``from_pose`` on, frame 0 moved, the pages kept: off from either
+    frame it may have primed on, ``analyze`` FAILs it (whole and streamed: the stream judges
+    it whole), the live judges too (POSE WRONG, both end verdicts)."""
+    messages = frame_zero_moved(_wrong(_messages(), 0, 10_000, from_pose))
+    path = _written(messages, tmp_path / "wrong.log")
+    analysis = analyze(read_log(path), PMIR, "exact")
+    assert not analysis.passed
+    assert analysis.report["onboard_vs_reference"]["max_position_error_beyond_allowance_m"] > 0.5
+    assert main(["analyze", str(path), "--robot", "pmir", "--integrator", "exact",
+                 "--stream", "always"]) == 1
+    monitor, bridge, end_s = _live(messages)
+    assert monitor.health(end_s)["state"] == "POSE WRONG"
+    assert bridge.tracker.wrongs.as_dict()["episodes"] >= 1
+    assert _end_verdicts(bridge) == ("FAIL", "FAIL")
+
+
+def test_frame_zero_moved_without_a_stall_no_false_fail(tmp_path: Path) -> None:
+    """No halt (``drive`` with 0 ticks): the FIFO drained at tick 0, the firmware primes on
+    frame 1, frame 0 moved. Its count page then counts one frame fewer than the log holds
+    before it, no bound matches: no judge proves the power-up from frame 0, none FAILs the
+    correct firmware; X 1 m off from its 2nd pose FAILs every judge."""
+    right = frame_zero_moved(drive("power-up", 0))
+    path = _written(right, tmp_path / "right.log")
+    assert analyze(read_log(path), PMIR, "exact").passed
+    assert main(["analyze", str(path), "--robot", "pmir", "--integrator", "exact",
+                 "--stream", "always"]) == 0
+    monitor, bridge, end_s = _live(right)
+    assert (monitor.health(end_s)["state"], _end_verdicts(bridge)) == ("OK", ("PASS", "PASS"))
+    wrong = frame_zero_moved(_wrong(drive("power-up", 0), 0, 10_000, 1))
+    path = _written(wrong, tmp_path / "wrong.log")
+    assert not analyze(read_log(path), PMIR, "exact").passed
+    assert main(["analyze", str(path), "--robot", "pmir", "--integrator", "exact",
+                 "--stream", "always"]) == 1
+    monitor, bridge, end_s = _live(wrong)
+    assert (monitor.health(end_s)["state"], _end_verdicts(bridge)) == ("POSE WRONG",
+                                                                        ("FAIL", "FAIL"))

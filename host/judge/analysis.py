@@ -130,6 +130,7 @@ from odocan.host.judge.losses import (
     loss_allowance,
 )
 from odocan.host.judge.powerup import saw_only_the_log, starts_at_power_up
+from odocan.host.judge.primedon import each_prime
 from odocan.host.judge.reboots import (
     Life,
     before_two_sources,
@@ -160,7 +161,7 @@ from odocan.host.judge.samples import (
 )
 from odocan.host.judge.setposekept import Kept, check_cut
 from odocan.host.judge.setposes import cut_lives, set_pose_cuts
-from odocan.host.judge.stallpowerup import stall_power_up
+from odocan.host.judge.stallpowerup import log_power_up
 from odocan.host.judge.stallreprime import reprime_events
 from odocan.host.judge.stalls import after_stalls, alive_times, first_placement, primed_first
 from odocan.host.judge.statuslatch import StatusLatch, firmware_events
@@ -324,6 +325,7 @@ def _latched_per_firmware(frames: FrameArrays, lives: list[Life],
     return latched_fields(events, latch)
 
 
+@each_prime  # a stall at power-up's unproven start: judged from each frame it may have primed on
 def _analyze_life(
     frames: FrameArrays,
     robot: RobotProfile,
@@ -359,9 +361,11 @@ def _analyze_life(
     if boot:  # (a stalled MCU's first page misses the frames its FIFO overran: primed_first)
         power_up = saw_only_the_log(frames, accepted, decoder) or primed_first(
             float(np.min(sent_s, initial=np.inf)), enc, alive_s, pose_sent_s)
-    elif not (power_up := starts_at_power_up(frames, accepted, decoder, onboard)) and not (
-            rebase or start_pose):  # the log's first life only
-        power_up, unproven = stall_power_up(frames, accepted, decoder, enc, sent_s, alive_s)
+    elif rebase or start_pose:  # not the log's first life: its count pages only
+        power_up = starts_at_power_up(frames, accepted, decoder, onboard)
+    else:  # the log's first life: a stall at power-up vetoes the page's tick bound
+        power_up, unproven = log_power_up(frames, accepted, decoder, onboard, enc,
+                                          (sent_s, alive_s), (robot, integrator))
     ref_all = build_reference(enc, onboard, robot, integrator, power_up=power_up,
                          max_wheel_speed_mm_s=max_wheel_speed_mm_s, breaks=stalls,
                          slack_m=tolerance.position_m, start_pose=start_pose,

@@ -20,14 +20,17 @@ NAMED_SPAN = 8  # a pose names one of the latest 8 encoder frames (``livepose.re
 
 
 def starts_at_power_up(
-    frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder, onboard: Poses
+    frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder, onboard: Poses,
+    *, by_tick: bool = True
 ) -> bool:
     """The log starts at the firmware's power-up (module docstring, step 4): the first accepted
     ODOM_STATUS summary says UPTIME 0 and the first ENC_E2E_OK page says the firmware had
     accepted exactly the log's encoder frames (it primed on the log's first), whatever the
     first on-board sample reads: a firmware whose power-up pose is not (0, 0, 0) is judged from
     (0, 0, 0), and the log's first accepted ODOM_STATUS frame is of the firmware's first cycle
-    (``holds_first_cycle``). Without that page, ``zero_first_sample`` stands in for it."""
+    (``holds_first_cycle``). Without that page, ``zero_first_sample`` stands in for it.
+    ``by_tick`` False: the page's tick bound (``heard_by_tick``) is no evidence (a firmware that
+    halted at power-up sent its page a stall after the bound: ``stallpowerup.log_power_up``)."""
     try:
         page = decoder.decode_page(frames, "ODOM_STATUS", 0)
     except DecodeError:
@@ -37,7 +40,7 @@ def starts_at_power_up(
     uptime = page["UPTIME"][accepted[page["index"]]]
     if len(uptime) == 0 or int(uptime[0]) != 0:
         return False
-    counted = counted_only_the_log(frames, accepted, decoder)
+    counted = counted_only_the_log(frames, accepted, decoder, by_tick=by_tick)
     if counted is None:
         return zero_first_sample(onboard)
     try:
@@ -89,7 +92,8 @@ def saw_only_the_log(
 
 
 def counted_only_the_log(
-    frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder
+    frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder, *,
+    by_tick: bool = True
 ) -> bool | None:
     """Whether the firmware had accepted exactly the log's encoder frames when it made its first
     ODOM_STATUS page of WHEEL_ENCODERS E2E counts (ENC_E2E_OK): then it primed on the log's first
@@ -101,7 +105,8 @@ def counted_only_the_log(
     ENC_E2E_LOST (u8): a firmware whose mailbox dropped frames the bus carried counted each
     frame since its first once, accepted or lost. A log cut by some frames after the power-up
     (the firmware counted them too) matches neither unless its page's tick came late past as
-    many frames, both its summary and the poses before it (a later tick's pose)."""
+    many frames, both its summary and the poses before it (a later tick's pose). ``by_tick``
+    False: without the tick bound's count (``starts_at_power_up``)."""
     try:
         page = decoder.decode_page(frames, "ODOM_STATUS", ENC_E2E_PAGE)
         summary = decoder.decode_page(frames, "ODOM_STATUS", 0)
@@ -122,7 +127,7 @@ def counted_only_the_log(
     counts = {ok, (ok + lost) & 0xFFFF}  # and the frames it lost after the bus carried them
     if in_log & 0xFFFF in counts or pose_named(frames, accepted, decoder, made) in counts:
         return True
-    return heard_by_tick(frames, accepted, decoder, (first, made)) in counts
+    return by_tick and heard_by_tick(frames, accepted, decoder, (first, made)) in counts
 
 
 def heard_by_tick(frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder,

@@ -29,10 +29,12 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
-from odocan.host.judge.powerup import holds_first_cycle
-from odocan.host.judge.samples import Encoders, FloatArray
+from odocan.host.judge.powerup import holds_first_cycle, starts_at_power_up
+from odocan.host.judge.primedon import FRAMES_KEY, candidates
+from odocan.host.judge.samples import Encoders, FloatArray, Poses
 from odocan.host.judge.stalls import first_after_stall
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
+from odocan.sim.robot import RobotProfile
 
 UNPROVEN_KIND = "power_up_unproven"  # the report's event when the rule cannot prove it
 INIT = "INIT"  # ODOM_STATUS STATE's name (the DBC's VAL_) of a firmware that primed on nothing
@@ -55,18 +57,26 @@ def stalled_power_up(frames: FrameArrays, accepted: npt.NDArray[np.bool_],
     """``stall_proves_power_up``, None when the firmware stalled after its power-up but the
     robot moved over the frames it may have primed on (``stall_power_up``); False when the log
     shows no such stall."""
+    lo = primed_by(frames, accepted, decoder, enc, sent_s, alive_s)
+    return lo is not None and (unmoved(enc.left, enc.right, lo) or None)
+
+
+def primed_by(frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder,
+              enc: Encoders, sent_s: FloatArray, alive_s: FloatArray) -> int | None:
+    """``lo`` of the module docstring: the firmware halted after its power-up before it primed
+    and primed on one of encoder frames 0 .. ``lo``; None when the log shows no such stall."""
     halves = _pose_half_times(frames, accepted, decoder)
     if len(sent_s) == 0 or halves is None or not len(alive_s):
-        return False
+        return None
     first_s = float(np.min(sent_s))
     alive = np.sort(np.concatenate((alive_s, halves)))
     lo = first_after_stall(first_s, enc, alive)
     if lo is None:
-        return False
+        return None
     talked_s = float(alive[int(np.searchsorted(alive, first_s, side="left")) - 1])
     if np.any(halves <= talked_s) or not _primed_on_nothing(frames, accepted, decoder, talked_s):
-        return False
-    return unmoved(enc.left, enc.right, lo) or None
+        return None
+    return lo
 
 
 def stall_power_up(frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder,
@@ -79,6 +89,31 @@ def stall_power_up(frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder
     if proven is not None:
         return proven, []
     return False, [{"kind": UNPROVEN_KIND, "t_s": float(np.min(sent_s)), "detail": UNPROVEN}]
+
+
+def log_power_up(frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder,
+                 onboard: Poses, enc: Encoders, times_s: tuple[FloatArray, FloatArray],
+                 judged: tuple[RobotProfile, str]) -> tuple[bool, list[dict[str, Any]]]:
+    """The power-up of the log's first life and the report's events (``times_s``: its samples'
+    and its ODOM_STATUS frames' bus times, ``stall_power_up``'s; ``judged``: the robot and
+    integrator): the firmware's count page (``powerup.starts_at_power_up``), else the stall's
+    rule. When the firmware halted at power-up before it primed (``primed_by``), the page's
+    tick bound (``powerup.heard_by_tick``) proves nothing: it takes one ODOM_STATUS cycle a
+    period on the bus, while the halt held the page's tick seconds past the bound, so the
+    frames on the bus by then are not those the firmware counted. Issue #11: frame 0 moved,
+    the bound counted it, the firmware primed on frame 1 (its FIFO was drained at tick 0): the
+    reference started a frame early and FAILed the correct firmware by 29.8 mm / 15.8 mrad.
+    Then only an exact count (the frames before the page, or the pose before it) proves the
+    power-up, else the stall's rule: frames 0 .. lo unmoved, or unproven, said, with each
+    frame's start (``primedon``: the life judged from each)."""
+    lo = primed_by(frames, accepted, decoder, enc, *times_s)
+    if lo is None:
+        return starts_at_power_up(frames, accepted, decoder, onboard), []
+    if unmoved(enc.left, enc.right, lo) or starts_at_power_up(frames, accepted, decoder,
+                                                               onboard, by_tick=False):
+        return True, []
+    return False, [{"kind": UNPROVEN_KIND, "t_s": float(np.min(times_s[0])), "detail": UNPROVEN,
+                    FRAMES_KEY: candidates(enc, lo, *judged)}]
 
 
 def unmoved(left: npt.NDArray[np.int64], right: npt.NDArray[np.int64], lo: int) -> bool:

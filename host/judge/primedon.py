@@ -1,0 +1,91 @@
+"""A power-up whose prime frame the stall leaves open, judged from every frame it may have
+primed on (issue #11: "a FAIL must never blame a correct firmware", and a wrong one must not
+PASS unjudged).
+
+``host.judge.stallpowerup`` proves the firmware halted at power-up before it primed, so it
+primed on one of encoder frames 0 .. ``lo`` (its FIFO kept the first frames it had not read).
+When the robot moved over them the frame is not known, and the whole log's rule said the start
+unproven and fitted it at the first sample kept: a firmware 1 m off from its first pose PASSed
+``analyze`` with only a line saying that pose not judged. Yet each of those frames gives an
+exact start: pose (0, 0, 0) at frame p is, at frame 0, the inverse of the reference's motion
+over frames 0 .. p (``start_pose_primed_on``; the reference is rigid-motion equivariant). The
+life is judged from each (as a set-pose's exact start): a firmware that passes from one of them
+is one that primed there, PASS, the frame said; one that fails from every one is off whichever
+it primed on, FAIL (the least error reported)."""
+
+from __future__ import annotations
+
+import functools
+import math
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any, TypeVar, cast
+
+import numpy as np
+
+from odocan.host.judge.reference import Geometry, integrate, wrap_delta
+from odocan.host.judge.samples import WIRE_COUNTER_BITS, Encoders
+from odocan.sim.robot import RobotProfile
+
+if TYPE_CHECKING:
+    from odocan.host.judge.analysis import Analysis
+
+Pose = tuple[float, float, float]
+F = TypeVar("F", bound=Callable[..., Any])
+PRIMED_KIND = "power_up_primed_on"  # the report's event: the frame it was judged from
+FRAMES_KEY = "start_poses"  # the unproven event's candidates (frame, start pose at frame 0)
+
+
+def start_pose_primed_on(enc: Encoders, p: int, robot: RobotProfile, integrator: str) -> Pose:
+    """The pose at encoder frame 0 from which the reference reads (0, 0, 0) at frame ``p``: the
+    inverse of its motion over frames 0 .. ``p``."""
+    if p == 0:
+        return 0.0, 0.0, 0.0
+    bits = min(robot.counter_bits, WIRE_COUNTER_BITS)
+    moved = integrate(wrap_delta(np.diff(enc.left[: p + 1]), bits),
+                      wrap_delta(np.diff(enc.right[: p + 1]), bits), Geometry.of(robot),
+                      integrator)
+    x_m, y_m, heading_rad = (float(moved.x_m[-1]), float(moved.y_m[-1]),
+                             float(moved.heading_rad[-1]))
+    cos_h, sin_h = math.cos(-heading_rad), math.sin(-heading_rad)
+    return (-(cos_h * x_m - sin_h * y_m), -(sin_h * x_m + cos_h * y_m), -heading_rad)
+
+
+def candidates(enc: Encoders, lo: int, robot: RobotProfile, integrator: str) -> list[list[Any]]:
+    """[frame, [x m, y m, heading rad]] of each frame 0 .. ``lo`` it may have primed on (the
+    unproven event's ``FRAMES_KEY``, JSON as the report is)."""
+    return [[p, list(start_pose_primed_on(enc, p, robot, integrator))] for p in range(lo + 1)]
+
+
+def judged_from_each(first: Analysis, rerun: Callable[[Pose], Analysis]) -> Analysis:
+    """``first`` (fitted, its start unproven) judged again from each candidate start of its
+    unproven event (``rerun``: the life from that exact start): the first that passes, else the
+    one with the least error beyond its allowance, its events saying which frame; ``first``
+    when it has no candidates."""
+    event = next((e for e in first.report["events"] if FRAMES_KEY in e), None)
+    if event is None:
+        return first
+    tries = [(p, rerun((pose[0], pose[1], pose[2]))) for p, pose in event[FRAMES_KEY]]
+    passed = [t for t in tries if t[1].passed]
+    p, best = passed[0] if passed else min(tries, key=lambda t: t[1].report[
+        "onboard_vs_reference"]["max_position_error_beyond_allowance_m"])
+    frames = [t[0] for t in tries]
+    verdict = (f"it passes from frame {p}" if passed
+               else f"it fails from every one (the least error from frame {p})")
+    best.report["reference_start"] = "power-up"
+    best.report["events"] = [{
+        "kind": PRIMED_KIND, "t_s": event["t_s"], "encoder_frame": p,
+        "detail": f"the firmware stalled before its first pose after its power-up (INIT at "
+                  f"UPTIME 0) while the robot moved over encoder frames {frames[0]} .. "
+                  f"{frames[-1]}, one of which it primed on: judged from each, {verdict}"}] + [
+        e for e in best.report["events"] if e.get("kind") != PRIMED_KIND]
+    return best
+
+
+def each_prime(analyze_life: F) -> F:
+    """``analyze_life`` (``analysis._analyze_life``) with its unproven start judged from each
+    frame it may have primed on (``judged_from_each``: again with ``start_pose``)."""
+    @functools.wraps(analyze_life)
+    def judged(*args: Any, **kwargs: Any) -> Analysis:
+        return judged_from_each(analyze_life(*args, **kwargs), lambda pose: analyze_life(
+            *args, **{**kwargs, "start_pose": pose}))
+    return cast(F, judged)
