@@ -119,7 +119,7 @@ from odocan.host.judge.compare import (
 from odocan.host.judge.configs import config_cuts, cut_configs, in_force
 from odocan.host.judge.distance import DistanceJudge, check_distance, twin_paths
 from odocan.host.judge.evidencechoice import chosen_seen
-from odocan.host.judge.finalstate import firmware_fields, latched_fields
+from odocan.host.judge.finalstate import firmware_fields, latched_per_firmware
 from odocan.host.judge.gapseen import Seen, seen_in_log
 from odocan.host.judge.holepages import page_numbered
 from odocan.host.judge.keptmark import mark_kept
@@ -164,7 +164,6 @@ from odocan.host.judge.setposes import cut_lives, set_pose_cuts
 from odocan.host.judge.stallpowerup import log_power_up
 from odocan.host.judge.stallreprime import reprime_events
 from odocan.host.judge.stalls import after_stalls, alive_times, first_placement, primed_first
-from odocan.host.judge.statuslatch import StatusLatch, firmware_events
 from odocan.host.judge.twins import twin_allowance_of
 from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.protocol.decode import BulkDecoder
@@ -277,7 +276,7 @@ def analyze(
     report, series = merge([d[1].report for d in done], [d[1].series for d in done],
                            [d[0] for d in done], [d[2] for d in done], silent=silent)
     if len(lives) != len(firmware_lives):  # a set-pose is no reboot: one latch per firmware
-        report.update(_latched_per_firmware(frames, firmware_lives, db))
+        report.update(latched_per_firmware(frames, firmware_lives, db))
     seconds = covered_s(frames, db)
     report.update(
         integrator_source=source, scenario=scenario, seed=seed, sim_seconds=seconds,
@@ -308,21 +307,6 @@ def _first_integrator(frames: FrameArrays, lives: list[Life], decoder: BulkDecod
         return pick_integrator(head, check_frames(head, decoder.db)[1], decoder, None)[0]
     except AnalysisError:  # no summary before it: the last one reported
         return integrator
-
-
-def _latched_per_firmware(frames: FrameArrays, lives: list[Life],
-                          db: DatabaseSpec) -> dict[str, Any]:
-    """``firmware_events`` of each firmware life (a reboot's), its mask latched from its start
-    (a set-pose's cut does not clear the firmware's sticky bits: not reported again there), and
-    the last life's ``firmware_final``."""
-    events: list[dict[str, Any]] = []
-    latch = StatusLatch()
-    for k, life in enumerate(lives):
-        part = frames.select(life.index)
-        latch = StatusLatch()  # a reboot clears the firmware's state
-        events += [dict(e, firmware_life=k) for e in firmware_events(
-            part, check_frames(part, db)[1], BulkDecoder(db), latch)]
-    return latched_fields(events, latch)
 
 
 @each_prime  # a stall at power-up's unproven start: judged from each frame it may have primed on

@@ -9,13 +9,20 @@ reboot starts a fresh latch, so the final state is the last firmware life's.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
 
 from odocan.host.judge.reasonwords import REASON_WORDS
 from odocan.host.judge.statuslatch import StatusLatch, firmware_events
+from odocan.host.protocol.decode import BulkDecoder
+from odocan.host.protocol.e2e import check_frames
+
+if TYPE_CHECKING:
+    from odocan.host.io.logs import FrameArrays
+    from odocan.host.judge.reboots import Life
+    from odocan.host.protocol.dbcplan import DatabaseSpec
 
 
 def final_state(latch: StatusLatch) -> dict[str, Any] | None:
@@ -46,3 +53,18 @@ def final_text(final: dict[str, Any] | None) -> str | None:
     since = "" if final["since_s"] is None else f" since {final['since_s']:.2f} s"
     words = REASON_WORDS.get(str(final["reason"]))
     return f"ends {final['state']} {final['reason']}{since}" + (f": {words}" if words else "")
+
+
+def latched_per_firmware(frames: FrameArrays, lives: list[Life],
+                         db: DatabaseSpec) -> dict[str, Any]:
+    """``firmware_events`` of each firmware life (a reboot's), its mask latched from its start
+    (a set-pose's cut does not clear the firmware's sticky bits: not reported again there), and
+    the last life's ``firmware_final``."""
+    events: list[dict[str, Any]] = []
+    latch = StatusLatch()
+    for k, life in enumerate(lives):
+        part = frames.select(life.index)
+        latch = StatusLatch()  # a reboot clears the firmware's state
+        events += [dict(e, firmware_life=k) for e in firmware_events(
+            part, check_frames(part, db)[1], BulkDecoder(db), latch)]
+    return latched_fields(events, latch)
