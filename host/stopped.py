@@ -66,6 +66,25 @@ def stopped_text(stopped: dict[str, Any]) -> str:
             f"of {stopped['asked']:g} {unit}")
 
 
+def mark_stopped(report: dict[str, Any]) -> bool:
+    """A report a signal stopped early: its ``passed`` is false, as the fleet's is (what was
+    asked did not run: a CI step reading ``.passed`` must never take a killed drive for a pass),
+    and the verdict of the part that ran moves to ``stopped.partial_passed``; returns
+    ``passed``. Marking twice keeps the first partial verdict."""
+    stopped = report.get("stopped")
+    if stopped and "partial_passed" not in stopped:
+        stopped["partial_passed"] = bool(report["passed"])
+        report["passed"] = False
+    return bool(report["passed"])
+
+
+def partial_verdict(report: dict[str, Any]) -> bool:
+    """The verdict of what was judged: ``stopped.partial_passed`` when a signal stopped it,
+    else ``passed``."""
+    stopped = report.get("stopped") or {}
+    return bool(stopped.get("partial_passed", report.get("passed")))
+
+
 def stop_code(stopped: dict[str, Any]) -> int:
     """The exit code of a report's ``stopped``: 128 + its signal's number."""
     name = str(stopped["signal"])

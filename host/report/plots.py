@@ -35,6 +35,7 @@ from matplotlib.patches import Patch
 from PIL import Image
 
 from odocan.host.judge.analysis import Analysis, Tolerance
+from odocan.host.stopped import partial_verdict
 
 PNG_DPI = 100
 _TRUTH, _ONBOARD, _REFERENCE = "0.45", "tab:blue", "tab:orange"
@@ -85,7 +86,9 @@ def build_figure(series: Series, report: dict[str, Any], tolerance: Tolerance) -
 def title(report: dict[str, Any]) -> str:
     """Two lines: what ran (robot, integrator, errors, faults) and what was found."""
     inputs = report.get("inputs") or {}
-    verdict = "PASS" if report.get("passed") else "FAIL"
+    verdict = "PASS" if partial_verdict(report) else "FAIL"
+    if report.get("stopped"):
+        verdict = f"STOPPED: partial {verdict}"
     distance = (report.get("onboard_vs_truth") or {}).get("distance_travelled_m")
     line1 = (
         f"odocan: {report.get('scenario') or 'log'} on {report['robot']['name']}, "

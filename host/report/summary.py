@@ -25,7 +25,7 @@ from odocan.host.judge.finalstate import final_text
 from odocan.host.judge.samples import POSITION_LSB_M
 from odocan.host.outputs import check_writable, replaced
 from odocan.host.protocol.e2e_silence import lost_text, silence_caption
-from odocan.host.stopped import stopped_text
+from odocan.host.stopped import mark_stopped, partial_verdict, stopped_text
 from odocan.sim.exceptions import ConfigurationError
 
 COARSE_KEPT_LSB = 2  # an APPLY's check wider than this cannot tell a jump of 2 LSB: said
@@ -106,6 +106,7 @@ def finish(analysis: Analysis, args: argparse.Namespace, *, title: str) -> int:
     from rich.console import Console
 
     console = Console(file=sys.stdout, highlight=False)
+    analysis.passed = mark_stopped(analysis.report)
     print_summary(analysis.report, args.tolerance, console, title=title)
     sys.stdout.flush()
     for option, path in (("--report", args.report), ("--plot", args.plot)):
@@ -142,10 +143,11 @@ def print_summary(
         console.print()
         console.print(Padding(table, (0, 0, 0, 2), expand=False))
     console.print()
-    verdict, style = ("PASS", "green") if report["passed"] else ("FAIL", "bold red")
+    passed = partial_verdict(report)  # a signal's stop: what ran, said as partial
+    verdict, style = ("PASS", "green") if passed else ("FAIL", "bold red")
     if report.get("stopped"):  # a signal ended it early: never a plain PASS
         verdict = f"{stopped_text(report['stopped'])}: partial drive {verdict}"
-        style = "bold yellow" if report["passed"] else style
+        style = "bold yellow" if passed else style
     twist = report.get("onboard_twist_vs_reference") or {"passed": True}
     distance = report.get("onboard_distance_vs_reference") or {"passed": True}
     pose_met = _pose_within(report, tolerance)
