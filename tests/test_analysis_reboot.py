@@ -157,6 +157,11 @@ CAMPAIGN_EXAMPLES = int(os.environ.get("ODOCAN_CAMPAIGN_EXAMPLES", "50")) // 2
     robot=Robot(500, 75_000_000, 75_000_000, 300_000_000, 16), integrator="rk2", steps=600,
     distance_m=20.0, where=(150 - 110) / (600 - 110), boot_in_init=False, bias_100um=0, seed=1,
 )
+@example(  # a robot standing still (sub-count steps): the old firmware's pose of E2E COUNTER 0
+    # 30 ms before the boot reads (0, 0, 0), the new one's power-up pose X -3 LSB (issue #11)
+    robot=Robot(227, 35_000_000, 35_000_000, 230_000_000, 32), integrator="exact", steps=2783,
+    distance_m=1.0, where=0.02, boot_in_init=False, bias_100um=-3, seed=101217813,
+)
 @given(
     robot=robots(),
     integrator=st.sampled_from(["euler", "rk2", "exact"]),

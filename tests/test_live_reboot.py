@@ -14,9 +14,13 @@ from odocan.host.io.logs import read_log
 from odocan.host.judge.analysis import POSITION_LSB_M, analyze
 from odocan.host.judge.monitor import BusMonitor
 from odocan.host.judge.reference import Geometry
+from odocan.host.judge.stream_analysis import analyze_file
 from odocan.host.mqtt.telemetry import RobotTelemetry
 from odocan.sim.robot import load
+from tests.independent_checker import Robot, check
+from tests.synth_log import ENCODER_PERIOD_S, synthesize
 from tests.test_analysis_reboot import REBOOT, STEPS, independent, rebooting_drive
+from tests.test_judge_campaign import drive, profile_of
 
 
 def monitor_of(path: Path, robot: str, integrator: str) -> BusMonitor:
@@ -97,3 +101,39 @@ def test_without_the_boot_summary_the_live_judges_find_the_frame_it_primed_on(
         assert tracker.reference_starts == 2
         assert tracker.vs_reference.max_dpos_m == pytest.approx(offline, abs=1e-12)
         assert (tracker.vs_reference.max_dpos_m <= POSITION_LSB_M) == right
+
+
+def test_a_power_up_pose_off_zero_after_an_old_pose_at_zero(tmp_path: Path) -> None:
+    """A robot standing at its origin (steps below a count): the old firmware's pose of E2E
+    COUNTER 0, 30 ms before the reboot, reads (0, 0, 0); the new firmware's power-up pose reads
+    X -3 LSB. The old pose was taken for the power-up pose: the life started 3 frames before the
+    one the firmware primed on, its page of E2E counts then proved nothing and its start was
+    fitted (issue #11: an offset a fitted start may absorb). Every judge starts it at the power-up
+    pose now and shows the 3 LSB, as the independent checker does."""
+    robot = Robot(227, 35_000_000, 35_000_000, 230_000_000, 32)
+    profile = profile_of(robot)
+    d_left, d_right = drive(robot, 2783, 1.0, 101217813)
+    reboot_at = 163  # 53 encoder frames after the old firmware's UPTIME 1
+    bias = dict.fromkeys(range(reboot_at, 2784), -3)
+    path = synthesize(profile, "exact", d_left, d_right, reboot_at=reboot_at, x_bias_100um=bias
+                      ).write(tmp_path / "still.log")
+    expected = check(path, robot, "exact", lambda t: (0.0, 0.0, 0.0), max_wheel_speed_m_s=None,
+                     reboots_t_s=[reboot_at * ENCODER_PERIOD_S])
+    assert not expected.passed
+    whole = analyze(read_log(path), profile, "exact", max_wheel_speed_mm_s=None).report
+    streamed = analyze_file(path, profile, "exact", max_wheel_speed_mm_s=None, chunk_frames=97)
+    for report in (whole, streamed):
+        assert [r["reference_start"] for r in report["reboots"]] == ["power-up"]
+        assert not report["passed"]
+        assert report["onboard_vs_reference"]["max_position_error_m"] == pytest.approx(
+            expected.max_position_error_m, abs=0.25 * POSITION_LSB_M)
+    monitor = BusMonitor(profile, "exact")
+    bridge = RobotTelemetry("r1", Geometry.of(profile), "exact", counter_bits=32)
+    with can.LogReader(str(path)) as reader:
+        for msg in reader:
+            monitor.feed(msg, now_s=msg.timestamp)
+            bridge.feed(msg)
+    for tracker in (monitor.tracker, bridge.tracker):
+        assert tracker.reference_starts == 2
+        assert tracker.vs_reference.max_dpos_m == pytest.approx(
+            expected.max_position_error_m, abs=0.25 * POSITION_LSB_M)

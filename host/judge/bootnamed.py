@@ -11,12 +11,20 @@ those ODOM_STATUS frames were stamped. A recorder or gateway that stamps every O
 firmware FAILed by 6..25 mm (issue #11, rule 5). The pose frames are not delayed with them, and
 the pose's name is the firmware's own word on where it primed.
 
-The power-up pose is the latest ODOM_POSE_X before the reboot's summary whose CRC holds, whose
-COUNTER is 0 and which reads X 0 and HEADING 0, heard less than ``BOOT_WINDOW_S`` (80 ms) before
-the summary (``bootticks``: a summary held back further is not told as its tick's either). A pose
-of the old life reading (0, 0, 0) would name a frame the robot had not left since the power-up
-pose's: the same start. One rule for the whole log (``reboots``), the streamed
-(``stream_lives``) and the live judges (``tracking.PoseTracker.power_up``).
+The power-up pose is the latest ODOM_POSE_X of COUNTER 0 whose CRC holds before the reboot's
+summary, heard less than ``BOOT_WINDOW_S`` (80 ms) before the summary (``bootticks``: a summary
+held back further is not told as its tick's either), when it reads X 0 and HEADING 0. When that
+latest one reads anything else, the pose has no word on where the firmware primed, even if an
+earlier pose of COUNTER 0 read (0, 0, 0): that earlier one is the old life's (its COUNTER wraps
+to 0 every 16 poses; a robot standing at its origin reads (0, 0, 0)), and the new one, its sequence
+restarted after it, came up off (0, 0, 0) -- a wrong firmware, judged from (0, 0, 0) at the
+frame the other rules name. Taking the old pose's frame started the life frames before the one
+it primed on, so its page of E2E counts no longer proved the power-up and its start was fitted
+(issue #11: a firmware 3 LSB off after its reboot had its start fitted to its offset). A pose of
+the old life reading (0, 0, 0) that is the latest (the new firmware's first pose lost) would
+name a frame the robot had not left since the power-up pose's: the same start. One rule for the
+whole log (``reboots``), the streamed (``stream_lives``) and the live judges
+(``tracking.PoseTracker.power_up``).
 """
 
 from __future__ import annotations
@@ -33,7 +41,9 @@ from odocan.host.judge.powerup import NAMED_SPAN
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.protocol.e2e import crc8h2f_p02, e2e_messages
 
-# (log positions, bus times s, ENC_COUNTERs) of power-up poses
+# (log positions, bus times s, ENC_COUNTERs) of the poses of COUNTER 0, ENC_COUNTER ``NO_WORD``
+# for one that reads no power-up pose (module docstring)
+NO_WORD = -1
 PowerUpPoses = tuple[npt.NDArray[np.int64], npt.NDArray[np.float64], npt.NDArray[np.int64]]
 
 
@@ -57,9 +67,10 @@ def carried_on(kept: PowerUpPoses, heard: PowerUpPoses, keep: int = 4) -> PowerU
 
 
 def powerup_poses(frames: FrameArrays, decoder: BulkDecoder, offset: int = 0) -> PowerUpPoses:
-    """The ODOM_POSE_X frames of ``frames`` whose CRC holds and that read a power-up pose
-    (``is_powerup_pose``): their positions (plus ``offset``: a stream's chunk), bus times and
-    ENC_COUNTERs; empty without them."""
+    """The ODOM_POSE_X frames of ``frames`` of COUNTER 0 whose CRC holds: their positions (plus
+    ``offset``: a stream's chunk), bus times and ENC_COUNTERs, ``NO_WORD`` for those that read
+    no power-up pose (``is_powerup_pose``: a later one of them voids an earlier power-up pose,
+    module docstring); empty without them."""
     empty = no_powerup_poses()
     try:
         rows = decoder.decode(frames, POSE_MESSAGE)
@@ -68,19 +79,19 @@ def powerup_poses(frames: FrameArrays, decoder: BulkDecoder, offset: int = 0) ->
     if not {"COUNTER", "X", "HEADING", "ENC_COUNTER"} <= rows.keys() or not len(rows["index"]):
         return empty
     index = rows["index"]
-    keep = ((rows["COUNTER"] == 0) & (rows["X"] == 0) & (rows["HEADING"] == 0)
-            & _crc_holds(frames, decoder, index))
+    keep = (rows["COUNTER"] == 0) & _crc_holds(frames, decoder, index)
+    named = np.where((rows["X"] == 0) & (rows["HEADING"] == 0), rows["ENC_COUNTER"], NO_WORD)
     return (index[keep].astype(np.int64) + offset, rows["timestamp_s"][keep].astype(np.float64),
-            rows["ENC_COUNTER"][keep].astype(np.int64))
+            named[keep].astype(np.int64))
 
 
 def pose_before(poses: PowerUpPoses, position: int, t_s: float) -> tuple[int, int] | None:
     """The power-up pose a summary at log ``position`` and bus time ``t_s`` follows: the latest
     of ``poses`` before it, heard less than ``BOOT_WINDOW_S`` before it (its position and
-    ENC_COUNTER); None when none."""
+    ENC_COUNTER); None when none, or when that latest one reads no power-up pose."""
     at, times, named = poses
     k = int(np.searchsorted(at, position)) - 1
-    if k < 0 or not 0.0 <= t_s - float(times[k]) < BOOT_WINDOW_S:
+    if k < 0 or not 0.0 <= t_s - float(times[k]) < BOOT_WINDOW_S or named[k] == NO_WORD:
         return None
     return int(at[k]), int(named[k])
 
@@ -129,8 +140,12 @@ class LivePowerUp:
               rows: Sequence[Sequence[float]]) -> None:
         """An ODOM_POSE_X accepted by the tracker (E2E ``counter``, ``x``, ``heading``, its
         ENC_COUNTER, bus time s); ``rows``: the encoder frames heard before it (seq, place,
-        COUNTER, ...: ``livewindow.ENC_COLUMNS``)."""
+        COUNTER, ...: ``livewindow.ENC_COLUMNS``). One of COUNTER 0 that reads no power-up pose
+        voids the one before (module docstring)."""
+        if counter != 0:
+            return
         if not is_powerup_pose(counter, x, heading):
+            self.latest = (t_s, None)
             return
         tail = [row for row in list(rows)[-NAMED_SPAN:] if int(row[2]) == enc_counter]
         self.latest = (t_s, int(tail[-1][0]) if tail else None)
