@@ -1,0 +1,141 @@
+"""A bare APPLY just after a firmware re-primed at a stall before its first pose (issue #11: "a
+PASS/OK must never hide a wrong pose"; ``host.judge.reprimekept``).
+
+The case: pmir (``tests.fault_rig.FaultRig``), the MCU reset at tick ``REBOOT`` with its receive
+FIFO drained, halted 4.9 s, 6 s or 10 s (long enough for its step bound to reach half the
+counters' range: it re-primes on resuming and says so, COUNTER_RESET, the stall's motion left
+out by design: ``stallreprime``), then a bare APPLY (nothing staged: the pose must stay) 2 or 3
+ticks after it resumed; the firmware's set_pose adds ``off`` to its X (0: the correct firmware).
+
+Measured before (``analyze``, the monitor, the bridge), straight and circle alike: the kept
+check was not made ("its power-up pose not known": ``setposekept._refusal_said`` withdrew the
+stall rule) and the life after the APPLY was judged from a fitted start: X +1 m and +10 mm
+PASSed ``analyze`` on every halt; live, the straight drive's +1 m was OK too (the placement
+owed after the stall absorbed 986 mm), the circle's was POSE WRONG. Now ``analyze`` bounds the
+pose at the APPLY by the travel of every frame the firmware can have integrated (its FIFO's
+before the stall, those from the frame it re-primed on): +1 m FAILs everywhere; +10 mm FAILs
+the straight drive (at rest after the stall: a 7.6 mm bound) and is named "judged only within
+54 mm" on the circle (moving: which frames it took is not on the log), never a silent PASS.
+"""
+
+from __future__ import annotations
+
+from functools import cache
+from pathlib import Path
+from typing import Any
+
+import can
+import pytest
+
+from odocan.firmware import frames as fr
+from odocan.firmware.errors import ErrorMask
+from odocan.firmware.odometry import Odometry
+from odocan.host.io.logs import read_log
+from odocan.host.judge.analysis import analyze
+from odocan.host.report.summary import kept_failures, kept_unjudged
+from odocan.sim.board import TICK_S
+from odocan.sim.scenarios import get_scenario
+from tests import host_frames as hf
+from tests.fault_rig import FaultRig, open_virtual
+from tests.test_staged_reboot import PMIR, _x_by_frame, _written
+
+REBOOT = 10  # the reset's tick (0.1 s)
+AFTER_TICKS = 200  # ticks driven after the halt
+LSB_Q40 = round(1e-4 * 2**40)  # one position LSB (0.1 mm) in the firmware's Q40 metres
+METRE_Q40 = 10_000 * LSB_Q40
+
+
+@cache
+def drive(scenario: str, halted: int, after: int | None,
+          off_q40: int = 0) -> tuple[can.Message, ...]:
+    """The module docstring's drive: halted ``halted`` ticks, the APPLY ``after`` ticks after
+    it resumed (None: none); set_pose adds ``off_q40`` to X."""
+    apply_at = None if after is None else REBOOT + halted + after
+    heard: list[can.Message] = []
+    with pytest.MonkeyPatch.context() as patch, FaultRig(
+            scenario=get_scenario(scenario, PMIR, duration_s=60.0)) as rig:
+        apply = Odometry.set_pose
+        patch.setattr(Odometry, "set_pose",
+                      lambda self, x, y, h: apply(self, x + off_q40, y, h))
+        rig.halted = lambda k: REBOOT < k <= REBOOT + halted
+        tool = open_virtual(rig.channel)
+
+        def host(k: int) -> None:
+            if k == REBOOT:
+                rig.board.reboot()
+                while rig.fw_bus.recv(0) is not None:  # the reset clears the receive FIFO
+                    pass
+            if k == apply_at:
+                data = hf.pack_odom_set_pose(0, fr.SetPoseField.APPLY, 0, ErrorMask())
+                tool.send(can.Message(arbitration_id=fr.ODOM_SET_POSE_ID, data=data,
+                                      is_extended_id=False, timestamp=k * TICK_S))
+
+        rig.observers.append(lambda _k, got: heard.extend(got))
+        rig.before_board.append(host)
+        try:
+            rig.run((REBOOT + halted + AFTER_TICKS) * TICK_S)
+        finally:
+            tool.shutdown()
+    return tuple(heard)
+
+
+def _report(messages: tuple[can.Message, ...], path: Path) -> dict[str, Any]:
+    report = analyze(read_log(_written(messages, path)), PMIR, "exact").report
+    assert isinstance(report, dict)
+    return report
+
+
+def _kept(report: dict[str, Any]) -> dict[str, Any]:
+    [event] = [e for e in report["events"] if e["kind"] == "set_pose"]
+    assert isinstance(event["kept"], dict), event.get("kept_not_judged")
+    return event["kept"]
+
+
+@pytest.mark.parametrize(("scenario", "halted", "after"), [
+    ("straight", 490, 2), ("straight", 600, 3), ("straight", 1000, 3), ("circle", 600, 2),
+    ("circle", 1000, 2)])
+def test_the_correct_firmware_passes_and_the_check_is_made(
+        scenario: str, halted: int, after: int, tmp_path: Path) -> None:
+    right = drive(scenario, halted, after)
+    assert _x_by_frame(right) == _x_by_frame(drive(scenario, halted, None))  # nothing moved
+    report = _report(right, tmp_path / "right.log")
+    assert report["passed"], report["onboard_vs_reference"]
+    kept = _kept(report)
+    assert kept["passed"] and kept["reprimed"]
+    assert not kept_failures(report)
+
+
+def test_without_the_apply_the_re_prime_is_the_firmware_s_own(tmp_path: Path) -> None:
+    """The hole was the APPLY's: without it the re-prime is judged (its event) and PASSes."""
+    report = _report(drive("straight", 600, None), tmp_path / "none.log")
+    assert report["passed"]
+    assert [e["kind"] for e in report["events"]].count("stall_reprime") == 1
+
+
+@pytest.mark.parametrize(("scenario", "halted", "after"), [
+    ("straight", 490, 2), ("straight", 490, 3), ("straight", 600, 2), ("straight", 1000, 3),
+    ("circle", 490, 3), ("circle", 1000, 2)])
+def test_a_bare_apply_that_moves_x_by_a_metre_fails(
+        scenario: str, halted: int, after: int, tmp_path: Path) -> None:
+    """Before: PASS (the check not made, the life after it fitted)."""
+    report = _report(drive(scenario, halted, after, METRE_Q40), tmp_path / "wrong.log")
+    kept = _kept(report)
+    assert kept["passed"] is False and kept["position_jump_m"] > 0.99
+    assert not report["passed"]
+    assert kept_failures(report)
+
+
+def test_ten_millimetres_fail_the_straight_drive_at_rest(tmp_path: Path) -> None:
+    """After the straight drive's 4 s the robot rests: the bound is the FIFO's frames (7.6 mm)."""
+    report = _report(drive("straight", 600, 3, 100 * LSB_Q40), tmp_path / "ten.log")
+    assert _kept(report)["passed"] is False
+    assert not report["passed"]
+
+
+def test_ten_millimetres_within_the_bound_are_said_not_silent(tmp_path: Path) -> None:
+    """On the circle the frames the firmware took are not on the log: +10 mm is within the
+    bound, and the verdict line says how coarse the check was (before: "not judged")."""
+    report = _report(drive("circle", 600, 2, 100 * LSB_Q40), tmp_path / "ten.log")
+    kept = _kept(report)
+    assert kept["passed"] and kept["bound_m"] > 0.01
+    assert any("judged only within" in line for line in kept_unjudged(report))
