@@ -37,7 +37,7 @@ from odocan.sim.board import TICK_S
 from odocan.sim.scenarios import get_scenario
 from tests import host_frames as hf
 from tests.fault_rig import FaultRig, open_virtual
-from tests.test_staged_reboot import PMIR, _x_by_frame, _written
+from tests.test_staged_reboot import PMIR, _written, _x_by_frame
 
 REBOOT = 10  # the reset's tick (0.1 s)
 AFTER_TICKS = 200  # ticks driven after the halt
@@ -101,7 +101,8 @@ def test_the_correct_firmware_passes_and_the_check_is_made(
     report = _report(right, tmp_path / "right.log")
     assert report["passed"], report["onboard_vs_reference"]
     kept = _kept(report)
-    assert kept["passed"] and kept["reprimed"]
+    assert kept["passed"]
+    assert kept["reprimed"]
     assert not kept_failures(report)
 
 
@@ -120,7 +121,8 @@ def test_a_bare_apply_that_moves_x_by_a_metre_fails(
     """Before: PASS (the check not made, the life after it fitted)."""
     report = _report(drive(scenario, halted, after, METRE_Q40), tmp_path / "wrong.log")
     kept = _kept(report)
-    assert kept["passed"] is False and kept["position_jump_m"] > 0.99
+    assert kept["passed"] is False
+    assert kept["position_jump_m"] > 0.99
     assert not report["passed"]
     assert kept_failures(report)
 
@@ -137,5 +139,6 @@ def test_ten_millimetres_within_the_bound_are_said_not_silent(tmp_path: Path) ->
     bound, and the verdict line says how coarse the check was (before: "not judged")."""
     report = _report(drive("circle", 600, 2, 100 * LSB_Q40), tmp_path / "ten.log")
     kept = _kept(report)
-    assert kept["passed"] and kept["bound_m"] > 0.01
+    assert kept["passed"]
+    assert kept["bound_m"] > 0.01
     assert any("judged only within" in line for line in kept_unjudged(report))

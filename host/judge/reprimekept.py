@@ -30,8 +30,10 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.keptjump import FLOAT_M, FLOAT_RAD, TURN_RAD
 from odocan.host.judge.livesetpose import FIELDS
+from odocan.host.judge.nearthreshold import COUNTER_RESET_BIT, ResetLog
 from odocan.host.judge.reference import integrate
 from odocan.host.judge.samples import (
     HEADING_LSB_RAD,
@@ -39,29 +41,37 @@ from odocan.host.judge.samples import (
     SILENCE_CYCLES,
     Encoders,
     FloatArray,
+    IntArray,
     Poses,
 )
 from odocan.host.judge.stallreprime import FIFO_SPAN, R_SPAN
+from odocan.host.protocol.decode import BulkDecoder
 
 if TYPE_CHECKING:
     from odocan.host.judge.setposekept import Odo
 
+NOT_TOLD = ("the firmware said it left a step out (IMPLAUSIBLE_STEP, COUNTER_RESET), not that "
+            "it re-primed at the stall before its first pose")
 NOT_MADE = ("the firmware re-primed after a stall before its first pose (COUNTER_RESET), and "
             "the frames around the APPLY not all heard")
 
 
 def reprime_kept(seen: tuple[Poses, Encoders, FloatArray], alive_s: FloatArray, c: int,
-                 after: int, staged: dict[str, float], odo: Odo) -> dict[str, Any] | str:
+                 after: int, staged: dict[str, float], odo: Odo,
+                 summaries: tuple[FloatArray, IntArray]) -> dict[str, Any] | str:
     """The module docstring's check of the APPLY that took effect after encoder frame ``c``
     (positions in the frames read, from the life's first), judged on the sample ``after``;
-    ``alive_s``: the firmware's ODOM_STATUS bus times; ``odo``: ``setposekept.Odo``. Why not
-    (words) when the frames cannot bound it."""
+    ``alive_s``: the firmware's ODOM_STATUS bus times; ``odo``: ``setposekept.Odo``;
+    ``summaries``: their bus times and ERROR_MASKs (``summaries_of``). Why not (words) when
+    the firmware did not say it re-primed at this stall, or the frames cannot bound it."""
     poses, enc, sent_s = seen
     geometry, bits = odo.geometry, odo.bits
     first = int(np.argmin(sent_s))
     talked_s = _stall_start_s(alive_s, sent_s, float(sent_s[first]), enc.cycle_s)
     a = int(poses.enc[after])
-    if talked_s is None or a <= c or np.any(np.diff(enc.seq[: a + 1]) != 1):
+    if talked_s is None or not _told(summaries, talked_s, float(sent_s[first])):
+        return NOT_TOLD
+    if a <= c or np.any(np.diff(enc.seq[: a + 1]) != 1):
         return NOT_MADE
     f_max = int(np.searchsorted(enc.timestamp_s, talked_s, side="right")) - 1 + FIFO_SPAN
     r_min = max(0, int(poses.enc[first]) - R_SPAN)
@@ -107,6 +117,28 @@ def _judged(at_c: tuple[float, float, float], staged: dict[str, float],
             "encoder_frames": frames, "position_jump_m": math.hypot(dx, dy),
             "heading_jump_rad": dh, "bound_m": bound_m, "passed": bool(passed),
             "reprimed": True}
+
+
+def summaries_of(frames: FrameArrays, accepted: np.ndarray,
+                 decoder: BulkDecoder) -> tuple[FloatArray, IntArray]:
+    """The bus times and ERROR_MASKs of the accepted summaries of ``frames`` (none when the
+    DBC has no ERROR_MASK: nothing told)."""
+    log = ResetLog()
+    log.feed(frames, decoder, np.flatnonzero(accepted))
+    if not log.usable or not log.sent_s:
+        return np.zeros(0), np.zeros(0, dtype=np.int64)
+    return np.concatenate(log.sent_s), np.concatenate(log.mask)
+
+
+def _told(summaries: tuple[FloatArray, IntArray], talked_s: float, first_s: float) -> bool:
+    """Whether the firmware said it re-primed at the stall from ``talked_s`` to its first
+    sample at ``first_s``: COUNTER_RESET clear on its last summary before the stall, set on
+    one after (``nearthreshold.Resets.told``'s rule); a refusal said elsewhere is no re-prime
+    here (the firmware then took the stall merged, far from the bound)."""
+    sent_s, mask = summaries
+    before, later = mask[sent_s <= talked_s], mask[sent_s > first_s]
+    return (len(before) > 0 and not int(before[-1]) & COUNTER_RESET_BIT
+            and bool(np.any(later & COUNTER_RESET_BIT)))
 
 
 def _stall_start_s(alive_s: FloatArray, sent_s: FloatArray, first_s: float,

@@ -86,7 +86,7 @@ from odocan.host.judge.nearthreshold import ResetLog
 from odocan.host.judge.powerup import life_powered_up
 from odocan.host.judge.reference import Geometry, SpeedBound, integrate
 from odocan.host.judge.reference_path import firmware_steps
-from odocan.host.judge.reprimekept import reprime_kept
+from odocan.host.judge.reprimekept import reprime_kept, summaries_of
 from odocan.host.judge.samples import (
     HEADING_LSB_RAD,
     POSITION_LSB_M,
@@ -183,7 +183,8 @@ def kept_check(frames: FrameArrays, lo: int, cut: SetPoseCut, robot: RobotProfil
                       primed=lambda: stalled and not refused)
     after = _around(poses, int(at[0]))[1]
     if kept == NO_START and refused and after is not None:  # re-primed: bounded (reprimekept)
-        return reprime_kept((poses, enc, sent_s), alive_s, int(at[0]), after, cut.staged, odo)
+        return reprime_kept((poses, enc, sent_s), alive_s, int(at[0]), after, cut.staged, odo,
+                            summaries_of(frames, accepted, decoder))
     return kept
 
 
