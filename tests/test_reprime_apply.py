@@ -37,7 +37,7 @@ from odocan.sim.board import TICK_S
 from odocan.sim.scenarios import get_scenario
 from tests import host_frames as hf
 from tests.fault_rig import FaultRig, open_virtual
-from tests.test_staged_reboot import PMIR, _written, _x_by_frame
+from tests.test_staged_reboot import PMIR, _live, _written, _x_by_frame
 
 REBOOT = 10  # the reset's tick (0.1 s)
 AFTER_TICKS = 200  # ticks driven after the halt
@@ -142,3 +142,29 @@ def test_ten_millimetres_within_the_bound_are_said_not_silent(tmp_path: Path) ->
     assert kept["passed"]
     assert kept["bound_m"] > 0.01
     assert any("judged only within" in line for line in kept_unjudged(report))
+
+
+@pytest.mark.parametrize(("scenario", "halted", "after"), [
+    ("straight", 490, 2), ("straight", 490, 3), ("straight", 1000, 3), ("circle", 600, 2)])
+def test_a_bare_apply_that_moves_x_by_a_metre_is_pose_wrong_live(
+        scenario: str, halted: int, after: int) -> None:
+    """Before, on the straight drive: OK (the placement owed after the stall absorbed 986 mm);
+    now ``livekept`` bounds it as ``analyze`` does (the FIFO's frames at the speed bound when
+    the window no longer holds them: 166 mm on pmir)."""
+    wrong = drive(scenario, halted, after, METRE_Q40)
+    monitor, bridge = _live(wrong)
+    for judge in (monitor, bridge):
+        assert judge.tracker.wrongs.count > 0
+    assert monitor.health(wrong[-1].timestamp)["state"] == "POSE WRONG"
+
+
+@pytest.mark.parametrize(("scenario", "halted", "after"), [
+    ("straight", 490, 2), ("straight", 1000, 3), ("circle", 490, 3), ("circle", 1000, 2)])
+def test_the_correct_firmware_is_ok_live(scenario: str, halted: int, after: int) -> None:
+    right = drive(scenario, halted, after)
+    monitor, bridge = _live(right)
+    for judge in (monitor, bridge):
+        assert judge.tracker.wrongs.count == 0
+    [event] = [e for e in monitor.tracker.restarts.events if e["kind"] == "set_pose"]
+    assert event["kept"]["passed"]
+    assert monitor.health(right[-1].timestamp)["state"] == "OK"

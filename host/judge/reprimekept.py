@@ -48,6 +48,7 @@ from odocan.host.judge.stallreprime import FIFO_SPAN, R_SPAN
 from odocan.host.protocol.decode import BulkDecoder
 
 if TYPE_CHECKING:
+    from odocan.host.judge.reference import Geometry
     from odocan.host.judge.setposekept import Odo
 
 NOT_TOLD = ("the firmware said it left a step out (IMPLAUSIBLE_STEP, COUNTER_RESET), not that "
@@ -75,24 +76,42 @@ def reprime_kept(seen: tuple[Poses, Encoders, FloatArray], alive_s: FloatArray, 
         return NOT_MADE
     f_max = int(np.searchsorted(enc.timestamp_s, talked_s, side="right")) - 1 + FIFO_SPAN
     r_min = max(0, int(poses.enc[first]) - R_SPAN)
-    d_left = _wrapped(np.diff(enc.left[: a + 1]), bits)
-    d_right = _wrapped(np.diff(enc.right[: a + 1]), bits)
+    d_left = wrapped(np.diff(enc.left[: a + 1]), bits)
+    d_right = wrapped(np.diff(enc.right[: a + 1]), bits)
     taken = np.zeros(len(d_left), dtype=bool)  # step k: into frame k + 1
     taken[: max(0, min(f_max, c))] = True
     taken[r_min:c] = True
+    travel_m, turn_rad = travel(d_left[taken], d_right[taken], geometry)
+    after_pose = (float(poses.x_m[after]), float(poses.y_m[after]),
+                  float(poses.heading_rad[after]))
+    return from_after(after_pose, (d_left[c:], d_right[c:]), (travel_m, turn_rad), staged, odo)
+
+
+def travel(d_left: IntArray, d_right: IntArray, geometry: Geometry) -> tuple[float, float]:
+    """How far (m) and how much (rad) the steps (counts) can move the pose, whichever of them
+    a firmware integrated, merged or not: the larger wheel's travel, the wheels' difference
+    over the wheelbase, summed."""
     travel_m = np.maximum(np.abs(d_left) * geometry.m_per_count_left,
                           np.abs(d_right) * geometry.m_per_count_right)
     turn_rad = np.abs(d_right * geometry.m_per_count_right - d_left * geometry.m_per_count_left
                       ) / geometry.wheelbase_m
-    reach_m, reach_rad = float(np.sum(travel_m[taken])), float(np.sum(turn_rad[taken]))
-    rel = integrate(d_left[c:], d_right[c:], geometry, odo.integrator)
+    return float(np.sum(travel_m)), float(np.sum(turn_rad))
+
+
+def from_after(after: tuple[float, float, float], steps: tuple[IntArray, IntArray],
+               reach: tuple[float, float], staged: dict[str, float], odo: Odo
+               ) -> dict[str, Any]:
+    """The check on the sample ``after`` (x m, y m, heading rad), moved back to the APPLY's
+    frame by ``steps`` (counts from it), against the power-up pose within ``reach`` (m, rad:
+    ``travel`` of the frames the firmware can have integrated); analyze's and ``livekept``'s."""
+    rel = integrate(*steps, odo.geometry, odo.integrator)
     mx, my, mh = float(rel.x_m[-1]), float(rel.y_m[-1]), float(rel.heading_rad[-1])
-    h_c = float(poses.heading_rad[after]) - mh
-    x_c = float(poses.x_m[after]) - (math.cos(h_c) * mx - math.sin(h_c) * my)
-    y_c = float(poses.y_m[after]) - (math.sin(h_c) * mx + math.cos(h_c) * my)
+    h_c = after[2] - mh
+    x_c = after[0] - (math.cos(h_c) * mx - math.sin(h_c) * my)
+    y_c = after[1] - (math.sin(h_c) * mx + math.cos(h_c) * my)
     round_m = 0.5 * POSITION_LSB_M + 0.5 * HEADING_LSB_RAD * math.hypot(mx, my) + FLOAT_M
     round_rad = 0.5 * HEADING_LSB_RAD + FLOAT_RAD
-    return _judged((x_c, y_c, h_c), staged, (reach_m, reach_rad), (round_m, round_rad), a - c)
+    return _judged((x_c, y_c, h_c), staged, reach, (round_m, round_rad), len(steps[0]))
 
 
 def _judged(at_c: tuple[float, float, float], staged: dict[str, float],
@@ -153,7 +172,7 @@ def _stall_start_s(alive_s: FloatArray, sent_s: FloatArray, first_s: float,
     return float(times[gaps[-1]]) if len(gaps) else None
 
 
-def _wrapped(delta: np.ndarray, bits: int) -> np.ndarray:
+def wrapped(delta: np.ndarray, bits: int) -> np.ndarray:
     """Count steps read in ``bits``-bit counters (signed)."""
     half = 1 << (bits - 1)
     out: np.ndarray = (delta.astype(np.int64) + half) % (2 * half) - half
