@@ -32,6 +32,7 @@ from odocan.firmware.errors import ErrorMask
 from odocan.firmware.odometry import Odometry
 from odocan.host.io.logs import read_log
 from odocan.host.judge.analysis import analyze
+from odocan.host.mqtt.endverdict import end_verdict
 from odocan.host.report.summary import kept_failures, kept_unjudged
 from odocan.sim.board import TICK_S
 from odocan.sim.scenarios import get_scenario
@@ -168,3 +169,15 @@ def test_the_correct_firmware_is_ok_live(scenario: str, halted: int, after: int)
     [event] = [e for e in monitor.tracker.restarts.events if e["kind"] == "set_pose"]
     assert event["kept"]["passed"]
     assert monitor.health(right[-1].timestamp)["state"] == "OK"
+
+
+def test_the_bridge_s_end_verdict_says_the_coarse_check_not_pass() -> None:
+    """Live the FIFO's frames before a 6 s halt are out of the window: the bound is the speed
+    bound's (166 mm on pmir), so +10 mm passes the check. The bridge's verdict is UNJUDGED,
+    the bound named (before: PASS), for the correct firmware and the +10 mm one alike."""
+    for off_q40 in (0, 100 * LSB_Q40):
+        _, bridge = _live(drive("straight", 600, 2, off_q40))
+        bridge.end_watch()
+        verdict = end_verdict(bridge)
+        assert verdict.verdict == "UNJUDGED", verdict
+        assert "judged only within" in verdict.reason

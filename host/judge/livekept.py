@@ -38,7 +38,7 @@ import numpy as np
 from odocan.host.judge.livesetpose import FIELDS
 from odocan.host.judge.livewindow import CYCLE_S, window_counts
 from odocan.host.judge.reprimekept import from_after, travel, wrapped
-from odocan.host.judge.samples import Encoders, Poses
+from odocan.host.judge.samples import POSITION_LSB_M, Encoders, Poses
 from odocan.host.judge.setposekept import NARROW_SAMPLES, NO_START, Kept, Odo, judge_kept
 from odocan.host.judge.stallreprime import FIFO_SPAN, R_SPAN
 
@@ -47,6 +47,7 @@ if TYPE_CHECKING:
     from odocan.host.judge.reference import Geometry
     from odocan.host.judge.tracking import PoseTracker
 
+COARSE_M = 2 * POSITION_LSB_M  # a check wider cannot tell a jump of 2 LSB (report.summary's)
 RECENT = NARROW_SAMPLES + 4  # samples kept before an APPLY: the check's, and a stall before them
 
 
@@ -74,6 +75,7 @@ class KeptWatch:
         self._open: list[_Open] = []
         self._due: list[_Open] = []  # ended by a reboot: made with what they have
         self.made, self.not_made, self.failed = 0, 0, 0  # checks (the events are a window)
+        self.coarse: list[tuple[float, float]] = []  # re-primes' checks passed: (t_s, bound m)
         self._robot: tuple[Geometry, str | None] | None = None  # the samples' robot
 
     def forget(self) -> None:
@@ -121,13 +123,31 @@ class KeptWatch:
             self._due.append(check)
         due, self._due = self._due, []
         for check in due:
-            kept = _made(tracker, check)
-            _mark(tracker, check, kept)
-            if isinstance(kept, dict):
-                self.made, self.failed = self.made + 1, self.failed + (not kept["passed"])
-            else:
-                self.not_made += 1
+            self._counted(check, _made(tracker, check), tracker)
         return samples
+
+    def _counted(self, check: _Open, kept: Kept, tracker: PoseTracker) -> None:
+        """The check made (``kept``): into its event, counted; a re-prime's coarse one kept
+        (``coarse_why``)."""
+        _mark(tracker, check, kept)
+        if not isinstance(kept, dict):
+            self.not_made += 1
+            return
+        self.made, self.failed = self.made + 1, self.failed + (not kept["passed"])
+        if kept["passed"] and kept.get("reprimed") and kept["bound_m"] > COARSE_M:
+            self.coarse.append((float(check.event["t_s"]), float(kept["bound_m"])))
+
+
+def coarse_why(kept: KeptWatch) -> str | None:
+    """Why the end verdict cannot be a PASS (UNJUDGED): a bare APPLY after a re-prime whose
+    check (``_reprimed``) holds only within a bound wider than ``COARSE_M``, a jump within it
+    not told from the frames the firmware may have taken; None else."""
+    if not kept.coarse:
+        return None
+    t_s, bound_m = kept.coarse[-1]
+    return (f"what the ODOM_SET_POSE APPLY at {t_s:.3f} s kept judged only within "
+            f"{bound_m * 1e3:.4g} mm (the firmware re-primed after a stall before its first "
+            f"pose: which frames it took is not known; {len(kept.coarse)} such APPLY)")
 
 
 def _made(tracker: PoseTracker, check: _Open) -> Kept:
