@@ -199,3 +199,19 @@ def test_the_correct_firmware_on_the_circle_with_the_apply_3_ticks_after_passes(
     report = _report(drive("circle", halted, 3), tmp_path / "right.log")
     assert _kept(report)["passed"]  # (the kept check holds)
     assert report["passed"], report["onboard_vs_reference"]
+
+
+@pytest.mark.parametrize(("scenario", "halted", "after"), [
+    ("spin", 400, 2), ("spin", 800, 2), ("square", 400, 3), ("square", 800, 2)])
+def test_the_power_up_rule_does_not_hold_across_a_re_prime(
+        scenario: str, halted: int, after: int, tmp_path: Path) -> None:
+    """Where ``powerup.life_powered_up`` proves the power-up (spin, square: the robot still at
+    the start), the APPLY was judged from (0, 0, 0) through the stall's frames, which the
+    re-primed firmware left out: its kept check FAILed the correct firmware (942 mrad on the
+    spin after 4 s, 789 mm on the square). Now a re-prime told withdraws that rule: bounded.
+    (Other parts of these logs' verdicts FAIL the correct firmware still: see the report.)"""
+    right = _kept(_report(drive(scenario, halted, after), tmp_path / "right.log"))
+    wrong = _kept(_report(drive(scenario, halted, after, METRE_Q40), tmp_path / "wrong.log"))
+    assert right["passed"], right
+    assert right["reprimed"]
+    assert wrong["passed"] is False

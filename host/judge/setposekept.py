@@ -178,8 +178,8 @@ def kept_check(frames: FrameArrays, lo: int, cut: SetPoseCut, robot: RobotProfil
                                                                     "ODOM_POSE_Y")["timestamp_s"])
     refused = stalled and _refusal_said(frames, accepted, decoder)
     kept = judge_kept((poses, enc, sent_s), int(at[0]), cut.staged, odo,
-                      lambda: boot and life_powered_up(frames, accepted, decoder, poses,
-                                                       log_start=log_start),
+                      lambda: boot and not refused and life_powered_up(  # (a re-prime's:
+                          frames, accepted, decoder, poses, log_start=log_start),  # no power-up)
                       primed=lambda: stalled and not refused)
     after = _around(poses, int(at[0]))[1]
     if kept == NO_START and refused and after is not None:  # re-primed: bounded (reprimekept)
