@@ -151,6 +151,9 @@ def test_a_wrong_apply_just_after_the_stall_is_pose_wrong_live(after: int) -> No
 def test_a_firmware_that_re_primed_after_a_long_stall_is_not_kept_failed(tmp_path: Path) -> None:
     """A 4.7 s halt: the firmware re-primes on resuming (COUNTER_RESET, ``stallreprime``), the
     stall's motion not in its pose; the merged-steps check from the power-up does not hold
-    there and is not made (before: ``kept`` FAILed the correct firmware at 1.84 m)."""
+    there (before: ``kept`` FAILed the correct firmware at 1.84 m): the re-prime's bound is
+    made instead (``reprimekept``; ``tests/test_reprime_apply.py``) and holds."""
     report = _report(drive(3, reboot=10, halted=470), tmp_path / "long.log")
-    assert _set_pose(report)["kept"] is None, _set_pose(report)["kept"]
+    kept = _set_pose(report)["kept"]
+    assert kept["passed"], kept
+    assert kept["reprimed"]

@@ -20,6 +20,11 @@ The APPLY took effect after frame ``c``, the latest encoder frame heard before i
 between its sending and its ACK and a field was staged, where it was set is not known to a frame
 (``livesetpose_choice``), and the check is not made (said why); a bare APPLY sets nothing, and
 the samples around it continue the same pose wherever it took effect.
+
+An APPLY with no pose before it, in a life whose firmware stalled before its first pose and said
+it re-primed on resuming (COUNTER_RESET), is bounded as ``analyze`` bounds it
+(``reprimekept``, ``_reprimed``): before, not made, and on a straight drive a firmware that
+moved its X by 1 m there was OK (the placement owed after the stall took it in).
 """
 
 from __future__ import annotations
@@ -32,14 +37,17 @@ import numpy as np
 
 from odocan.host.judge.livesetpose import FIELDS
 from odocan.host.judge.livewindow import CYCLE_S, window_counts
-from odocan.host.judge.samples import Encoders, Poses
-from odocan.host.judge.setposekept import NARROW_SAMPLES, Kept, Odo, judge_kept
+from odocan.host.judge.reprimekept import from_after, travel, wrapped
+from odocan.host.judge.samples import POSITION_LSB_M, Encoders, Poses
+from odocan.host.judge.setposekept import NARROW_SAMPLES, NO_START, Kept, Odo, judge_kept
+from odocan.host.judge.stallreprime import FIFO_SPAN, R_SPAN
 
 if TYPE_CHECKING:
     from odocan.host.judge.livepose import Sample
     from odocan.host.judge.reference import Geometry
     from odocan.host.judge.tracking import PoseTracker
 
+COARSE_M = 2 * POSITION_LSB_M  # a check wider cannot tell a jump of 2 LSB (report.summary's)
 RECENT = NARROW_SAMPLES + 4  # samples kept before an APPLY: the check's, and a stall before them
 
 
@@ -67,6 +75,7 @@ class KeptWatch:
         self._open: list[_Open] = []
         self._due: list[_Open] = []  # ended by a reboot: made with what they have
         self.made, self.not_made, self.failed = 0, 0, 0  # checks (the events are a window)
+        self.coarse: list[tuple[float, float]] = []  # re-primes' checks passed: (t_s, bound m)
         self._robot: tuple[Geometry, str | None] | None = None  # the samples' robot
 
     def forget(self) -> None:
@@ -114,13 +123,31 @@ class KeptWatch:
             self._due.append(check)
         due, self._due = self._due, []
         for check in due:
-            kept = _made(tracker, check)
-            _mark(tracker, check, kept)
-            if isinstance(kept, dict):
-                self.made, self.failed = self.made + 1, self.failed + (not kept["passed"])
-            else:
-                self.not_made += 1
+            self._counted(check, _made(tracker, check), tracker)
         return samples
+
+    def _counted(self, check: _Open, kept: Kept, tracker: PoseTracker) -> None:
+        """The check made (``kept``): into its event, counted; a re-prime's coarse one kept
+        (``coarse_why``)."""
+        _mark(tracker, check, kept)
+        if not isinstance(kept, dict):
+            self.not_made += 1
+            return
+        self.made, self.failed = self.made + 1, self.failed + (not kept["passed"])
+        if kept["passed"] and kept.get("reprimed") and kept["bound_m"] > COARSE_M:
+            self.coarse.append((float(check.event["t_s"]), float(kept["bound_m"])))
+
+
+def coarse_why(kept: KeptWatch) -> str | None:
+    """Why the end verdict cannot be a PASS (UNJUDGED): a bare APPLY after a re-prime whose
+    check (``_reprimed``) holds only within a bound wider than ``COARSE_M``, a jump within it
+    not told from the frames the firmware may have taken; None else."""
+    if not kept.coarse:
+        return None
+    t_s, bound_m = kept.coarse[-1]
+    return (f"what the ODOM_SET_POSE APPLY at {t_s:.3f} s kept judged only within "
+            f"{bound_m * 1e3:.4g} mm (the firmware re-primed after a stall before its first "
+            f"pose: which frames it took is not known; {len(kept.coarse)} such APPLY)")
 
 
 def _made(tracker: PoseTracker, check: _Open) -> Kept:
@@ -153,7 +180,41 @@ def _made(tracker: PoseTracker, check: _Open) -> Kept:
                   heading_raw=np.zeros(len(used), dtype=np.int64))
     odo = Odo(tracker.geometry, tracker.counter_bits, tracker.integrator, "profile")
     sent_s = np.array([s.t_s for s in used], dtype=float)
-    return judge_kept((poses, enc, sent_s), check.c - first, check.staged, odo)
+    kept = judge_kept((poses, enc, sent_s), check.c - first, check.staged, odo)
+    return _reprimed(tracker, check, odo) if kept == NO_START and after else kept
+
+
+def _reprimed(tracker: PoseTracker, check: _Open, odo: Odo) -> Kept:
+    """``reprimekept``'s check live: an APPLY with no pose before it in a life whose firmware
+    stalled before its first pose (``livefirst``: ``stalled_from``, the first frame it could
+    have primed on) and said it re-primed on resuming (``ReprimeHold.word``). The frames it
+    can have integrated: its FIFO's (``FIFO_SPAN`` from ``stalled_from``; at the speed bound
+    when the window no longer holds them) and those from ``R_SPAN`` before its first sample
+    after the stall to the APPLY's; the sample after the APPLY moved back by the steps since."""
+    primed, (first_seq, said) = tracker.first.stalled_from, tracker.reprime.word()
+    after = next(s for s in check.samples if s.pose.seq > check.c)
+    if primed is None or not said or not primed < first_seq <= after.pose.seq:
+        return NO_START
+    r_min = max(primed, first_seq - R_SPAN)
+    rows = [f for f in window_counts(tracker.window, r_min) if f[0] <= after.pose.seq]
+    if not rows or rows[0][0] != r_min or any(f[4] != 1 for f in rows[1:]):
+        return "the firmware re-primed after a stall; the frames since not all in the window"
+    d_left = wrapped(np.diff([f[2] for f in rows]), odo.bits)
+    d_right = wrapped(np.diff([f[3] for f in rows]), odo.bits)
+    c = check.c - r_min
+    reach_m, reach_rad = travel(d_left[:c], d_right[:c], odo.geometry)
+    fifo = [f for f in window_counts(tracker.window, primed) if f[0] <= primed + FIFO_SPAN]
+    if len(fifo) == FIFO_SPAN + 1 and fifo[0][0] == primed:  # the FIFO's frames heard
+        fifo_m, fifo_rad = travel(wrapped(np.diff([f[2] for f in fifo]), odo.bits),
+                                  wrapped(np.diff([f[3] for f in fifo]), odo.bits), odo.geometry)
+    else:  # at the speed bound
+        bound = tracker.raw.gate.bound
+        fifo_m, fifo_rad = travel(np.full(FIFO_SPAN, bound[0]), np.full(FIFO_SPAN, bound[1]),
+                                  odo.geometry)
+        fifo_rad = 2.0 * fifo_m / odo.geometry.wheelbase_m  # the wheels opposite
+    pose = after.pose
+    return from_after((pose.x_m, pose.y_m, pose.heading_rad), (d_left[c:], d_right[c:]),
+                      (reach_m + fifo_m, reach_rad + fifo_rad), check.staged, odo)
 
 
 def _mark(tracker: PoseTracker, check: _Open, kept: Kept) -> None:

@@ -115,6 +115,13 @@ class ReprimeHold:
         if self._word:
             self.release(True)
 
+    def word(self) -> tuple[int, bool]:
+        """The frame of the first sample after the latest stall held for, and whether the
+        firmware said it re-primed there (COUNTER_RESET clear before, set on the latest
+        summary): ``livekept`` bounds a bare APPLY just after it (``reprimekept``)."""
+        said = self._before >= 0 and not self._before & COUNTER_RESET_BIT
+        return self._first, said and bool(self._mask & COUNTER_RESET_BIT)
+
     def stalled(self, seq: int, t_s: float, talked: tuple[float, int] | None,
                 least: int | None) -> None:
         """The sample of encoder frame ``seq`` (its ODOM_POSE_Y at ``t_s``) was left out after

@@ -29,7 +29,7 @@ the primed one (``stallmerge.merged_allowance_m``: the worst grouping into runs,
 heading exact), as the lone sample before it is placed by ``analyze``; before, not judged, and
 a firmware that moved its X by 1 m at such an APPLY PASSed (4.1 mm allowed after a 3 s stall
 on pmir's circle, the correct firmware 1.26 mm off the fine steps). Not when a summary says a
-step was left out (``_refusal_said``: a re-prime after a long stall is no merged step).
+step was left out (``_refusal_said``: a re-prime is no merged step; ``reprimekept`` bounds it).
 
 Two samples alone allow a jump of up to two roundings (a firmware moving X by 1.2 LSB at a bare
 APPLY passed, where the live judges, which carry the reference across it, said POSE WRONG). So
@@ -86,6 +86,7 @@ from odocan.host.judge.nearthreshold import ResetLog
 from odocan.host.judge.powerup import life_powered_up
 from odocan.host.judge.reference import Geometry, SpeedBound, integrate
 from odocan.host.judge.reference_path import firmware_steps
+from odocan.host.judge.reprimekept import reprime_kept, summaries_of
 from odocan.host.judge.samples import (
     HEADING_LSB_RAD,
     POSITION_LSB_M,
@@ -171,13 +172,20 @@ def kept_check(frames: FrameArrays, lo: int, cut: SetPoseCut, robot: RobotProfil
         return "no on-board poses around the APPLY"
     odo = Odo(Geometry.of(robot), min(robot.counter_bits, WIRE_COUNTER_BITS), integrator,
               max_wheel_speed_mm_s)
-    return judge_kept((poses, enc, sent_s), int(at[0]), cut.staged, odo,
-                      lambda: boot and life_powered_up(frames, accepted, decoder, poses,
-                                                       log_start=log_start),
-                      primed=lambda: boot and not log_start and primed_first(
-                          float(np.min(sent_s)), enc, alive_times(frames, accepted, decoder),
-                          accepted_rows(frames, accepted, decoder, "ODOM_POSE_Y")["timestamp_s"])
-                      and not _refusal_said(frames, accepted, decoder))
+    alive_s = alive_times(frames, accepted, decoder) if boot and not log_start else sent_s[:0]
+    stalled = len(alive_s) > 0 and primed_first(float(np.min(sent_s)), enc, alive_s,
+                                                      accepted_rows(frames, accepted, decoder,
+                                                                    "ODOM_POSE_Y")["timestamp_s"])
+    refused = stalled and _refusal_said(frames, accepted, decoder)
+    kept = judge_kept((poses, enc, sent_s), int(at[0]), cut.staged, odo,
+                      lambda: boot and not refused and life_powered_up(  # (a re-prime's:
+                          frames, accepted, decoder, poses, log_start=log_start),  # no power-up)
+                      primed=lambda: stalled and not refused)
+    after = _around(poses, int(at[0]))[1]
+    if kept == NO_START and refused and after is not None:  # re-primed: bounded (reprimekept)
+        return reprime_kept((poses, enc, sent_s), alive_s, int(at[0]), after, cut.staged, odo,
+                            summaries_of(frames, accepted, decoder))
+    return kept
 
 
 def _refusal_said(frames: FrameArrays, accepted: np.ndarray, decoder: BulkDecoder) -> bool:

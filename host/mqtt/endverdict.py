@@ -35,6 +35,7 @@ from dataclasses import asdict, dataclass
 from typing import TYPE_CHECKING, Any, Literal, Protocol
 
 from odocan.host.judge.livefirst import unproven_why
+from odocan.host.judge.livekept import coarse_why
 from odocan.host.judge.livereprime import unbounded_why
 from odocan.host.judge.watchverdict import REQUIRE_FIRMWARE, failures, nothing_judged
 
@@ -115,7 +116,8 @@ def end_verdict(telemetry: RobotTelemetry, *, profile_name: str | None = None,
         return EndVerdict("UNJUDGED", f"{why} (--require-firmware fails it)"
                           + _mismatch(telemetry))
     # never a PASS on an unbounded start (livereprime) nor an unproven one (livefirst)
-    unbounded = unbounded_why(telemetry.tracker) or unproven_why(telemetry.tracker)
+    unbounded = (unbounded_why(telemetry.tracker) or unproven_why(telemetry.tracker)
+                 or coarse_why(telemetry.kept))  # (livekept: a re-prime's coarse APPLY check)
     if unbounded:
         return EndVerdict("UNJUDGED", unbounded + _mismatch(telemetry))
     distance, twist = telemetry.distance.samples, telemetry.twist.samples

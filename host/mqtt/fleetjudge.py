@@ -23,6 +23,7 @@ from typing import Any, cast
 
 from odocan.host.judge.livefirst import unproven_why
 from odocan.host.judge.livefit import pose_wrong
+from odocan.host.judge.livekept import coarse_why
 from odocan.host.judge.livepose import ErrorStats
 from odocan.host.judge.livereprime import unbounded_why
 from odocan.host.judge.samples import HEADING_LSB_RAD, POSITION_LSB_M
@@ -131,7 +132,7 @@ def watched_verdict(
     if verdict["verdict"] in ("PASS", "FAIL") and halted is not None:
         verdict = after_halts(verdict, halted, tracker, telemetry.stretches)
     # a PASS resting on an unbounded start (livereprime) or an unproven one (livefirst)
-    unbounded = unbounded_why(tracker) or unproven_why(tracker)
+    unbounded = unbounded_why(tracker) or unproven_why(tracker) or coarse_why(telemetry.kept)
     if verdict["verdict"] == "PASS" and unbounded:
         verdict = {**verdict, "verdict": "UNJUDGED", "reason": unbounded}
     # ODOM_TWIST judged live, the samples waiting at the end included (said, not yet verdicts)
