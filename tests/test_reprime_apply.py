@@ -26,6 +26,7 @@ the correct firmware (before and after this change) at the lone sample before th
 
 from __future__ import annotations
 
+import re
 from functools import cache
 from pathlib import Path
 from typing import Any
@@ -186,7 +187,10 @@ def test_the_bridge_s_end_verdict_says_the_coarse_check_not_pass() -> None:
         bridge.end_watch()
         verdict = end_verdict(bridge)
         assert verdict.verdict == "UNJUDGED", verdict
-        assert "judged only within" in verdict.reason
+        # the bound named: the kept check's, or the re-prime's own when its FIFO frames were
+        # not heard either (livereprime's unbounded_why comes first then)
+        assert re.search(r"(judged only within|held only to the speed bound) .*\d+ mm",
+                         verdict.reason), verdict.reason
 
 
 @pytest.mark.xfail(strict=True, reason="known false FAIL, not fixed here: the life before the "
