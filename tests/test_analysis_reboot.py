@@ -162,6 +162,17 @@ CAMPAIGN_EXAMPLES = int(os.environ.get("ODOCAN_CAMPAIGN_EXAMPLES", "50")) // 2
     robot=Robot(227, 35_000_000, 35_000_000, 230_000_000, 32), integrator="exact", steps=2783,
     distance_m=1.0, where=0.02, boot_in_init=False, bias_100um=-3, seed=101217813,
 )
+@example(  # booted in INIT at frame 165: the old firmware's pose of COUNTER 0 at (0, 0, 0) 44 ms
+    # before the summary, then its COUNTER 1 and 2; the new one's power-up pose after the summary
+    robot=Robot(50, 100_000_000, 100_000_000, 1_000_000_000, 32), integrator="exact", steps=2822,
+    distance_m=0.1, where=(165 - 1) / (2822 - 1), boot_in_init=True, bias_100um=0,
+    seed=2146624321,
+)
+@example(  # the same, the new firmware's X 3 LSB off: its start must not be fitted to it
+    robot=Robot(50, 100_000_000, 100_000_000, 1_000_000_000, 32), integrator="exact", steps=2822,
+    distance_m=0.1, where=(165 - 1) / (2822 - 1), boot_in_init=True, bias_100um=3,
+    seed=2146624321,
+)
 @given(
     robot=robots(),
     integrator=st.sampled_from(["euler", "rk2", "exact"]),

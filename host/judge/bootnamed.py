@@ -22,9 +22,18 @@ frame the other rules name. Taking the old pose's frame started the life frames 
 it primed on, so its page of E2E counts no longer proved the power-up and its start was fitted
 (issue #11: a firmware 3 LSB off after its reboot had its start fitted to its offset). A pose of
 the old life reading (0, 0, 0) that is the latest (the new firmware's first pose lost) would
-name a frame the robot had not left since the power-up pose's: the same start. One rule for the
-whole log (``reboots``), the streamed (``stream_lives``) and the live judges
-(``tracking.PoseTracker.power_up``).
+name a frame the robot had not left since the power-up pose's: the same start.
+
+Nor has it a word when a pose of COUNTER 0 follows the summary less than ``BOOT_WINDOW_S``
+after it (``restarted_after``): the pose sequence restarted there, so the one before the summary
+was the old firmware's, which went on after it (a COUNTER wraps to 0 after 16 poses, 320 ms,
+longer than the 160 ms between the two), and the new one came up after its summary (STATE INIT:
+it boots 5 ms before the tick it primes in). Before the summary the two cannot be told apart
+(an old pose at (0, 0, 0) followed by its COUNTER 1 and 2 reads as a power-up pose whose summary
+was stamped 45 ms late); naming the old pose's frame started the life 5 frames early, its page
+of counts no longer proved the power-up and its start was fitted (issue #11: a fitted start
+can absorb a constant offset). One rule for the whole log (``reboots``), the streamed
+(``stream_lives``) and the live judges (``tracking.PoseTracker.power_up``).
 """
 
 from __future__ import annotations
@@ -113,7 +122,18 @@ def named_start(poses: PowerUpPoses, encoders: tuple[npt.NDArray[np.int64], npt.
     time ``t_s``, primed on, as its power-up pose names it (module docstring); None when no
     power-up pose precedes it in the window or the log lacks the frame it names."""
     pose = pose_before(poses, position, t_s)
-    return None if pose is None else named_frame(encoders, *pose)
+    if pose is None or restarted_after(poses, position, t_s):
+        return None
+    return named_frame(encoders, *pose)
+
+
+def restarted_after(poses: PowerUpPoses, position: int, t_s: float) -> bool:
+    """Whether a pose of COUNTER 0 of ``poses`` follows the summary at log ``position``, bus
+    time ``t_s``, less than ``BOOT_WINDOW_S`` after it: the pose sequence restarted after the
+    summary, so no pose before it was the new firmware's power-up pose (module docstring)."""
+    at, times, _ = poses
+    k = int(np.searchsorted(at, position, side="right"))
+    return k < len(at) and 0.0 <= float(times[k]) - t_s < BOOT_WINDOW_S
 
 
 def _crc_holds(frames: FrameArrays, decoder: BulkDecoder, rows: npt.NDArray[np.int64]
