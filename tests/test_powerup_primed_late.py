@@ -4,13 +4,16 @@
 (INIT, UPTIME 0), so it primes on frame 1; no stall. Its first count page counts one frame
 fewer than the log holds before it, so ``powerup.counted_only_the_log`` proved nothing and the
 start was fitted: a firmware 1 m off from its first pose PASSed ``analyze`` (whole and
-streamed) and the live judges, the fitted start absorbing the offset. Now the page proves the
-power-up at frame 1 (``powerup.primed_after``: the frames before the page less ENC_E2E_OK is
-1, as many as the log holds before the firmware's first cycle, the tick bound agreeing) and
-``analyze`` judges from (0, 0, 0) there (``primedon.start_pose_primed_on``): 1 m off FAILs, the
-correct firmware PASSes (frame 0 moved or not). A recorder started late is no power-up: the
-firmware counted the frames the log lacks, fewer in the log than counted, the start fitted
-(also when the first summary heard says UPTIME 0 and COUNTER 0 after the 4-bit COUNTER wrapped).
+streamed) and the live judges (OK, end verdicts PASS), the fitted start absorbing the offset.
+Now the page proves the power-up at frame 1 (``powerup.primed_after``: the frames before the
+page less ENC_E2E_OK is 1, as many as the log holds before the firmware's first cycle, the
+tick bound agreeing) and ``analyze`` judges from (0, 0, 0) there
+(``primedon.start_pose_primed_on``; the stream refuses the life, judged whole), the live
+judges too (``sources.SourceWatch.on_page``, ``livestart.Lives.primed_late``): 1 m off FAILs,
+the correct firmware PASSes (frame 0 moved or not). A recorder started late is no power-up:
+the firmware counted the frames the log lacks, fewer in the log than counted, the start fitted
+(also when the first summary heard says UPTIME 0 and COUNTER 0 after the 4-bit COUNTER
+wrapped).
 
 The evidence is independent of the judges: the count read from cantools-decoded frames, and
 the float64 odometry of the tests from frame 1 within an LSB of the correct firmware's poses.
@@ -34,8 +37,8 @@ from odocan.host.judge.primedon import PRIMED_KIND
 from odocan.host.judge.samples import ENC_E2E_PAGE
 from tests.test_first_second_reboot import _decoded, _written, _wrong
 from tests.test_stall_before_first_pose import _odometry
-from tests.test_stall_before_first_pose_after_reboot import _poses
-from tests.test_stall_beyond_window import PMIR, drive, frame_zero_moved
+from tests.test_stall_before_first_pose_after_reboot import _live, _poses
+from tests.test_stall_beyond_window import PMIR, _end_verdicts, drive, frame_zero_moved
 
 MOVED = (False, True)  # frame 0 as recorded, or 5 counts back (the robot moved to frame 1)
 
@@ -103,17 +106,29 @@ def test_the_correct_firmware_passes_from_frame_one(tmp_path: Path, moved: bool)
             if e["kind"] == PRIMED_KIND] == [1]
     assert main(["analyze", str(path), "--robot", "pmir", "--integrator", "exact",
                  "--stream", "always"]) == 0
+    monitor, bridge, end_s = _live(_right(moved))
+    assert (monitor.health(end_s)["state"], _end_verdicts(bridge)) == ("OK", ("PASS", "PASS"))
+    for tracker in (monitor.tracker, bridge.tracker):
+        assert tracker.lives.primed_late == 1
+        assert tracker.max_beyond_allowance_m <= POSITION_LSB_M
 
 
 @pytest.mark.parametrize("moved", MOVED)
 def test_a_firmware_one_metre_off_fails(tmp_path: Path, moved: bool) -> None:
-    """Before: PASS, the start fitted at its first pose (whole and streamed)."""
-    path = _written(_wrong_by(moved, 10_000), tmp_path / "wrong.log")
+    """Before: PASS, the start fitted at its first pose (whole, streamed and live: OK)."""
+    wrong = _wrong_by(moved, 10_000)
+    path = _written(wrong, tmp_path / "wrong.log")
     analysis = analyze(read_log(path), PMIR, "exact")
     assert not analysis.passed
-    assert analysis.report["onboard_vs_reference"]["max_position_error_beyond_allowance_m"] > 0.9
+    beyond_m = analysis.report["onboard_vs_reference"]["max_position_error_beyond_allowance_m"]
+    assert beyond_m > 0.9
     assert main(["analyze", str(path), "--robot", "pmir", "--integrator", "exact",
                  "--stream", "always"]) == 1
+    monitor, bridge, end_s = _live(wrong)
+    assert (monitor.health(end_s)["state"], _end_verdicts(bridge)) == ("POSE WRONG",
+                                                                        ("FAIL", "FAIL"))
+    for tracker in (monitor.tracker, bridge.tracker):  # the same start: the same error
+        assert tracker.max_beyond_allowance_m == pytest.approx(beyond_m, abs=POSITION_LSB_M)
 
 
 @pytest.mark.parametrize("late_s", [0.05, 0.75])
@@ -134,3 +149,9 @@ def test_a_recorder_started_late_is_no_power_up(tmp_path: Path, late_s: float) -
     assert PRIMED_KIND not in [e["kind"] for e in analysis.report["events"]]
     assert main(["analyze", str(path), "--robot", "pmir", "--integrator", "exact",
                  "--stream", "always"]) == 0
+    monitor, bridge, end_s = _live(messages)
+    assert monitor.health(end_s)["state"] != "POSE WRONG"
+    assert _end_verdicts(bridge) == ("PASS", "PASS")
+    for tracker in (monitor.tracker, bridge.tracker):
+        assert tracker.lives.primed_late is None
+        assert not tracker.lives.power_up_proven
