@@ -28,7 +28,9 @@ Everything comes from the bus (``FrameArrays``, live or from a log), decoded wit
    ODOM_STATUS page of encoder E2E counts says the firmware had accepted exactly the log's encoder
    frames (it primed on the log's first: a recorder started late is not a power-up) starts the
    reference at exactly (0, 0, 0) on its first encoder frame, whatever its first on-board sample
-   reads: a firmware that powers up off (0, 0, 0), by one LSB or by 0.1 m, FAILs. The exact start
+   reads: a firmware that powers up off (0, 0, 0), by one LSB or by 0.1 m, FAILs (a page that
+   counts the log's first k frames fewer, all before the firmware's first cycle, starts it at
+   (0, 0, 0) on frame k: ``powerup.primed_after``, ``primedon``). The exact start
    is not checked against the samples: a wrong firmware drifting from the start must be judged
    from it, not from a start fitted to its drift. Without that page (other firmwares need not send
    it) the first sample must also name the first accepted encoder frame and read exactly 0 (X, Y,

@@ -79,6 +79,7 @@ class Lives:
         self.backlog_counts: list[Counted] = []  # the frames since the pending pose's
         self.backlog_poses: list[FramePose] = []
         self.power_up_proven = False  # the first life's first page proved a power-up at 0
+        self.primed_late: int | None = None  # ... or at this frame (``powerup.primed_after``)
 
     def waits(self, pose: FramePose, now_s: float) -> bool:
         """Whether the on-board ``pose`` waits for its life's start (a boot's frame, the
@@ -134,7 +135,10 @@ class Lives:
         boot, tracker = self.boot, self._tracker
         started = self.power_up_proven  # by the stall (``livefirst``): not started again
         self.power_up_proven |= proven  # (``livefirst``: also when no frame was heard yet)
-        if boot is not None and boot[0] < 0:  # the first life's samples wait
+        if boot is not None and boot[0] < 0 and self.primed_late is not None \
+                and tracker.integrator is not None:  # primed on frame k: from (0, 0, 0) there
+            self.finish_boot(self.primed_late, first_life=True)
+        elif boot is not None and boot[0] < 0:  # the first life's samples wait
             self.finish_first(proven)
         elif boot is not None and self.boot_named:
             self.finish_boot(boot[0])

@@ -130,6 +130,62 @@ def counted_only_the_log(
     return by_tick and heard_by_tick(frames, accepted, decoder, (first, made)) in counts
 
 
+def primed_after(frames: FrameArrays, accepted: npt.NDArray[np.bool_],
+                 decoder: BulkDecoder) -> int | None:
+    """The log's encoder frame the firmware primed on, when its first count page says it had
+    not accepted the log's first ``k`` (1 or more) and so primed on frame ``k`` (issue #11:
+    its FIFO drained at tick 0, it primed on frame 1, and a log that holds one frame more than
+    it counted had its start fitted, absorbing a firmware 1 m off). The frames it did not
+    accept before priming are on the bus before its first cycle: the log's first ODOM_STATUS
+    frame is of that cycle (``holds_first_cycle``, the first summary UPTIME 0) and holds ``k``
+    accepted encoder frames or more before it. The count is the frames before the page was
+    made (``made_at``) less ENC_E2E_OK (or ENC_E2E_OK + ENC_E2E_LOST), and the page's tick
+    bound (``heard_by_tick``), when it has one, must count the same: a page held back on the
+    bus past later frames overcounts, and is no proof. A recorder started late is not taken:
+    the firmware counted the frames it lacks (fewer in the log than counted). None when not
+    proven (``counted_only_the_log`` True is frame 0: not this rule's)."""
+    try:
+        status = decoder.decode(frames, "ODOM_STATUS")
+        summary = decoder.decode_page(frames, "ODOM_STATUS", 0)
+        page = decoder.decode_page(frames, "ODOM_STATUS", ENC_E2E_PAGE)
+    except DecodeError:
+        return None
+    if not {"COUNTER"} <= status.keys() or "UPTIME" not in summary \
+            or "ENC_E2E_OK" not in page or not accepted[page["index"]].any():
+        return None
+    heard_status = status["index"][accepted[status["index"]]]
+    uptime = summary["UPTIME"][accepted[summary["index"]]]
+    if not len(uptime) or int(uptime[0]) != 0 or not holds_first_cycle(
+            int(status["COUNTER"][accepted[status["index"]]][0])):
+        return None
+    keep = accepted[page["index"]]
+    first = int(page["index"][keep][0])
+    ok = int(page["ENC_E2E_OK"][keep][0])
+    lost = int(page["ENC_E2E_LOST"][keep][0]) if "ENC_E2E_LOST" in page else 0
+    heard = accepted[summary["index"]] & (summary["index"] < first)
+    last = (int(summary["index"][heard][-1]), int(summary["COUNTER"][heard][-1])) \
+        if heard.any() and "COUNTER" in summary else None
+    made = made_at(first, int(page["COUNTER"][keep][0]) if "COUNTER" in page else None, last,
+                   status_counter_modulo(decoder))
+    encoders = decoder.select(frames, "WHEEL_ENCODERS")
+    in_log = int(np.count_nonzero(accepted[encoders] & (encoders < made)))
+    before_first = int(np.count_nonzero(accepted[encoders] & (encoders < int(heard_status[0]))))
+    by_tick = heard_by_tick(frames, accepted, decoder, (first, made))
+    return primed_by_count(in_log, (ok, (ok + lost) & 0xFFFF), by_tick, before_first)
+
+
+def primed_by_count(in_log: int, counts: tuple[int, int], by_tick: int | None,
+                    before_first: int) -> int | None:
+    """``primed_after``'s rule on its counts: the one ``k`` (1 .. ``before_first``) that the
+    log's frames before the page (``in_log``) hold beyond a count the firmware made
+    (``counts``), the tick bound's count (``by_tick``) agreeing when there is one."""
+    found = {in_log - count for count in counts if 1 <= in_log - count <= before_first}
+    if len(found) != 1:
+        return None
+    k = found.pop()
+    return k if by_tick is None or by_tick - k in counts else None
+
+
 def heard_by_tick(frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder,
                   page: tuple[int, int]) -> int | None:
     """The accepted encoder frames before the first count page was made (``page``: its position

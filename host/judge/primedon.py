@@ -33,6 +33,9 @@ Pose = tuple[float, float, float]
 F = TypeVar("F", bound=Callable[..., Any])
 PRIMED_KIND = "power_up_primed_on"  # the report's event: the frame it was judged from
 FRAMES_KEY = "start_poses"  # the unproven event's candidates (frame, start pose at frame 0)
+WHY_KEY = "why"  # the event's reason for its candidates (``{frames}``: theirs), if not a stall
+STALL_WHY = ("the firmware stalled before its first pose after its power-up (INIT at UPTIME 0) "
+             "while the robot moved over encoder frames {frames}, one of which it primed on")
 
 
 def start_pose_primed_on(enc: Encoders, p: int, robot: RobotProfile, integrator: str) -> Pose:
@@ -69,14 +72,14 @@ def judged_from_each(first: Analysis, rerun: Callable[[Pose], Analysis]) -> Anal
     p, best = passed[0] if passed else min(tries, key=lambda t: t[1].report[
         "onboard_vs_reference"]["max_position_error_beyond_allowance_m"])
     frames = [t[0] for t in tries]
-    verdict = (f"it passes from frame {p}" if passed
-               else f"it fails from every one (the least error from frame {p})")
+    verdict = (f"it passes from frame {p}" if passed else f"it fails from frame {p}"
+               if len(tries) == 1 else f"it fails from every one (the least error from frame {p})")
     best.report["reference_start"] = "power-up"
+    named = f"{frames[0]}" if len(frames) == 1 else f"{frames[0]} .. {frames[-1]}"
+    why = str(event.get(WHY_KEY, STALL_WHY)).format(frames=named)
     best.report["events"] = [{
         "kind": PRIMED_KIND, "t_s": event["t_s"], "encoder_frame": p,
-        "detail": f"the firmware stalled before its first pose after its power-up (INIT at "
-                  f"UPTIME 0) while the robot moved over encoder frames {frames[0]} .. "
-                  f"{frames[-1]}, one of which it primed on: judged from each, {verdict}"}] + [
+        "detail": f"{why}: judged from {'it' if len(frames) == 1 else 'each'}, {verdict}"}] + [
         e for e in best.report["events"] if e.get("kind") != PRIMED_KIND]
     return best
 

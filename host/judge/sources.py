@@ -31,7 +31,13 @@ from odocan.host.judge.bootticks import (
 )
 from odocan.host.judge.liveadopted import LATE_REBOOT
 from odocan.host.judge.livegapseen import heard_status
-from odocan.host.judge.powerup import NAMED_SPAN, holds_first_cycle, same_tick, tick_bound_s
+from odocan.host.judge.powerup import (
+    NAMED_SPAN,
+    holds_first_cycle,
+    primed_by_count,
+    same_tick,
+    tick_bound_s,
+)
 from odocan.host.protocol import busfacts
 from odocan.host.protocol.busfacts import ENC_COUNTER_MASK
 from odocan.host.protocol.e2e import crc8h2f_p02_one
@@ -70,6 +76,7 @@ class SourceWatch:
     summary: tuple[int, int, int | None] | None = None  # the latest accepted one: COUNTER,
     # the encoder frames heard, those up to the frame the latest pose names (pose_named_live)
     first_counter: int | None = None  # the first accepted page's COUNTER, any page
+    before_first: int = 0  # the encoder frames heard before it (``powerup.primed_after``)
     summary_times: list[tuple[int, float]] = field(default_factory=list)  # the latest
     # summaries' COUNTER and bus time (``powerup.tick_bound_s``)
     pose: tuple[float, int, bool] | None = None  # the ODOM_POSE_X frames' run (``next_run``)
@@ -93,12 +100,14 @@ class SourceWatch:
         ``powerup.counted_only_the_log`` counts them (before the summary of its tick when that
         is the latest heard, for the page may have been held back past frames it could not
         count, else before it; or up to the frame the latest pose before that names); or with
-        its ENC_E2E_LOST added (``powerup.counted_only_the_log``). Once."""
+        its ENC_E2E_LOST added (``powerup.counted_only_the_log``). Once. Else, when it counts
+        the frames heard less the first k, all before the first ODOM_STATUS frame heard, the
+        firmware primed on frame k (``powerup.primed_after``): ``Lives.primed_late``."""
         if not self.page_pending:  # heard, or a reboot came first: nothing to count
             return False
         heard = (tracker.enc_seq + 1, pose_named_live(tracker))
         if self.first_counter is None:
-            self.first_counter = int(signals["COUNTER"])
+            self.first_counter, self.before_first = int(signals["COUNTER"]), heard[0]
         if page == "summary":
             self.summary = (int(signals["COUNTER"]), *heard)
             self.summary_times = [*self.summary_times[-TIMES_KEPT + 1:],
@@ -116,7 +125,11 @@ class SourceWatch:
                                STATUS_CYCLE_MS)
         by_tick = None if bound_s is None else heard_before_live(tracker, bound_s, heard[0])
         spanned = (ok + int(signals.get("ENC_E2E_LOST", 0))) & 0xFFFF  # accepted or lost
-        return bool({ok, spanned} & {heard[0] & 0xFFFF, heard[1], by_tick})
+        if {ok, spanned} & {heard[0] & 0xFFFF, heard[1], by_tick}:
+            return True
+        tracker.lives.primed_late = primed_by_count(heard[0], (ok, spanned), by_tick,
+                                                    self.before_first)
+        return False
 
     def observe(self, t_s: float, uptime_s: int, state: str, counter: int | None = None,
                 ahead: bool = False, seq: int | None = None) -> str | None:

@@ -258,6 +258,15 @@ class FrameSpill:
             yield FrameArrays(**columns)
 
 
+def _refuse_primed_late(facts: StreamFacts, started: bool) -> None:
+    """``NotStreamable`` when the log's first life (not ``started`` by a boot, a rebase, the
+    power-up rule or a set-pose) may have primed on the log's k-th frame
+    (``StreamFacts.primed_late``): the whole log judges it from there."""
+    if not started and facts.primed_late():
+        raise NotStreamable("the firmware's first count page says it primed after the log's "
+                            "first encoder frame (judged whole: powerup.primed_after)")
+
+
 def _life(
     frames: Frames, robot: RobotProfile, integrator: str | None, *, tolerance: Tolerance,
     db: DatabaseSpec, boot: bool, max_wheel_speed_mm_s: SpeedBound,
@@ -272,6 +281,7 @@ def _life(
     integrator, source = facts.integrator(integrator)
     first.check()
     power_up = facts.saw_only_the_log() if boot else facts.starts_at_power_up(first.head)
+    _refuse_primed_late(facts, boot or rebase or power_up or start_pose is not None)
     at_first = power_up or start_pose is not None  # the start exact at the first frame
     e0 = 0 if at_first else int(first.head.enc[0])
     breaks = first.breaks

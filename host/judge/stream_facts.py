@@ -226,6 +226,23 @@ class StreamFacts:
         bound_s = tick_bound_s(self._page_counter, self._times.summaries, modulo, cycle_ms)
         return bound_s is not None and self._times.before(bound_s, made) in counts
 
+    def primed_late(self) -> bool:
+        """The first count page may say the firmware primed on the log's k-th encoder frame
+        (``powerup.primed_after``: k 1 or more, the first summary UPTIME 0 in its first
+        cycle): the stream refuses the life, the whole log judges it from there (a refusal
+        wider than the rule: never a fitted start where the whole log's is exact)."""
+        if not self._has_status or not self._uptime.present or self._uptime.first != 0:
+            return False
+        if not self._enc_ok.present or self._enc_ok.first is None:
+            return False
+        if self._first_counter.present and not holds_first_cycle(self._first_counter.first):
+            return False
+        made = made_at(self._accepted_encoders, self._page_counter, self._summary,
+                       status_counter_modulo(self.decoder))
+        lost = self._enc_lost.first if self._enc_lost.present else None
+        counts = {self._enc_ok.first, (self._enc_ok.first + (lost or 0)) & 0xFFFF}
+        return any(made - count >= 1 for count in counts)
+
     def starts_at_power_up(self, first: Poses) -> bool:
         """``samples.starts_at_power_up``, given the log's first on-board sample (``first``:
         its columns, at least one element)."""
