@@ -13,6 +13,7 @@ from __future__ import annotations
 import json
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import can
 import pytest
@@ -53,9 +54,10 @@ def logs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
 def test_the_kobuki_logs_page_is_kobukis_by_the_tests_own_crc(logs: dict[str, Path]) -> None:
     """The drive's PROFILE pages carry kobuki's CRC (the premise of the tests below)."""
     status = database().get_message_by_name("ODOM_STATUS")
-    crcs = {int(s["PROFILE_CRC"]) for msg in can.LogReader(str(logs["kobuki"]))
-            if msg.arbitration_id == status.frame_id
-            and int((s := status.decode(msg.data, decode_choices=False))["PAGE"]) == PROFILE_PAGE}
+    pages: list[Any] = [status.decode(bytes(msg.data), decode_choices=False)
+                        for msg in can.LogReader(str(logs["kobuki"]))
+                        if msg.arbitration_id == status.frame_id]
+    crcs = {int(s["PROFILE_CRC"]) for s in pages if int(s["PAGE"]) == PROFILE_PAGE}
     assert crcs == {crc32_iso_hdlc(parameter_bytes(robot.load("kobuki"), "exact"))}
 
 
@@ -153,3 +155,14 @@ def test_odocan_monitor_without_robot_passes_a_live_kobuki(
     assert (code, err) == (0, "odocan monitor: robot 'kobuki' (from the firmware's PROFILE "
                               "page)\n")
     assert json.loads(out)["robot"] == FROM_PAGE
+
+
+def test_the_screen_names_the_robot_the_page_chose() -> None:
+    """The TUI's firmware line says a robot the page chose; the default pmir stays unsaid."""
+    from odocan.host.report.tui import firmware_line
+
+    status = {"state": "OK", "errors": [], "integrator": "EXACT", "uptime_s": 3}
+    chosen = firmware_line({"status": status, "robot": FROM_PAGE}, 0.1).plain
+    assert "robot kobuki (PROFILE page)" in chosen
+    pmir = {"name": "pmir", "source": "PROFILE page", "page_fits": ["pmir"]}
+    assert "robot" not in firmware_line({"status": status, "robot": pmir}, 0.1).plain

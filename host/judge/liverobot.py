@@ -20,22 +20,23 @@ from __future__ import annotations
 import math
 from collections import deque
 from dataclasses import dataclass
-from typing import Any, Generic, Protocol, TypeVar
-
-from cantools.database.can import Database
+from typing import TYPE_CHECKING, Any, Generic, Protocol, TypeVar
 
 from odocan.host.judge.livedistance import LiveDistance, robot_of
 from odocan.host.judge.livetwist import LiveTwist
 from odocan.host.judge.profilepage import PROFILE_PAGE, RunningProfile, shipped_robots
 from odocan.host.judge.reference import Geometry
+from odocan.host.judge.robotsource import DEFAULT, DEFAULT_ROBOT, FROM_PAGE, GIVEN
 from odocan.host.judge.tracking import PoseTracker
 from odocan.host.protocol.busfacts import ENC_COUNTER_MASK
 from odocan.host.protocol.e2e import crc8h2f_p02_one, e2e_messages
 from odocan.sim import robot as robots
 from odocan.sim.robot import MM_PER_M, RobotProfile
 
-DEFAULT_ROBOT = "pmir"  # host.cli.robotchoice's: judge/ imports nothing of cli/
-GIVEN, FROM_PAGE, DEFAULT = "--robot", "PROFILE page", "default"  # ``source``, as analyze's
+if TYPE_CHECKING:
+    from cantools.database.can import Database
+
+__all__ = ["DEFAULT", "DEFAULT_ROBOT", "FROM_PAGE", "GIVEN", "LiveRobot", "PageWait", "decide"]
 PAGE_PERIOD_S = 0.6  # ODOM_STATUS's PROFILE page: every 6th 100 ms status frame
 PAGE_WAIT_S = 2.5 * PAGE_PERIOD_S  # frames held at most this long (bus time) for the page
 

@@ -220,6 +220,7 @@ def run_screen(app: MonitorApp, deadline_s: float, console: Console | None = Non
     with _cbreak(), Live(console=console, auto_refresh=False, screen=console.is_terminal,
                          redirect_stderr=False) as live:
         app.receive(deadline_s, lambda: live.update(current(), refresh=True))
+        app.model.release_held()  # the watch ended: frames held (the robot's page) judged
         live.update(current(), refresh=True)
     if console.is_terminal:
         console.print(current(spare_rows=1), height=console.size.height - 1)  # + the prompt

@@ -30,8 +30,8 @@ import can
 from odocan.host.cli.options import add_duration_argument, add_robot_argument
 from odocan.host.io.buses import add_bus_arguments, open_bus
 from odocan.host.io.busreader import lost_here_text
-from odocan.host.judge.liverobot import DEFAULT_ROBOT
 from odocan.host.judge.reference import Geometry
+from odocan.host.judge.robotsource import DEFAULT_ROBOT
 from odocan.host.mqtt.bridge import Bridge, BridgeConfig, RobotEndpoint
 from odocan.host.mqtt.broker import BrokerURL
 from odocan.host.mqtt.busfeed import BusFeed

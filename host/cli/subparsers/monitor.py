@@ -50,8 +50,8 @@ from odocan.host.cli.subparsers.analyze import load_judges_dbc
 from odocan.host.io.buses import add_bus_arguments, open_bus
 from odocan.host.io.busreader import lost_here_text
 from odocan.host.io.export import FOXGLOVE_PORT
-from odocan.host.judge.liverobot import DEFAULT_ROBOT
 from odocan.host.judge.monitor import BusMonitor, to_json
+from odocan.host.judge.robotsource import DEFAULT_ROBOT
 from odocan.host.judge.watchend import end_watch
 from odocan.host.judge.watchverdict import REQUIRE_FIRMWARE, failures, nothing_judged
 from odocan.host.mqtt.broker import (
