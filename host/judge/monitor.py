@@ -50,6 +50,8 @@ from __future__ import annotations
 
 import time
 from collections import Counter, deque
+from collections.abc import Callable
+from functools import partial
 from typing import Any
 
 import can
@@ -139,8 +141,8 @@ class BusMonitor:
         self.secoc = AuthWatch()  # SecOC (docs/secoc.md): commands awaiting ODOM_AUTH, AUTH_*
         self.auth = self.secoc.counts  # the firmware's AUTH_* refusals, ODOM_AUTH without command
         self.robot = LiveRobot(robot, DEFAULT if from_page else GIVEN)  # odocan's DBC: the page
-        self.robot_wait = PageWait[tuple[can.Message, float]](self.db) \
-            if from_page and db is None else None  # picks, the frames held till it comes
+        self.robot_wait = PageWait[Any](self.db) if from_page and db is None else None  # picks
+        self.replayed: Callable[[can.Message], None] = lambda _msg: None  # each held, judged
 
     def feed(self, msg: can.Message, now_s: float | None = None) -> None:
         """One frame heard on the bus (``now_s``: local monotonic time, default now); held while
@@ -164,10 +166,12 @@ class BusMonitor:
         self.settle.release(self._feed)
 
     def _judge_waited(self) -> None:
-        """The robot decided (``liverobot``): the frames held for its page judged now."""
+        """The robot decided (``liverobot``): the frames held for its page judged now, each
+        then given to ``replayed`` (live Foxglove publishes what the model made of it)."""
         wait, self.robot_wait = self.robot_wait, None
         for msg, now_s in decide(self, wait) if wait is not None else ():
             self.feed(msg, now_s)
+            self.replayed(msg)
 
     def _feed(self, msg: can.Message, now_s: float, verdict: bool | None) -> None:
         """``feed`` one frame; an encoder frame held given back with its ``verdict``."""
@@ -424,16 +428,13 @@ class BusMonitor:
             return "UNVERIFIED", ["no on-board pose compared with the reference yet"]
         if self.tracker.awaiting_boot:
             return "UNVERIFIED", ["rebooted: waiting for the encoder frame it primed on"]
-        for verdict, why in (("POSE WRONG", self._pose_wrong),  # livestanding
+        for verdict, why in (("POSE WRONG", partial(pose_wrong_why, self.tracker)),  # livestanding
                              ("DISTANCE WRONG", self.distance.verdict),  # latched, in this order
                              ("TWIST WRONG", self.twist.verdict),  # LINEAR_VEL, ANGULAR_VEL
                              ("HELD", self.settle.why)):  # frames not judged yet: livesettle
             if reasons := why():
                 return verdict, reasons
         return "OK", placed_why(self.tracker)
-
-    def _pose_wrong(self) -> list[str]:
-        return pose_wrong_why(self.tracker)  # the latest sample, or the pose's life
 
     def _reported_verdict(self, reported: str) -> tuple[str, list[str]]:
         """The firmware's own state when not OK, with its REASON; but a pose, DISTANCE or twist
