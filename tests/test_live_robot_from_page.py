@@ -166,3 +166,20 @@ def test_the_screen_names_the_robot_the_page_chose() -> None:
     assert "robot kobuki (PROFILE page)" in chosen
     pmir = {"name": "pmir", "source": "PROFILE page", "page_fits": ["pmir"]}
     assert "robot" not in firmware_line({"status": status, "robot": pmir}, 0.1).plain
+
+
+def test_odocan_bridge_without_robot_passes_a_kobuki(
+    logs: dict[str, Path], monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``odocan bridge`` (an embedded broker) hearing the kobuki drive: PASS, exit 0, the robot
+    said before its verdict."""
+    from tests.test_bridge_exit import _bridge_hears, _duration_reached
+    from tests.test_stall_bound import _messages
+
+    _bridge_hears(monkeypatch, _messages(logs["kobuki"]), _duration_reached)
+    code, _, err = run_cli(capsys, "bridge", "-i", "virtual", "--duration", "600",
+                           "--require-firmware")
+    lines = err.splitlines()
+    assert code == 0, err
+    assert "bridge robot001: robot 'kobuki' (from the firmware's PROFILE page)" in lines, err
+    assert lines[-1].startswith("bridge robot001: PASS: the on-board pose right in "), err
