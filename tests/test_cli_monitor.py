@@ -49,6 +49,7 @@ class Source:
     channel: str
     ticks: int = TICKS
     garbage: bool = True
+    robot_name: str = "pmir"  # the rig's robot (its firmware's PROFILE page names it)
     injected: int = 0  # rounds of garbage sent
     done: threading.Event = field(default_factory=threading.Event)
 
@@ -57,7 +58,7 @@ class Source:
         # the rig's own (simulated) times on the bus: the monitor pairs poses by bus time, and
         # the wall clock's gaps on a loaded machine split pairs (46 samples of 50 under load)
         out = can.Bus(interface="virtual", channel=self.channel, preserve_timestamps=True)
-        config = RigConfig(robot=robot.load("pmir"), seed=2, channel=f"{self.channel}-rig")
+        config = RigConfig(robot=robot.load(self.robot_name), seed=2, channel=f"{self.channel}-rig")
         last_pose_y: list[can.Message] = []
         forward = _Forward(out, last_pose_y)
         try:
@@ -130,8 +131,13 @@ class _Heard:
 def source(monkeypatch: pytest.MonkeyPatch) -> Iterator[Source]:
     """A Source on a fresh channel that starts when ``odocan monitor`` opens its bus; the
     monitor ends ``LINGER_S`` after it heard the whole drive (``_Heard``)."""
+    yield from sources(monkeypatch)
+
+
+def sources(monkeypatch: pytest.MonkeyPatch, **fields: Any) -> Iterator[Source]:
+    """``source`` with its ``fields`` (its robot, ticks: read before ``odocan monitor`` runs)."""
     build_parser()  # every subcommand imported before the clock starts
-    src = Source(f"odocan-test-monitor-{os.getpid()}-{next(_channels)}")
+    src = Source(f"odocan-test-monitor-{os.getpid()}-{next(_channels)}", **fields)
     opened = threading.Event()
 
     def open_and_start(args: Any, **overrides: Any) -> can.BusABC:

@@ -71,15 +71,20 @@ def add_seed_argument(parser: argparse.ArgumentParser, what: str = "random seed"
 
 
 def add_robot_argument(
-    parser: argparse.ArgumentParser, *, role: str = "profile name", from_log: bool = False
+    parser: argparse.ArgumentParser, *, role: str = "profile name", from_log: bool = False,
+    live: bool = False,
 ) -> None:
     """``--robot NAME|PATH`` (default pmir; ``from_log``: None, the log's PROFILE page picks,
-    ``host.cli.robotchoice``)."""
+    ``host.cli.robotchoice``; ``live``: None, the firmware's first PROFILE page picks,
+    ``host.judge.liverobot``)."""
     default = ("the shipped robot whose parameters the log's PROFILE page gives, when exactly "
                "one does (said on stderr); else pmir" if from_log else "pmir")
+    if live:
+        default = ("the shipped robot whose parameters the firmware's first PROFILE page gives, "
+                   "when exactly one does (frames held till it comes, said on stderr); else pmir")
     parser.add_argument(
         "--robot",
-        default=None if from_log else "pmir",
+        default=None if from_log or live else "pmir",
         help=f"{role} ({', '.join(robot.list_profiles())}) or TOML path (default: {default})",
     )
 

@@ -25,11 +25,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from odocan.host.judge.robotsource import DEFAULT as DEFAULT  # one rule, live and offline
+from odocan.host.judge.robotsource import DEFAULT_ROBOT as DEFAULT_ROBOT
+from odocan.host.judge.robotsource import FROM_PAGE as FROM_PAGE
+from odocan.host.judge.robotsource import GIVEN as GIVEN
 from odocan.sim import robot
 from odocan.sim.robot import RobotProfile
-
-DEFAULT_ROBOT = "pmir"
-GIVEN, FROM_PAGE, DEFAULT = "--robot", "PROFILE page", "default"
 
 
 @dataclass(frozen=True)

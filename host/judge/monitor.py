@@ -50,6 +50,8 @@ from __future__ import annotations
 
 import time
 from collections import Counter, deque
+from collections.abc import Callable
+from functools import partial
 from typing import Any
 
 import can
@@ -60,6 +62,7 @@ from odocan.host.judge.busstats import LoadWindow
 from odocan.host.judge.liveconfig import SAME_TICK_S, ConfigFollower, follow_config_ack, rebooted
 from odocan.host.judge.livedistance import LiveDistance
 from odocan.host.judge.livekept import KeptWatch
+from odocan.host.judge.liverobot import DEFAULT, GIVEN, LiveRobot, PageWait, decide
 from odocan.host.judge.livesetpose import SetPoseFollower, apply_set_pose, set_pose_event
 from odocan.host.judge.livesettle import SettleHold
 from odocan.host.judge.livestanding import placed_why, pose_wrong_why
@@ -70,12 +73,11 @@ from odocan.host.judge.monitorauth import AUTH_COUNTS as AUTH_COUNTS  # re-expor
 from odocan.host.judge.monitorauth import AuthWatch
 from odocan.host.judge.monitorvalues import (
     error_names,
-    message_stale,
+    messages_snapshot,
     node_ages,
     page_of,
     shown_value,
     to_json,
-    unit_of,
 )
 from odocan.host.judge.profilepage import follow_profile
 from odocan.host.judge.reasonwords import reason_text
@@ -103,7 +105,9 @@ class BusMonitor:
     """The state model of ``odocan monitor`` (see the module docstring)."""
 
     def __init__(self, robot: RobotProfile, integrator: str | None = None,
-                 db: Database | None = None, bitrate: int | None = None) -> None:
+                 db: Database | None = None, bitrate: int | None = None, *,
+                 from_page: bool = False) -> None:
+        """``from_page``: no ``--robot``; the PROFILE page picks the robot (``liverobot``)."""
         self.db = db if db is not None else database()
         self.bitrate = bitrate  # bit/s, for bus_load's fraction (None: bits/s only)
         self.load = LoadWindow()
@@ -136,11 +140,19 @@ class BusMonitor:
         self._bus_time_s = 0.0  # the latest bus timestamp heard
         self.secoc = AuthWatch()  # SecOC (docs/secoc.md): commands awaiting ODOM_AUTH, AUTH_*
         self.auth = self.secoc.counts  # the firmware's AUTH_* refusals, ODOM_AUTH without command
+        self.robot = LiveRobot(robot, DEFAULT if from_page else GIVEN)  # odocan's DBC: the page
+        self.robot_wait = PageWait[Any](self.db) if from_page and db is None else None  # picks
+        self.replayed: Callable[[can.Message], None] = lambda _msg: None  # each held, judged
 
     def feed(self, msg: can.Message, now_s: float | None = None) -> None:
         """One frame heard on the bus (``now_s``: local monotonic time, default now); held while
         an encoder frame's verdict waits for the firmware's evidence (``livesettle``)."""
         now_s = time.monotonic() if now_s is None else now_s
+        if self.robot_wait is not None:  # no --robot: held for the PROFILE page (liverobot)
+            if self.robot_wait.hold((msg, now_s), msg.timestamp, msg.arbitration_id,
+                                    bytes(msg.data), msg.is_extended_id, now_s):
+                self._judge_waited()
+            return
         if self.settle.held:
             self.settle.held.append((msg, now_s))
             if msg.timestamp > self.settle.until_s:
@@ -149,8 +161,17 @@ class BusMonitor:
         self._feed(msg, now_s, None)
 
     def release_held(self) -> None:
-        """The watch ends: the frames held are judged now (``livesettle``)."""
+        """The watch ends: the frames held are judged now (``liverobot``, ``livesettle``)."""
+        self._judge_waited()
         self.settle.release(self._feed)
+
+    def _judge_waited(self) -> None:
+        """The robot decided (``liverobot``): the frames held for its page judged now, each
+        then given to ``replayed`` (live Foxglove publishes what the model made of it)."""
+        wait, self.robot_wait = self.robot_wait, None
+        for msg, now_s in decide(self, wait) if wait is not None else ():
+            self.feed(msg, now_s)
+            self.replayed(msg)
 
     def _feed(self, msg: can.Message, now_s: float, verdict: bool | None) -> None:
         """``feed`` one frame; an encoder frame held given back with its ``verdict``."""
@@ -377,6 +398,8 @@ class BusMonitor:
     def health(self, now_s: float | None = None) -> dict[str, Any]:
         """The verdict on the firmware and its pose (module docstring), why, node ages, events."""
         now_s = time.monotonic() if now_s is None else now_s
+        if self.robot_wait is not None and self.robot_wait.quiet(now_s):  # a silent bus
+            self._judge_waited()  # without the page: the default's judges (liverobot)
         if self.settle.quiet(now_s):  # nothing heard for a hold's time: judged now (livesettle)
             self.release_held()
         nodes = node_ages(self.db, self.messages, now_s)
@@ -405,16 +428,13 @@ class BusMonitor:
             return "UNVERIFIED", ["no on-board pose compared with the reference yet"]
         if self.tracker.awaiting_boot:
             return "UNVERIFIED", ["rebooted: waiting for the encoder frame it primed on"]
-        for verdict, why in (("POSE WRONG", self._pose_wrong),  # livestanding
+        for verdict, why in (("POSE WRONG", partial(pose_wrong_why, self.tracker)),  # livestanding
                              ("DISTANCE WRONG", self.distance.verdict),  # latched, in this order
                              ("TWIST WRONG", self.twist.verdict),  # LINEAR_VEL, ANGULAR_VEL
                              ("HELD", self.settle.why)):  # frames not judged yet: livesettle
             if reasons := why():
                 return verdict, reasons
         return "OK", placed_why(self.tracker)
-
-    def _pose_wrong(self) -> list[str]:
-        return pose_wrong_why(self.tracker)  # the latest sample, or the pose's life
 
     def _reported_verdict(self, reported: str) -> tuple[str, list[str]]:
         """The firmware's own state when not OK, with its REASON; but a pose, DISTANCE or twist
@@ -444,28 +464,12 @@ class BusMonitor:
         monotonic time (default now) for the ages."""
         now_s = time.monotonic() if now_s is None else now_s
         e2e = self.e2e.counts()
-        messages = {}
-        for name in sorted(self.messages, key=lambda n: self.messages[n].frame_id):
-            stats = self.messages[name]
-            message = self.db.get_message_by_name(name)
-            messages[name] = {
-                "id": f"0x{stats.frame_id:03X}",
-                "count": stats.count,
-                "rate_hz": stats.rate_hz(),
-                "jitter_ms": None if stats.pages else stats.jitter_ms(),
-                "e2e": e2e.get(name, {}),
-                "age_s": now_s - stats.heard_monotonic_s,
-                "stale": message_stale(message, now_s - stats.heard_monotonic_s),
-                "last": dict(stats.last),
-                "units": {sig: unit_of(message, sig) for sig in stats.last},
-            }
-            if message.is_multiplexed():  # the latest page alone
-                messages[name]["last_frame"] = dict(stats.last_frame)
-                messages[name]["pages"] = {k: v.timing() for k, v in stats.pages.items()}
+        messages = messages_snapshot(self.db, self.messages, e2e, now_s)
         return {
             "duration_s": now_s - self.started_monotonic_s,
             "frames_total": self.frames_total,
             "bus_load": self.load.snapshot(self.bitrate),
+            "robot": self.robot.as_dict(),  # the judges' robot, where from (liverobot)
             "messages": messages,
             "status": dict(self.status) or None,
             "health": self.health(now_s),
@@ -492,7 +496,5 @@ _HANDLERS = {
     "ODOM_STATUS": BusMonitor._on_status,
 }
 
-
-# --- the MQTT fleet -------------------------------------------------------------------------
 
 __all__ = ["BusMonitor", "MessageStats", "error_names", "shown_value", "to_json"]

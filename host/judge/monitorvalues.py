@@ -80,3 +80,29 @@ def shown_value(message: Message, name: str, value: Any) -> Any:
 def unit_of(message: Message, name: str) -> str:
     unit = message.get_signal_by_name(name).unit
     return "" if unit in (None, "-") else str(unit)
+
+
+def messages_snapshot(db: Database, messages: dict[str, MessageStats], e2e: dict[str, Any],
+                      now_s: float) -> dict[str, dict[str, Any]]:
+    """The ``messages`` section of the monitor's snapshot, by CAN ID: per message heard its
+    count, rate, jitter (a multiplexed one's per page), E2E counts (``e2e``: by name), age and
+    staleness at local time ``now_s``, latest values and units."""
+    shown = {}
+    for name in sorted(messages, key=lambda n: messages[n].frame_id):
+        stats = messages[name]
+        message = db.get_message_by_name(name)
+        shown[name] = {
+            "id": f"0x{stats.frame_id:03X}",
+            "count": stats.count,
+            "rate_hz": stats.rate_hz(),
+            "jitter_ms": None if stats.pages else stats.jitter_ms(),
+            "e2e": e2e.get(name, {}),
+            "age_s": now_s - stats.heard_monotonic_s,
+            "stale": message_stale(message, now_s - stats.heard_monotonic_s),
+            "last": dict(stats.last),
+            "units": {sig: unit_of(message, sig) for sig in stats.last},
+        }
+        if message.is_multiplexed():  # the latest page alone
+            shown[name]["last_frame"] = dict(stats.last_frame)
+            shown[name]["pages"] = {k: v.timing() for k, v in stats.pages.items()}
+    return shown

@@ -87,6 +87,7 @@ class RobotEndpoint:
     signer: SecocSigner | None = field(default=None, repr=False)
     publish_phase_s: float = 0.0  # its first pose published this long after the first sample
     profile_name: str | None = None  # its robot profile's (--robot), said in a profile mismatch
+    from_page: bool = False  # no --robot: the firmware's PROFILE page picks (judge.liverobot)
 
 
 @dataclass(frozen=True)
@@ -125,6 +126,7 @@ class _Robot:
             counter_bits=endpoint.counter_bits, publish_hz=config.publish_hz,
             publish_phase_s=endpoint.publish_phase_s,
             now_s=time.monotonic(), profile_name=endpoint.profile_name,
+            from_page=endpoint.from_page,
         )
         self.feed_fields = self.telemetry.feed_fields  # (bound once: per frame, ``_handle``)
         self.plans = self.telemetry.plans  # a frame's plan by 11-bit id (host.mqtt.liveplan)

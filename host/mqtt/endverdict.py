@@ -102,7 +102,7 @@ def end_verdict(telemetry: RobotTelemetry, *, profile_name: str | None = None,
                 require_firmware: bool = False) -> EndVerdict:
     """``telemetry``'s verdict (module docstring), its watch ended (``end_watch``);
     ``profile_name``: the robot profile it was judged as (``--robot``), said beside a wrong pose."""
-    judged_as = "" if profile_name is None else f"; judged as robot {profile_name!r} (--robot)"
+    judged_as = "" if profile_name is None else telemetry.robot.judged_as()  # (liverobot)
     fails = failures(telemetry.tracker, telemetry.distance, telemetry.twist, telemetry.sources,
                      judged_as)
     compared = telemetry.tracker.vs_reference.samples

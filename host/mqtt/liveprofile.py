@@ -24,13 +24,18 @@ from __future__ import annotations
 
 import dataclasses
 from collections import deque
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 from odocan.host.judge.livedistance import LiveDistance
+from odocan.host.judge.liverobot import PageWait, decide
 from odocan.host.judge.profilepage import diagnose_profile, profile_crc, take_page, unbounded_text
 from odocan.host.judge.reference import INTEGRATORS
 from odocan.host.judge.tracking import PoseTracker
+from odocan.host.mqtt.liveplan import plans
 from odocan.sim.robot import MM_PER_M
+
+if TYPE_CHECKING:
+    from odocan.host.mqtt.telemetry import Publication, RobotTelemetry
 
 
 class _Robot(Protocol):
@@ -98,3 +103,28 @@ def _integrator(robot: _Robot) -> str:
     summary = robot.firmware.get("summary") or {}
     reported = str(summary.get("integrator", "")).lower()
     return reported if reported in INTEGRATORS else tracker.integrator or "exact"
+
+
+def judge_waited(telemetry: RobotTelemetry) -> list[Publication]:
+    """No ``--robot``: the robot decided by the firmware's PROFILE page (``host.judge.liverobot``:
+    its judges, its name in a profile mismatch, the plans made for them), then the frames held
+    for the page judged in bus order; the publications they make."""
+    wait, telemetry.robot_wait = telemetry.robot_wait, None
+    if wait is None:
+        return []
+    held = decide(telemetry, wait, name=telemetry.name)
+    telemetry.profile = ProfileStatus(telemetry.robot.profile.name)
+    telemetry.plans.update(plans(telemetry, telemetry._routes))  # the bridge's own dict
+    published: list[Publication] = []
+    for t_s, can_id, data, extended in held:
+        published += telemetry.feed_fields(t_s, can_id, data, extended)
+    return published
+
+
+def wait_page(telemetry: RobotTelemetry, wait: PageWait[Any], t_s: float, can_id: int,
+              data: bytes, extended: bool) -> list[Publication]:
+    """A frame held for the PROFILE page (``feed_fields``'s); once the wait is over, every frame
+    held judged (``judge_waited``)."""
+    if wait.hold((t_s, can_id, data, extended), t_s, can_id, data, extended):
+        return judge_waited(telemetry)
+    return []

@@ -62,6 +62,7 @@ from odocan.host.judge.livedistance import LiveDistance, robot_of
 from odocan.host.judge.livefit import pose_wrong
 from odocan.host.judge.livegapseen import heard_status
 from odocan.host.judge.livepose import FramePose, difference, pose_dict
+from odocan.host.judge.liverobot import DEFAULT, GIVEN, LiveRobot, PageWait
 from odocan.host.judge.livetwins import CRC_RIGHT_REFUSED, refused_encoders
 from odocan.host.judge.livetwist import LiveTwist
 from odocan.host.judge.reference import Geometry
@@ -75,7 +76,7 @@ from odocan.host.mqtt.haltstretch import HaltStretches
 from odocan.host.mqtt.livecommands import CommandFollowing
 from odocan.host.mqtt.livehold import BridgeHold
 from odocan.host.mqtt.liveplan import Plan, plans
-from odocan.host.mqtt.liveprofile import ProfileStatus
+from odocan.host.mqtt.liveprofile import ProfileStatus, judge_waited, wait_page
 from odocan.host.mqtt.liveroutes import Route, routes, takes
 from odocan.host.mqtt.topics import stamp, status_payload
 from odocan.host.protocol.busfacts import ENC_COUNTER_MASK as MASK
@@ -119,12 +120,13 @@ class RobotTelemetry(CommandFollowing):
         db: Database | None = None,
         now_s: float = 0.0,
         profile_name: str | None = None,
+        from_page: bool = False,
     ) -> None:
         """``geometry``/``integrator``/``counter_bits``: the robot's parameters for the float64
         reference (a 16-bit hardware counter wraps at 16 bits within the 24 on the bus; no
         default: the robot profile's width, or the expected PROFILE CRC is another robot's);
         ``profile_name``: their robot profile's name (``--robot``), said when the firmware's
-        PROFILE page differs (default: ``name``)."""
+        PROFILE page differs (default: ``name``); ``from_page``: the page picks (``liverobot``)."""
         self.name = name
         self.db = db if db is not None else database()
         self._by_id = {m.frame_id: m for m in self.db.messages}
@@ -169,7 +171,10 @@ class RobotTelemetry(CommandFollowing):
         self.stretches: HaltStretches | None = None  # an overloaded fleet's (host.mqtt.overload)
         # per 11-bit identifier (host.mqtt.liveplan): ``plans[id](t_s, data)`` is
         # ``feed_fields(t_s, id, data, False)`` (the bridge calls it without that call)
-        self.plans = plans(self, self._routes)
+        self.robot = LiveRobot(robot_of(profile_name or name, geometry, counter_bits),
+                               DEFAULT if from_page else GIVEN)  # odocan's DBC: the page picks
+        self.robot_wait = PageWait[Any](self.db) if from_page and db is None else None
+        self.plans = plans(self, self._routes) if self.robot_wait is None else {}
         self._ended = False  # ``end_watch`` ran
 
     # --- frames ---
@@ -199,6 +204,8 @@ class RobotTelemetry(CommandFollowing):
         Runs per frame of every robot (the fleet's hot path): one lookup of the frame's plan
         (``host.mqtt.liveplan``: E2E, decode, counts and handler made for its identifier); a
         frame of no 11-bit message of the DBC is checked (counted) and refused."""
+        if self.robot_wait is not None:  # held for the PROFILE page (host.judge.liverobot)
+            return wait_page(self, self.robot_wait, t_s, can_id, data, extended)
         plan = None if extended else self.plans.get(can_id)
         if plan is not None:
             return plan(t_s, data)
@@ -232,7 +239,7 @@ class RobotTelemetry(CommandFollowing):
         if self._ended:
             return []
         self._ended = True
-        published = self.hold.release(ends=True)
+        published = judge_waited(self) + self.hold.release(ends=True)
         end_watch(self.tracker, self.distance)
         return published
 
@@ -474,7 +481,7 @@ class RobotTelemetry(CommandFollowing):
             latched_errors=self.latch.latched_names(), events=list(self.events),
             pose_wrongs=self.tracker.wrongs.as_dict(), frames_total=sum(self.frames.values()),
             distance=self.distance.as_dict(), twist=self.twist.as_dict(),
-            profile=self.profile.section, **self._adopted(),
+            profile=self.profile.section, robot_profile=self.robot.as_dict(), **self._adopted(),
         ))
 
     def _adopted(self) -> dict[str, Any]:

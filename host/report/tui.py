@@ -15,7 +15,8 @@ The screen, top to bottom (rows on 80×24)::
     header       source, time, frames, bus load, PAUSED, the trace filter             1
     verdict      the judge's verdict (OK, STALE, CONFLICT, DEGRADED, POSE WRONG), WAS WRONG
                  (the pose was wrong earlier: latched, the worst episode) and why         1
-    firmware     STATE, AUTH refusals (SecOC), reason, status age, integrator, uptime 1
+    firmware     STATE, AUTH refusals (SecOC), the robot its PROFILE page chose (not  1
+                 the default pmir), reason, status age, integrator, uptime
     pose         on-board / reference / truth, on-board minus each (latest and max)   4
     alert        nothing heard for 2 s and why, node events, frames not checked       1
     messages     rate, jitter, E2E, and per-page rates of multiplexed messages      ≥ 4
@@ -45,6 +46,7 @@ from rich.segment import Segment
 from rich.table import Table
 from rich.text import Text
 
+from odocan.host.judge.robotsource import DEFAULT_ROBOT, FROM_PAGE
 from odocan.host.protocol.e2e_silence import SILENCE_KEYS, lost_text
 from odocan.host.report.live import (
     BAD_VERDICTS,
@@ -188,6 +190,9 @@ def firmware_line(snapshot: dict[str, Any], status_age_s: float | None) -> Text:
     if stale:
         line.append(" STALE", style="bold reverse red")
     _append_auth(line, snapshot)  # before the long fields: never cut off on 80 columns
+    chosen = snapshot.get("robot") or {}  # the robot its PROFILE page chose (liverobot):
+    if chosen.get("source") == FROM_PAGE and chosen.get("name") != DEFAULT_ROBOT:
+        line.append(f"  robot {chosen.get('name')} (PROFILE page)", style="cyan")
     errors = status.get("errors") or []
     reason = " ".join(errors) if errors else "no error bits"
     line.append(f"  reason {reason}", style="yellow" if errors else "")

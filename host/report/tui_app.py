@@ -114,6 +114,8 @@ class MonitorApp:
         self.bus, self.model, self.trace, self.view = bus, model, trace, view
         self.recorder = recorder
         self.publish = publish
+        if publish is not None:  # the frames held for the robot's PROFILE page, once judged
+            model.replayed = publish
         self.stop = stop
         self.quit = False
         self.stopped_by: int | None = None  # the signal (Ctrl-C, SIGTERM) that ended it
@@ -159,9 +161,10 @@ class MonitorApp:
     def on_frame(self, msg: can.Message) -> None:
         """One frame to judge (already in ``--log``): feed the model and the trace."""
         self.view.last_frame_s = time.monotonic()
+        waiting = self.model.robot_wait is not None  # held: published once judged (replayed)
         self.model.feed(msg)
         self.trace.feed(msg)
-        if self.publish is not None:
+        if self.publish is not None and not waiting:
             self.publish(msg)
 
     def on_keys(self, keys: str) -> None:
@@ -220,6 +223,7 @@ def run_screen(app: MonitorApp, deadline_s: float, console: Console | None = Non
     with _cbreak(), Live(console=console, auto_refresh=False, screen=console.is_terminal,
                          redirect_stderr=False) as live:
         app.receive(deadline_s, lambda: live.update(current(), refresh=True))
+        app.model.release_held()  # the watch ended: frames held (the robot's page) judged
         live.update(current(), refresh=True)
     if console.is_terminal:
         console.print(current(spare_rows=1), height=console.size.height - 1)  # + the prompt

@@ -31,6 +31,7 @@ from odocan.host.cli.options import add_duration_argument, add_robot_argument
 from odocan.host.io.buses import add_bus_arguments, open_bus
 from odocan.host.io.busreader import lost_here_text
 from odocan.host.judge.reference import Geometry
+from odocan.host.judge.robotsource import DEFAULT_ROBOT
 from odocan.host.mqtt.bridge import Bridge, BridgeConfig, RobotEndpoint
 from odocan.host.mqtt.broker import BrokerURL
 from odocan.host.mqtt.busfeed import BusFeed
@@ -68,7 +69,7 @@ def _add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--name", default="robot001", help="robot name in the topics odocan/NAME/..."
     )
-    add_robot_argument(parser, role="profile for the reference")
+    add_robot_argument(parser, role="profile for the reference", live=True)
     parser.add_argument(
         "--integrator",
         choices=INTEGRATORS,
@@ -102,7 +103,7 @@ def _do_bridge(args: argparse.Namespace) -> int:
         raise ConfigurationError(str(exc)) from None
     url = broker_url(args)
     configure_logging(getattr(args, "debug", False))
-    profile = robot.load(args.robot)
+    profile = robot.load(args.robot or DEFAULT_ROBOT)
     geometry = Geometry.of(profile)
     signer = None if args.secoc_key is None else SecocSigner(load_secoc_key(args.secoc_key))
     bus = open_bus(args)
@@ -142,7 +143,7 @@ async def _bridge(
         config = BridgeConfig(broker=broker, **bridge_options(args))
         endpoint = RobotEndpoint(name, bus, geometry, args.integrator,
                                  counter_bits=profile.counter_bits, signer=signer,
-                                 profile_name=profile.name)
+                                 profile_name=profile.name, from_page=args.robot is None)
         bridge = Bridge([endpoint], config=config,
                         end_rule=EndRule(require_firmware=args.require_firmware))
         stop = asyncio.Event()
@@ -161,6 +162,8 @@ async def _bridge(
             announced.cancel()
             reader.stop()
         print(f"bridge {name}: {bridge.summary()}", file=sys.stderr)
+        if said := bridge.robots[0].telemetry.robot.said(f"bridge {name}"):  # the page chose
+            print(said, file=sys.stderr)
         if lost := lost_here_text(reader.reader.stats()):
             print(f"bridge {name}: lost here: {lost}", file=sys.stderr)
     # judged once, when the watch ended: the verdicts the retained ``offline`` statuses carry

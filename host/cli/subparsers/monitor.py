@@ -51,6 +51,7 @@ from odocan.host.io.buses import add_bus_arguments, open_bus
 from odocan.host.io.busreader import lost_here_text
 from odocan.host.io.export import FOXGLOVE_PORT
 from odocan.host.judge.monitor import BusMonitor, to_json
+from odocan.host.judge.robotsource import DEFAULT_ROBOT
 from odocan.host.judge.watchend import end_watch
 from odocan.host.judge.watchverdict import REQUIRE_FIRMWARE, failures, nothing_judged
 from odocan.host.mqtt.broker import (
@@ -131,7 +132,7 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
         "no on-board pose with the reference: a CI watch that judged nothing fails (default: "
         "off, so that the monitor views or records (--log) any bus; NO FIRMWARE exits 0)",
     )
-    add_robot_argument(parser, role="profile for the reference")
+    add_robot_argument(parser, role="profile for the reference", live=True)
     add_judge_arguments(parser)
     parser.add_argument(
         "--broker",
@@ -155,12 +156,13 @@ def _do_monitor(args: argparse.Namespace) -> int:
         return _watch_fleet(monitor_broker_url(args), args)
     if args.ca or args.cert or args.key or args.password_file:
         raise ConfigurationError("--ca/--cert/--key/--password-file go with --broker URL")
-    profile = robot.load(args.robot)
+    profile = robot.load(args.robot or DEFAULT_ROBOT)
     model = BusMonitor(
         profile,
         args.integrator,
         load_judges_dbc(args.dbc) if args.dbc is not None else None,
         bitrate=args.bitrate,  # -b: the bus load as a fraction of the wire
+        from_page=args.robot is None,  # the firmware's PROFILE page picks (host.judge.liverobot)
     )
     trace = Trace(model.db, FrameFilter.parse(args.filter, model.db))
     check_log_path(args.log)
@@ -185,13 +187,15 @@ def _do_monitor(args: argparse.Namespace) -> int:
         print(f"monitor: lost here: {lost}", file=sys.stderr)
     if failure is not None:
         raise failure
-    failed = _say_failures(args, model, profile)
+    if said := model.robot.said("odocan monitor"):  # the PROFILE page chose the robot
+        print(said, file=sys.stderr)
+    failed = _say_failures(args, model, model.robot.profile)
     return 1 if failed and code == 0 else code
 
 
 def _say_failures(args: argparse.Namespace, model: BusMonitor, profile: robot.RobotProfile) -> bool:
     """Print the watch's FAIL lines (and the PROFILE page's mismatch) on stderr; whether any."""
-    judged_as = (f"; judged as robot {profile.name!r} (--robot){_robot_hint(args, profile)}"
+    judged_as = (f"{model.robot.judged_as()}{_robot_hint(args, profile)}"
                  if model.tracker.wrongs.count else "")  # (the hint reads the whole --log)
     fails = failures(model.tracker, model.distance, model.twist, model.sources, judged_as)
     if args.require_firmware and (why := nothing_judged(  # judged nothing: no pass (CI)
