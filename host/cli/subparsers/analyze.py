@@ -287,7 +287,8 @@ def _analyze_many(args: argparse.Namespace) -> int:
     ]
     if single_only:
         raise ConfigurationError(
-            f"{', '.join(single_only)} take a single LOG; for several logs use --report-dir DIR"
+            f"{', '.join(single_only)} {'takes' if len(single_only) == 1 else 'take'} a single "
+            "LOG; for several logs use --report-dir DIR"
         )
     if args.robot is not None:
         robot.load(args.robot)  # a bad profile is a usage error before any work

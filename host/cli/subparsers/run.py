@@ -250,6 +250,7 @@ def _run_and_analyze(
     stop = StopRequest()
     try:
         with stop_on_signals(stop):  # from the log's opening to its end: a signal only asks
+            args.log_opened = True  # every interruption from here says what became of --log
             rig = start_rig(config, listeners, args.log, stop)
             total_ticks = round(rig.default_duration_s / TICK_S)
             trace = TruthTrace(rig, total_ticks) if args.plot is not None else None
