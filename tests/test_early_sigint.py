@@ -88,7 +88,7 @@ def test_a_ctrl_c_before_the_log_opens_says_it_is_not_written(
     parsed: the line said only "stopped before it finished", not that ``--log pre.log`` was
     not written (docs/rig.md says it is); the file there stays as it was."""
     from odocan.host.cli import app
-    from odocan.host.cli.subparsers import run
+    from odocan.sim import robot
 
     log = tmp_path / "pre.log"
     log.write_text(OLD_LOG)
@@ -99,7 +99,7 @@ def test_a_ctrl_c_before_the_log_opens_says_it_is_not_written(
 
     said = (f"interrupted (SIGINT): odocan run stopped before it finished (--log {log}: not "
             "written)")
-    for where, name in ((run.robot, "load"), (app, "build_parser")):  # app: as it is parsed
+    for where, name in ((robot, "load"), (app, "build_parser")):  # app: as it is parsed
         with monkeypatch.context() as patched:
             patched.setattr(where, name, interrupted)
             assert main(argv) == 130
