@@ -62,6 +62,9 @@ BAD: list[tuple[str, tuple[str, ...]]] = [
     ("analyze {foreign} --dbc /nonexistent/x.dbc", ("/nonexistent/x.dbc",)),
     ("analyze {foreign} --tolerance pos=0", ("--tolerance",)),
     ("analyze", ("LOG",)),
+    ("analyze {foreign} {empty} --report {tmp}/r.json", ("--report takes a single LOG",)),
+    ("analyze {foreign} {empty} --report {tmp}/r.json --junit {tmp}/j.xml",
+     ("--report, --junit take a single LOG",)),
     # replay
     ("replay /nonexistent/drive.log", ("/nonexistent/drive.log",)),
     ("replay {foreign}", ("no WHEEL_ENCODERS frame",)),
@@ -141,6 +144,8 @@ BAD: list[tuple[str, tuple[str, ...]]] = [
     ("fleet --port 0", ("--port", "0")),
     ("fleet --port 70000", ("--port", "70000")),
     ("fleet --broker mqtt://127.0.0.1:1 --port 1883", ("--port", "--broker")),
+    ("fleet -n 4 --shard 2/2", ("--shard needs --broker: the shards of one fleet meet on one "
+                                "broker",)),
     # experiment
     ("experiment seed002 --runs 1000000", ("--runs", "1000000")),
     ("experiment seed002 --runs 0", ("--runs",)),

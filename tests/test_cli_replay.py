@@ -22,6 +22,9 @@ from tests.independent_checker import Robot, check
 from tests.synth_log import ENCODER_PERIOD_S, synthesize, wandering_drive
 from tests.test_cli_run import assert_usage_error, run_cli
 
+NO_PAGE = ("odocan replay: {}: judged as robot 'pmir' (the default: no PROFILE page in its first "
+           "8192 frames; give --robot)\n")  # host.cli.robotchoice: said once the log is judged
+
 POSE_IDS = {0x200, 0x201, 0x202}
 SAME_AS_RUN = (
     "robot",
@@ -315,7 +318,7 @@ def test_replay_a_log_without_firmware_frames(
                             if " 100#" in ln or " 700#" in ln))
     report_path = tmp_path / "replay.json"
     code, out, err = run_cli(capsys, "replay", str(only), "--report", str(report_path))
-    assert (code, err) == (0, "")
+    assert (code, err) == (0, NO_PAGE.format(only))  # no firmware frame: the default robot
     assert out.splitlines()[0] == "replay: the log has no on-board pose to compare with"
     report, run = json.loads(report_path.read_text()), json.loads(recorded["report"].read_text())
     assert report["integrator"] == "exact"
@@ -386,7 +389,7 @@ def test_replay_reproduces_a_log_written_with_the_firmwares_integers(
     log = synth.write(tmp_path / "synth.log")
     report_path = tmp_path / "replay.json"
     code, _, err = run_cli(capsys, "replay", str(log), "--report", str(report_path))
-    assert (code, err) == (0, "")
+    assert (code, err) == (0, NO_PAGE.format(log))
     vs_log = json.loads(report_path.read_text())["replay"]["onboard_vs_log"]
     assert vs_log["samples"] == vs_log["identical"] == 751
     assert check(log, Robot(**profile.firmware_params()), "rk2",

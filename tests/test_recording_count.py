@@ -10,6 +10,7 @@ line is cut off, so every frame in a text log is whole.
 
 from __future__ import annotations
 
+import json
 import os
 import resource
 import signal
@@ -20,16 +21,18 @@ from pathlib import Path
 import can
 import pytest
 
+from odocan.host.io.recording import stopped_after
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def _run_limited(log: Path, limit_bytes: int) -> subprocess.CompletedProcess[str]:
+def _run_limited(log: Path, limit_bytes: int, *more: str) -> subprocess.CompletedProcess[str]:
     def limited() -> None:  # as test_partial_output's ``_limited``, at ``limit_bytes``
         signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
         resource.setrlimit(resource.RLIMIT_FSIZE, (limit_bytes, limit_bytes))
 
     return subprocess.run(
-        [sys.executable, "-m", "odocan", "run", "--duration", "30", "--log", str(log)],
+        [sys.executable, "-m", "odocan", "run", "--duration", "30", "--log", str(log), *more],
         cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)}, capture_output=True, text=True,
         timeout=600, check=False, preexec_fn=limited)
 
@@ -50,3 +53,34 @@ def test_the_frames_said_are_the_frames_in_the_file(
     assert said == len(read_back) > 0
     if suffix != ".blf":
         assert log.read_bytes().endswith(b"\n")  # no cut line left
+
+
+@pytest.mark.parametrize("suffix", [".log", ".blf"])
+def test_the_report_of_a_stopped_recording_is_no_pass(tmp_path: Path, suffix: str) -> None:
+    """``--report`` beside a ``--log`` a full disk stopped: the report said ``passed: true``
+    and nothing of the log (the run exits 2); it records the recording's failure now, the
+    frames the file holds, and is no pass. A ``.blf``'s header counted 0 objects (python-can's
+    writer never finished it): it counts the frames read back now."""
+    log, report = tmp_path / f"drive{suffix}", tmp_path / "r.json"
+    done = _run_limited(log, 100_003, "--report", str(report))
+    assert done.returncode == 2, done.stderr
+    said = json.loads(report.read_text())
+    assert said["passed"] is False
+    read_back = list(can.LogReader(log))
+    assert said["recording"] == {"path": str(log), "stopped_after_frames": len(read_back),
+                                 "error": "File too large"}
+    assert "PASS" in done.stdout  # the poses' verdict: the firmware is not to blame
+    if suffix == ".blf":
+        with can.BLFReader(log) as blf:
+            assert blf.object_count == len(read_back) > 0
+            assert blf.file_size == log.stat().st_size
+        assert stopped_after(log, 0) == f"recording stopped after {len(read_back)} frames"
+
+
+def test_a_recording_that_did_not_fail_is_not_in_the_report(tmp_path: Path) -> None:
+    report = tmp_path / "r.json"
+    done = _run_limited(tmp_path / "d.log", 10_000_000, "--report", str(report))
+    assert done.returncode == 0, done.stderr
+    said = json.loads(report.read_text())
+    assert said["passed"] is True
+    assert "recording" not in said

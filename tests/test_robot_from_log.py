@@ -13,7 +13,15 @@ from pathlib import Path
 import pytest
 
 from odocan.host.cli.app import main
-from odocan.host.judge.profilepage import RunningProfile, profile_crc, shipped_robots
+from odocan.host.io.logs import read_log
+from odocan.host.judge.profilepage import (
+    PROFILE_PAGE,
+    RunningProfile,
+    profile_crc,
+    shipped_robots,
+)
+from odocan.host.protocol.dbcplan import default_plan
+from odocan.host.protocol.decode import BulkDecoder
 from odocan.sim import robot
 
 ODD = ('name = "odd"\ncounts_per_rev = 4000\nwheel_radius_left_m = 0.04\n'
@@ -40,6 +48,10 @@ def _run(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, str, str]
     code = main(list(argv))
     out, err = capsys.readouterr()
     return code, out, err
+
+
+def _defaulted(command: str, log: Path, why: str) -> str:
+    return f"odocan {command}: {log}: judged as robot 'pmir' (the default: {why}; give --robot)"
 
 
 def _chosen(report: Path) -> tuple[str, str, list[str]]:
@@ -117,16 +129,19 @@ def test_a_custom_robots_log_keeps_the_default_and_its_diagnosis(
     report = tmp_path / "r.json"
     code, out, err = _run(capsys, "analyze", str(logs["odd"]), "--report", str(report))
     assert code == 1
-    assert "PROFILE page)" not in err
+    assert err.splitlines() == [_defaulted("analyze", logs["odd"], "its PROFILE page fits no "
+                                           "shipped robot")]  # it said nothing of the page
     assert _chosen(report) == ("pmir", "default", [])
+    assert json.loads(report.read_text())["inputs"]["robot"]["page_in_head"] is True
     crc = profile_crc(robot.load(logs["odd.toml"]), "exact")
-    said = (f"profile mismatch: profile hash differs (log 0x{crc:08X}, --robot pmir "
-            f"0x{profile_crc(robot.load('pmir'), 'exact'):08X})")
+    said = (f"profile mismatch: profile hash differs (log 0x{crc:08X}, the default robot pmir "
+            f"0x{profile_crc(robot.load('pmir'), 'exact'):08X})")  # it said "--robot pmir"
     assert json.loads(report.read_text())["diagnosis"][0] == said
     assert f"  - {said}" in out.splitlines()
     code, out, err = _run(capsys, "replay", str(logs["odd"]))
     assert code == 1
-    assert "PROFILE page)" not in err
+    assert _defaulted("replay", logs["odd"], "its PROFILE page fits no shipped robot") in \
+        err.splitlines()
     assert f"warning: {said}" in err.splitlines()
     assert _run(capsys, "analyze", str(logs["odd"]), "--robot", str(logs["odd.toml"]))[0] == 0
 
@@ -161,7 +176,8 @@ def test_a_page_several_shipped_robots_fit_keeps_the_default(
     report = tmp_path / "r.json"
     code, _, err = _run(capsys, "analyze", str(logs["kobuki"]), "--report", str(report))
     assert code == 1
-    assert "PROFILE page)" not in err
+    assert err.splitlines() == [_defaulted("analyze", logs["kobuki"], "its PROFILE page fits 2 "
+                                           "shipped robots, 'kobuki', 'twin'")]
     assert _chosen(report) == ("pmir", "default", ["kobuki", "twin"])
 
 
@@ -183,7 +199,8 @@ def test_a_batch_chooses_each_logs_robot(
     assert code == 1  # odd, judged as pmir
     assert out.splitlines()[-1] == "2 PASS, 1 FAIL, 0 unreadable"
     assert [line for line in err.splitlines() if "PROFILE page" in line] == [
-        f"odocan analyze: {folder / 'kobuki.log'}: robot 'kobuki' (from the log's PROFILE page)"]
+        f"odocan analyze: {folder / 'kobuki.log'}: robot 'kobuki' (from the log's PROFILE page)",
+        _defaulted("analyze", folder / "odd.log", "its PROFILE page fits no shipped robot")]
     chosen = {path.name: _chosen(path) for path in reports.glob("*.json")}
     assert chosen == {"kobuki.log.json": ("kobuki", "PROFILE page", ["kobuki"]),
                       "pmir.log.json": ("pmir", "PROFILE page", ["pmir"]),
@@ -193,6 +210,39 @@ def test_a_batch_chooses_each_logs_robot(
     assert code == 1
     assert "PROFILE page)" not in err
     assert {_chosen(path)[:2] for path in reports.glob("*.json")} == {("kobuki", "--robot")}
+
+
+@pytest.mark.parametrize("command", ["analyze", "replay"])
+def test_a_log_without_a_page_says_why_the_default_and_names_it_so(
+    logs: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str], command: str
+) -> None:
+    """A kobuki log without its PROFILE pages (beyond the head's 8192 frames, or none sent):
+    judged as pmir, nothing said of the page, and the poses' fit said "not 'pmir' (--robot)"
+    although no --robot was given. Now one line says why pmir, the fit names the default."""
+    bare = tmp_path / "bare.log"
+    frames = read_log(logs["kobuki"])
+    pages = {int(i) for i in BulkDecoder(default_plan()).decode_page(
+        frames, "ODOM_STATUS", PROFILE_PAGE)["index"]}
+    lines = logs["kobuki"].read_text().splitlines(keepends=True)
+    assert len(lines) == len(frames)
+    assert pages
+    bare.write_text("".join(line for k, line in enumerate(lines) if k not in pages))
+    report = tmp_path / "r.json"
+    code, out, err = _run(capsys, command, str(bare), "--report", str(report))
+    assert code == 1
+    assert _defaulted(command, bare, "no PROFILE page in its first 8192 frames") in \
+        err.splitlines()
+    fit = "robot mismatch: the log's poses fit robot 'kobuki', not 'pmir' (the default robot)"
+    assert fit in out
+    assert "(--robot)" not in out + err
+    section = json.loads(report.read_text())["inputs"]["robot"]
+    assert (section["source"], section["page_in_head"]) == ("default", False)
+
+
+def test_a_robot_given_says_nothing_of_the_default(
+    logs: dict[str, Path], capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert _run(capsys, "analyze", str(logs["odd"]), "--robot", "pmir")[2] == ""
 
 
 def test_shipped_robots_reads_any_integrator_and_an_unbounded_page() -> None:

@@ -176,6 +176,7 @@ def main(argv: list[str] | None = None) -> int:
     """
     argv = sys.argv[1:] if argv is None else list(argv)
     argv, debug = split_debug(argv)
+    args: argparse.Namespace | None = None
     try:
         with sigterm_as_interrupt():
             follow_named_dbc(argv, named_command(argv))  # before any judge reads a DBC
@@ -186,7 +187,7 @@ def main(argv: list[str] | None = None) -> int:
             with outputs_on_stdout(args):  # --report -: the report alone on stdout
                 return int(args.func(args))
     except KeyboardInterrupt as exc:
-        return _interrupted(exc, named_command(argv))
+        return _interrupted(exc, named_command(argv), unopened_log(argv, args))
     except BrokenPipeError:
         _silence_stdout()
         return EXIT_SIGNAL_BASE + int(signal.SIGPIPE)
@@ -198,14 +199,33 @@ def main(argv: list[str] | None = None) -> int:
         return code
 
 
-def _interrupted(exc: KeyboardInterrupt, command: str | None) -> int:
-    """One line on stderr for a command stopped by a signal before its verdict; 128 + N."""
+def _interrupted(exc: KeyboardInterrupt, command: str | None, unopened: str | None) -> int:
+    """One line on stderr for a command stopped by a signal before its verdict; 128 + N.
+    ``unopened``: ``run``'s ``--log`` when the signal came before it was opened (the words
+    say that the file, if one is there, stays as it was)."""
     signum = signal.SIGTERM if isinstance(exc, Terminated) else signal.SIGINT
     what = f"odocan {command}" if command else "odocan"
-    detail = f" ({exc})" if str(exc) else ""  # e.g. run: before its first tick, its --log
+    words = str(exc) or ("" if unopened is None else f"--log {unopened}: not written")
+    detail = f" ({words})" if words else ""  # e.g. run: before its first tick, its --log
     print(f"interrupted ({signum.name}): {what} stopped before it finished{detail}",
           file=sys.stderr)
     return EXIT_SIGNAL_BASE + int(signum)
+
+
+def unopened_log(argv: list[str], args: argparse.Namespace | None) -> str | None:
+    """``run``'s ``--log`` when the run had not reached the opening of it (``args.log_opened``,
+    set by ``run`` as its rig's signals become requests: from there every interruption says
+    what became of the log); from ``argv`` when the signal came as it was parsed; else None."""
+    if named_command(argv) != "run" or getattr(args, "log_opened", False):
+        return None
+    if args is not None:
+        return None if args.log is None else str(args.log)
+    for k, word in enumerate(argv):
+        if word.startswith("--log="):
+            return word.partition("=")[2]
+        if word == "--log" and k + 1 < len(argv):
+            return argv[k + 1]
+    return None
 
 
 def is_usage_error(exc: BaseException) -> bool:

@@ -145,7 +145,7 @@ def analyze_one(path: str, job: Job) -> LogResult:
             report = analysis.report
         report["inputs"] = choice.recorded(log_inputs(
             log, profile, report["integrator"], None if job.dbc is None else Path(job.dbc)))
-        _diagnose(log, report, profile, running, tolerance, db is None, later)
+        _diagnose(log, report, profile, running, tolerance, db is None, later, choice.given_as)
     except (OdocanError, OSError) as exc:
         return LogResult(path, error=_one_line(exc))
     except Exception as exc:  # a log no check foresaw: this log's error, the batch goes on
@@ -155,21 +155,22 @@ def analyze_one(path: str, job: Job) -> LogResult:
 
 def _diagnose(log: Path, report: dict[str, Any], profile: RobotProfile,
               running: RunningProfile | None, tolerance: Tolerance, own_dbc: bool,
-              later: list[str]) -> None:
+              later: list[str], given_as: str) -> None:
     """``report["diagnosis"]`` as ``analyze LOG`` makes it: the PROFILE page's line naming a
     wrong ``--robot``, ``later`` (the pages after an applied config, host.judge.configs),
-    then, for a failed verdict on odocan's DBC, the pose fit's."""
+    then, for a failed verdict on odocan's DBC, the pose fit's (``given_as``: how they name
+    the robot, ``host.cli.robotchoice``)."""
     from odocan.host.io.logs import read_log
     from odocan.host.judge.profilepage import profile_mismatch, with_bus_speed
 
-    said = profile_mismatch(running, profile, report["integrator"])
+    said = profile_mismatch(running, profile, report["integrator"], given_as)
     hints = ([] if said is None else [said]) + later
     if not report["passed"] and own_dbc:  # a wrong --robot must not read as a firmware fault
         from odocan.host.judge.diagnosis import mismatches
 
         whole = read_log(log, warn=lambda message: None)
         hints += mismatches(whole, with_bus_speed(profile, running), report["integrator"],
-                            report["integrator_source"], tolerance)
+                            report["integrator_source"], tolerance, given_as)
     if hints:
         report["diagnosis"] = hints
 

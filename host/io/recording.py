@@ -16,11 +16,13 @@ from __future__ import annotations
 import struct
 import zlib
 from collections.abc import Callable
+from contextlib import suppress
 from pathlib import Path
 from typing import cast
 
 import can
 from can.io.asc import ASCWriter
+from can.io.blf import FILE_HEADER_SIZE, LOG_CONTAINER, LOG_CONTAINER_STRUCT, OBJ_HEADER_BASE_STRUCT
 from can.io.canutils import CanutilsLogWriter
 from can.util import channel2int
 
@@ -46,6 +48,8 @@ class Recording(FrameBatchListener):
         self.channel = channel
         self.frames = 0
         self.failure: OSError | None = None
+        self.reason = ""  # the failure's words, once ``stop`` has finished the file
+        self.kept_frames = 0  # the frames the file holds then (``stopped_after``)
         self._candump = type(writer) is CanutilsLogWriter and not channel.isdigit()
         self._asc = type(writer) is ASCWriter
         number = channel2int(channel)  # ASCWriter's channel number: counted from 1
@@ -139,15 +143,79 @@ class Recording(FrameBatchListener):
 
     def stop(self) -> None:
         """Finish the file; then the first error, if any, with the frames the file holds
-        (``stopped_after``)."""
+        (``stopped_after``; ``kept_frames`` and ``reason`` keep them for the run's report). A
+        ``.blf`` a write stopped is finished by ``finish_blf``: python-can's ``stop`` would
+        write its buffer first, fail again, and never write the header (0 objects counted in a
+        file holding thousands), as it never does when its own last write fails."""
+        blf = isinstance(self.writer, can.BLFWriter)
         try:
-            self.writer.stop()
+            if self.failure is None or not blf:
+                self.writer.stop()
         except OSError as exc:
             self.failure = self.failure or exc
         if self.failure is not None:
-            reason = self.failure.strerror or str(self.failure)
-            stopped = stopped_after(_path_of(self.writer), self.frames)
-            raise OSError(self.failure.errno, f"{reason} ({stopped})")
+            if blf:  # failed as a frame or the last container was written
+                with suppress(OSError):  # the first error is the one to tell
+                    finish_blf(cast(can.BLFWriter, self.writer))
+            self.reason = self.failure.strerror or str(self.failure)
+            path = _path_of(self.writer)
+            whole = None if path is None else whole_frames(path)
+            self.kept_frames = self.frames if whole is None else whole
+            raise OSError(self.failure.errno,
+                          f"{self.reason} ({said_kept(whole, self.frames)})")
+
+
+def finish_blf(writer: can.BLFWriter) -> None:
+    """The header of a ``.blf`` whose write failed, in place (no byte more: a full disk or
+    RLIMIT_FSIZE still lets the file's own bytes be rewritten): the file's size, the frames
+    python-can reads back (the last container, cut by the write, as far as it inflates) and
+    the stamps of the first and last; the buffer the write left (frames not written) dropped.
+    The cut container stays: its frames are read back by python-can, a stricter reader may
+    stop before it (docs/rig.md)."""
+    path = _path_of(writer)
+    with suppress(OSError):  # the buffer the failed write left: closed, its bytes lost
+        writer.file.close()
+    if path is None:  # a stream without a name: nothing to rewrite
+        return
+    offsets_s = _read_back_offsets_s(path)
+    writer.object_count = len(offsets_s)
+    writer.uncompressed_size = _uncompressed_size(path)
+    if offsets_s and writer.start_timestamp is not None:
+        writer.stop_timestamp = writer.start_timestamp + offsets_s[-1]
+    with open(path, "r+b") as blf:
+        writer.file = blf
+        writer._write_header(path.stat().st_size)  # python-can's own header, counting them
+
+
+def _uncompressed_size(path: Path) -> int:
+    """What python-can's writer counts in a ``.blf`` header's uncompressed size: the header's
+    bytes, and each container's (its headers, the data it says it inflates to) whose header is
+    in the file, walking the objects as its reader does."""
+    size, base = path.stat().st_size, OBJ_HEADER_BASE_STRUCT.size
+    heads = base + LOG_CONTAINER_STRUCT.size
+    at = total = FILE_HEADER_SIZE
+    with open(path, "rb") as blf:
+        while at + heads <= size:
+            blf.seek(at)
+            head = blf.read(heads)
+            signature, _, _, obj_size, obj_type = OBJ_HEADER_BASE_STRUCT.unpack_from(head)
+            if signature != b"LOBJ" or obj_size < base:
+                break
+            if obj_type == LOG_CONTAINER:
+                total += heads + LOG_CONTAINER_STRUCT.unpack_from(head, base)[1]
+            at += obj_size + obj_size % 4
+    return total
+
+
+def _read_back_offsets_s(path: Path) -> list[float]:
+    """The stamps of the frames python-can reads back from ``path``, from the first frame's
+    (the header not yet written: the reader's start is no stamp)."""
+    stamps: list[float] = []
+    with suppress(OSError, ValueError, EOFError, zlib.error, struct.error), \
+            can.BLFReader(path) as reader:
+        for msg in reader:
+            stamps.append(msg.timestamp)
+    return [stamp - stamps[0] for stamp in stamps]
 
 
 def stopped_after(path: Path | None, handed: int) -> str:
@@ -157,7 +225,12 @@ def stopped_after(path: Path | None, handed: int) -> str:
     RLIMIT_FSIZE: 11 said where the file held 125, 2531 where it held 2500 and a cut line --
     buffered lines reach the disk, or not, after the write that failed; a ``.blf`` said 2730
     where python-can reads back 449). A log it cannot count says what ``handed`` is."""
-    whole = None if path is None else whole_frames(path)
+    return said_kept(None if path is None else whole_frames(path), handed)
+
+
+def said_kept(whole: int | None, handed: int) -> str:
+    """``stopped_after``'s words for ``whole`` frames counted in the file (None: it cannot be
+    counted, ``handed`` said as what it is)."""
     if whole is None:
         return f"recording stopped after {handed} frames handed to its writer"
     return f"recording stopped after {whole} frames"

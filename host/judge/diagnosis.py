@@ -37,15 +37,17 @@ def fitting_profiles(
 
 
 def robot_mismatch(
-    log: FrameArrays, given: RobotProfile, integrator: str, tolerance: Tolerance
+    log: FrameArrays, given: RobotProfile, integrator: str, tolerance: Tolerance,
+    given_as: str = "--robot",
 ) -> str | None:
-    """``robot mismatch: ...`` when the log fits another profile and not ``given``; else None
-    (the log fits ``given``, or no known profile: nothing to say about the robot)."""
+    """``robot mismatch: ...`` when the log fits another profile and not ``given`` (named
+    ``given_as``: "the default robot" when no ``--robot`` was given); else None (the log fits
+    ``given``, or no known profile: nothing to say about the robot)."""
     fits = fitting_profiles(log, given, integrator, tolerance)
     if given.name in fits or not fits:
         return None
     return (f"robot mismatch: the log's poses fit robot {', '.join(map(repr, fits))}, "
-            f"not {given.name!r} (--robot)")
+            f"not {given.name!r} ({given_as})")
 
 
 def logged_integrator(log: FrameArrays) -> str | None:
@@ -58,7 +60,8 @@ def logged_integrator(log: FrameArrays) -> str | None:
 
 
 def mismatches(
-    log: FrameArrays, given: RobotProfile, integrator: str, source: str, tolerance: Tolerance
+    log: FrameArrays, given: RobotProfile, integrator: str, source: str, tolerance: Tolerance,
+    given_as: str = "--robot",
 ) -> list[str]:
     """Why a failed log may not be the firmware's fault: an ``--integrator`` (``source``
     "argument") other than the one the log's ODOM_STATUS reports, then ``robot_mismatch``
@@ -68,5 +71,5 @@ def mismatches(
     if logged is not None and logged != integrator:
         hints.append(f"integrator mismatch: the log's ODOM_STATUS reports {logged}, "
                      f"not {integrator} (--integrator)")
-    robot_hint = robot_mismatch(log, given, logged or integrator, tolerance)
+    robot_hint = robot_mismatch(log, given, logged or integrator, tolerance, given_as)
     return hints + ([] if robot_hint is None else [robot_hint])

@@ -46,6 +46,7 @@ if TYPE_CHECKING:
 PROFILE_PAGE = busfacts.PROFILE_PAGE  # ODOM_STATUS PAGE "PROFILE"
 _LAYOUT = "<IIIIBBH"  # the DBC comment's 20 bytes, little-endian
 NM_PER_M = 1_000_000_000
+GIVEN_AS = "--robot"  # how a mismatch names the robot the log is judged with, given
 HEAD_FRAMES = 1 << 13  # frames of a streamed log's head read for the page (~23 s of the rig's bus)
 UNBOUNDED = ("the firmware's PROFILE page gives max wheel speed 0 (no bound: a firmware in "
              "FAULT?); the judges keep {kept_m_s:g} m/s (the last page's bound, else --robot "
@@ -167,12 +168,14 @@ class Mismatch:
 
 
 def profile_mismatch(
-    running: RunningProfile | None, given: RobotProfile, integrator: str
+    running: RunningProfile | None, given: RobotProfile, integrator: str,
+    given_as: str = GIVEN_AS,
 ) -> str | None:
-    """One line naming how the firmware's parameters differ from ``given`` (``--robot``) run
-    with ``integrator``, or that its page gives no bound (``UNBOUNDED``); None when they are the
+    """One line naming how the firmware's parameters differ from ``given`` (``--robot``; the
+    line names it ``given_as``: "the default robot" when none was given) run with
+    ``integrator``, or that its page gives no bound (``UNBOUNDED``); None when they are the
     same or the log has no PROFILE page."""
-    said = diagnose_profile(running, given, integrator)
+    said = diagnose_profile(running, given, integrator, given_as)
     texts = [] if said is None else [said.text]
     if running is not None and not running.bounded:
         texts.insert(0, unbounded_text(given, given.max_wheel_speed_mm_s))
@@ -185,7 +188,8 @@ def unbounded_text(given: RobotProfile, kept_mm_s: int) -> str:
 
 
 def diagnose_profile(
-    running: RunningProfile | None, given: RobotProfile, integrator: str
+    running: RunningProfile | None, given: RobotProfile, integrator: str,
+    given_as: str = GIVEN_AS,
 ) -> Mismatch | None:
     """``profile_mismatch``'s line with the parameters it names; None when the firmware's
     parameters are ``given``'s run with ``integrator`` or the log has no PROFILE page."""
@@ -197,7 +201,7 @@ def diagnose_profile(
     bus_speed = with_bus_speed(given, running)
     speed = () if bus_speed is given else ("MAX_WHEEL_SPEED",)
     speed_said = (f"the log's firmware runs with max wheel speed {running.max_wheel_speed_m_s:g}"
-                  f" m/s, --robot {given.name} says {given.max_wheel_speed_m_s:g} m/s")
+                  f" m/s, {given_as} {given.name} says {given.max_wheel_speed_m_s:g} m/s")
     if running.profile_crc == profile_crc(bus_speed, integrator):
         return Mismatch(f"profile mismatch: {speed_said}", speed)
     for other in INTEGRATORS:
@@ -208,10 +212,10 @@ def diagnose_profile(
     fits = _shipped_fits(running, given)
     if fits:
         return Mismatch(f"profile mismatch: profile hash differs: the log's firmware runs with "
-                        f"the parameters of robot {fits!r}, not {given.name!r} (--robot)",
+                        f"the parameters of robot {fits!r}, not {given.name!r} ({given_as})",
                         robot=fits)
     return Mismatch(f"profile mismatch: profile hash differs (log 0x{running.profile_crc:08X}, "
-                    f"--robot {given.name} 0x{profile_crc(given, integrator):08X})"
+                    f"{given_as} {given.name} 0x{profile_crc(given, integrator):08X})"
                     + ("" if bus_speed is given else f"; {speed_said}"), speed)
 
 

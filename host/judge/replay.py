@@ -261,11 +261,13 @@ def _events(encoders: IntArray, truth: IntArray) -> list[tuple[int, int]]:
 def diagnose(
     log: FrameArrays, accepted: npt.NDArray[np.bool_], profile: RobotProfile, integrator: str,
     tolerance: Tolerance, *, source: str = "LOG", robot_arg: str | None = None,
+    given_as: str = "--robot",
 ) -> list[str]:
     """The likely cause of a departure, by name: an integrator other than the log's, a robot
     profile other than the one the logged poses fit (module docstring, "Verdict"); when none
     fits, either the profile or the recording firmware (``source``: the log's name, and
-    ``robot_arg``: the --robot given, for the command that says which poses are off)."""
+    ``robot_arg``: the --robot given, for the command that says which poses are off;
+    ``given_as``: how a robot mismatch names ``profile``, "the default robot" without one)."""
     reasons = []
     logged = logged_integrator(log, accepted)
     if logged is not None and logged != integrator:
@@ -282,7 +284,7 @@ def diagnose(
                               "recorded it"))
     elif fits:
         reasons.append(f"robot mismatch: the log's poses fit robot {', '.join(map(repr, fits))}, "
-                       f"not {profile.name!r} (--robot)")
+                       f"not {profile.name!r} ({given_as})")
     else:
         robot = robot_arg or profile.name
         reasons.append(f"the log's poses fit no known robot profile ({profile.name!r} given, "

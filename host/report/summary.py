@@ -113,13 +113,22 @@ def finish(analysis: Analysis, args: argparse.Namespace, *, title: str) -> int:
         if path is None:
             continue
         if option == "--report":
-            write_report(path, analysis.report)
+            write_report(path, as_written(analysis.report))
             continue
         from odocan.host.report.plots import plot_analysis  # matplotlib only when asked
 
         with replaced(path, option) as target:  # a full disk: an older plot there kept
             plot_analysis(analysis, target, tolerance=args.tolerance)
     return 0 if analysis.passed else 1
+
+
+def as_written(report: dict[str, Any]) -> dict[str, Any]:
+    """The JSON report of ``report``: no pass when its ``--log`` recording failed (``recording``:
+    the command exits 2, the log holds part of the run), though the summary printed its poses'
+    verdict (the firmware is not to blame for a full disk)."""
+    if report.get("recording") is None:
+        return report
+    return {**report, "passed": False}
 
 
 def print_summary(

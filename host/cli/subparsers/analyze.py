@@ -148,7 +148,7 @@ def _do_analyze(args: argparse.Namespace) -> int:
 def _analyze_single(args: argparse.Namespace) -> int:
     """One log: the full summary, ``--report``, ``--plot``, exports and ``--junit``."""
     from odocan.host.cli.inputs import explained, require_frames
-    from odocan.host.cli.robotchoice import choose_robot
+    from odocan.host.cli.robotchoice import choose_robot, say
     from odocan.host.io.logs import read_log
     from odocan.host.judge.analysis import analyze
     from odocan.host.judge.configs import later_mismatches, running_before_configs
@@ -168,8 +168,7 @@ def _analyze_single(args: argparse.Namespace) -> int:
     check_distinct([("--report", args.report), ("--plot", args.plot), ("--junit", args.junit),
                     ("--mcap", args.mcap)], [("LOG", args.log), ("--dbc", args.dbc)])
     db = load_judges_dbc(args.dbc) if args.dbc is not None else None
-    if (line := choice.said("analyze", args.log)) is not None:
-        print(line, file=sys.stderr)
+    say(choice.said("analyze", args.log))
     with wall_clock_progress(f"analysing {args.log}", None):
         streams = _streams(args)
         running = head_profile(args.log) if streams and db is None else None
@@ -187,6 +186,7 @@ def _analyze_single(args: argparse.Namespace) -> int:
                     analysis = analyze(whole, with_bus_speed(profile, running), args.integrator,
                                        tolerance=args.tolerance)
     assert analysis is not None
+    say(choice.defaulted("analyze", args.log))  # judged: why the default, if it was taken
     whole_log = frames  # --parquet/--mcap read the whole log: written after the summary
     if args.bitrate is not None:
         from odocan.host.judge import busstats
@@ -195,7 +195,7 @@ def _analyze_single(args: argparse.Namespace) -> int:
         analysis.report["bus"] = busstats.from_frames(frames, args.bitrate).as_dict()
     analysis.report["inputs"] = choice.recorded(
         log_inputs(args.log, profile, analysis.report["integrator"], args.dbc))
-    said = profile_mismatch(running, profile, analysis.report["integrator"])
+    said = profile_mismatch(running, profile, analysis.report["integrator"], choice.given_as)
     hints: list[str] = [] if said is None else [said]  # the firmware's PROFILE page names it
     if frames is not None and db is None:  # the pages after an applied config: its robot's
         hints += later_mismatches(frames, profile, analysis.report["integrator"])
@@ -206,7 +206,7 @@ def _analyze_single(args: argparse.Namespace) -> int:
         frames = frames if frames is not None else read_log(args.log)  # a failed verdict only
         report = analysis.report
         hints += mismatches(frames, with_bus_speed(profile, running), report["integrator"],
-                            report["integrator_source"], args.tolerance)
+                            report["integrator_source"], args.tolerance, choice.given_as)
     if hints:
         analysis.report["diagnosis"] = hints
     code = finish(analysis, args, title=f"odocan analyze: {args.log}")
@@ -287,7 +287,8 @@ def _analyze_many(args: argparse.Namespace) -> int:
     ]
     if single_only:
         raise ConfigurationError(
-            f"{', '.join(single_only)} take a single LOG; for several logs use --report-dir DIR"
+            f"{', '.join(single_only)} {'takes' if len(single_only) == 1 else 'take'} a single "
+            "LOG; for several logs use --report-dir DIR"
         )
     if args.robot is not None:
         robot.load(args.robot)  # a bad profile is a usage error before any work

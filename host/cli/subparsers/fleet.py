@@ -189,6 +189,9 @@ def _do_fleet(args: argparse.Namespace) -> int:
     broker = broker_url(args)
     if broker is not None and args.port is not None:
         raise ConfigurationError("--port is the embedded broker's: --broker names its own port")
+    if broker is None and args.shard.count > 1:  # a private broker: no other shard meets it
+        raise ConfigurationError("--shard needs --broker: the shards of one fleet meet on one "
+                                 "broker")
     profile = robot.load(args.robot)
     choice = resolve_firmware(args.firmware, args.secoc_key is not None,
                               firmware_params(profile, args.integrator))

@@ -117,13 +117,15 @@ def _do_replay(args: argparse.Namespace) -> int:
                        f"--integrator asks {integrator}: this replays a firmware other than "
                        "the one that recorded it")
     running = running_profile(frames)  # ODOM_STATUS PROFILE: what the recording firmware ran
-    said = profile_mismatch(running, profile, logged or integrator)
+    said = profile_mismatch(running, profile, logged or integrator, choice.given_as)
     if said is not None:
         warn_on_stderr(said)
     analysis = replay_and_analyze(
         frames, feed, with_bus_speed(profile, running), integrator, tolerance=args.tolerance,
         log=args.log, log_out=args.log_out,
     )
+    if (line := choice.defaulted("replay", args.log)) is not None:  # judged: say why pmir
+        print(line, file=sys.stderr)
     section = analysis.report["replay"]
     _print_versus_log(section)
     analysis.report["inputs"] = choice.recorded(log_inputs(args.log, profile, integrator, None))
@@ -132,7 +134,7 @@ def _do_replay(args: argparse.Namespace) -> int:
     if reasons:  # the firmware's own word on its profile first, then the poses' fit
         reasons += ([] if said is None else [said]) + diagnose(
             frames, feed.accepted, with_bus_speed(profile, running), integrator, args.tolerance,
-            source=str(args.log), robot_arg=args.robot)
+            source=str(args.log), robot_arg=args.robot, given_as=choice.given_as)
     section.update(passed=not reasons and blind is None, faults=reasons,
                    unjudged=blind)
     title = f"odocan replay: {args.log} on {profile.name}, {integrator} integrator"

@@ -47,6 +47,7 @@ from odocan.host.io.buses import add_bus_arguments, add_fault_argument, open_bus
 from odocan.host.io.export import add_export_arguments, check_export_paths, write_exports
 from odocan.host.io.listeners import Isolated
 from odocan.host.io.logs import FrameCollector
+from odocan.host.io.recording import Recording
 from odocan.host.judge.analysis import Analysis, analyze
 from odocan.host.outputs import OutputError, check_distinct, check_writable, replaced
 from odocan.host.protocol.dbcplan import default_plan
@@ -247,9 +248,11 @@ def _run_and_analyze(
     wants_mirror = args.interface is not None or args.channel is not None
     mirror = open_bus(args, with_faults=False) if wants_mirror else None
     log_error: OutputError | None = None
+    recorded: dict[str, Any] | None = None  # a --log a write error stopped (the report's)
     stop = StopRequest()
     try:
         with stop_on_signals(stop):  # from the log's opening to its end: a signal only asks
+            args.log_opened = True  # every interruption from here says what became of --log
             rig = start_rig(config, listeners, args.log, stop)
             total_ticks = round(rig.default_duration_s / TICK_S)
             trace = TruthTrace(rig, total_ticks) if args.plot is not None else None
@@ -269,6 +272,7 @@ def _run_and_analyze(
                     rig.close()
                 except OSError as exc:
                     log_error = OutputError(f"--log {args.log}: {exc.strerror or exc}")
+                    recorded = failed_recording(listeners, args.log)
     finally:
         if mirror is not None:
             mirror.shutdown()
@@ -287,8 +291,7 @@ def _run_and_analyze(
             seed=config.seed,
             wall_seconds=wall_s,
         )
-    if stopped is not None:
-        analysis.report["stopped"] = stopped.as_dict()
+    analysis.report.update(_ended_early(stopped, recorded))
     if trace is not None and len(frames):
         analysis.series.update(trace.series(float(frames.timestamp_s[0])))
     if wire is not None:
@@ -299,6 +302,24 @@ def _run_and_analyze(
     except OutputError as exc:  # as a log: raised once the summary is out
         log_error = log_error or exc
     return analysis, log_error, stopped
+
+
+def _ended_early(stopped: Stopped | None, recorded: dict[str, Any] | None) -> dict[str, Any]:
+    """The report's ``stopped`` (a signal ended the drive) and ``recording`` (a write error
+    ended the log), for those that did."""
+    ended: dict[str, Any] = {} if stopped is None else {"stopped": stopped.as_dict()}
+    return ended if recorded is None else {**ended, "recording": recorded}
+
+
+def failed_recording(listeners: list[can.Listener], log: Path) -> dict[str, Any] | None:
+    """The report's ``recording`` for a ``--log`` a write error stopped: its path, the frames
+    the file holds, the error (the report is then no pass: ``host.report.summary.finish``);
+    None when the error that closed the rig was not the recording's."""
+    failed = [li for li in listeners if isinstance(li, Recording) and li.failure is not None]
+    if not failed:
+        return None
+    return {"path": str(log), "stopped_after_frames": failed[0].kept_frames,
+            "error": failed[0].reason}
 
 
 def _after_log_error(log_error: OutputError | None, error: OutputError) -> OutputError:
