@@ -16,7 +16,7 @@ from odocan.host.judge.monitor import BusMonitor
 from odocan.host.judge.reference import Geometry
 from odocan.host.judge.stream_analysis import analyze_file
 from odocan.host.mqtt.telemetry import RobotTelemetry
-from odocan.sim.robot import load
+from odocan.sim.robot import RobotProfile, load
 from tests.independent_checker import Robot, check
 from tests.synth_log import ENCODER_PERIOD_S, synthesize
 from tests.test_analysis_reboot import REBOOT, STEPS, independent, rebooting_drive
@@ -127,16 +127,7 @@ def test_a_power_up_pose_off_zero_after_an_old_pose_at_zero(tmp_path: Path) -> N
         assert not report["passed"]
         assert report["onboard_vs_reference"]["max_position_error_m"] == pytest.approx(
             expected.max_position_error_m, abs=0.25 * POSITION_LSB_M)
-    monitor = BusMonitor(profile, "exact")
-    bridge = RobotTelemetry("r1", Geometry.of(profile), "exact", counter_bits=32)
-    with can.LogReader(str(path)) as reader:
-        for msg in reader:
-            monitor.feed(msg, now_s=msg.timestamp)
-            bridge.feed(msg)
-    for tracker in (monitor.tracker, bridge.tracker):
-        assert tracker.reference_starts == 2
-        assert tracker.vs_reference.max_dpos_m == pytest.approx(
-            expected.max_position_error_m, abs=0.25 * POSITION_LSB_M)
+    _live_agree(path, profile, expected.max_position_error_m)
 
 
 @pytest.mark.parametrize("bias_100um", [0, 3])
@@ -166,6 +157,12 @@ def test_an_old_pose_at_zero_continued_before_an_init_summary(
         assert report["passed"] == expected.passed
         assert report["onboard_vs_reference"]["max_position_error_m"] == pytest.approx(
             expected.max_position_error_m, abs=0.25 * POSITION_LSB_M)
+    _live_agree(path, profile, expected.max_position_error_m)
+
+
+def _live_agree(path: Path, profile: RobotProfile, error_m: float) -> None:
+    """The monitor and the bridge fed the log: one reboot (two reference starts) and the
+    checker's worst position error ``error_m`` within a quarter LSB."""
     monitor = BusMonitor(profile, "exact")
     bridge = RobotTelemetry("r1", Geometry.of(profile), "exact", counter_bits=32)
     with can.LogReader(str(path)) as reader:
@@ -174,5 +171,5 @@ def test_an_old_pose_at_zero_continued_before_an_init_summary(
             bridge.feed(msg)
     for tracker in (monitor.tracker, bridge.tracker):
         assert tracker.reference_starts == 2
-        assert tracker.vs_reference.max_dpos_m == pytest.approx(
-            expected.max_position_error_m, abs=0.25 * POSITION_LSB_M)
+        assert tracker.vs_reference.max_dpos_m == pytest.approx(error_m,
+                                                                abs=0.25 * POSITION_LSB_M)

@@ -10,7 +10,6 @@ test_partial_output.py: RLIMIT_FSIZE with SIGXFSZ ignored turns a write past it 
 
 from __future__ import annotations
 
-import io
 import os
 import stat
 import subprocess
@@ -21,7 +20,7 @@ import pytest
 
 from odocan.host.outputs import OutputError, write_text
 from odocan.sim.exceptions import Terminated
-from tests.test_partial_output import _limited
+from tests.test_partial_output import _limited, signal_mid_write
 
 OLD = b"last night's output, kept\n"
 
@@ -79,25 +78,7 @@ def test_a_signal_mid_write_keeps_the_older_report(
     whole, no part of the new one anywhere, and the interruption goes on to the CLI."""
     report = tmp_path / "r.json"
     report.write_bytes(OLD)
-    opened = Path.open
-
-    class _Signalled(io.StringIO):
-        def __init__(self, real: io.TextIOBase) -> None:
-            super().__init__()
-            self.real = real
-
-        def write(self, text: str) -> int:
-            self.real.write(text[:100])
-            self.real.flush()
-            raise Terminated
-
-        def close(self) -> None:
-            self.real.close()
-
-    def signalled(self: Path, *args: object, **kwargs: object) -> _Signalled:
-        return _Signalled(opened(self, "w", encoding="utf-8"))
-
-    monkeypatch.setattr(Path, "open", signalled)
+    signal_mid_write(monkeypatch)
     with pytest.raises(Terminated):
         write_text(report, "{" + " " * 1000 + "}\n", "--report")
     monkeypatch.undo()

@@ -9,6 +9,7 @@ the limit into EFBIG, a real OS error at the same place as ENOSPC.
 
 from __future__ import annotations
 
+import io
 import resource
 import signal
 import subprocess
@@ -200,12 +201,22 @@ def test_a_signal_mid_write_leaves_no_partial_report(
     """SIGTERM (``Terminated``) while the report is being written: before, the exception went
     through and left the report cut where it landed; now the part is removed, the interruption
     goes on to the CLI (its one line, exit 143)."""
-    import io
-
     from odocan.host.outputs import write_text
     from odocan.sim.exceptions import Terminated
 
     report = tmp_path / "r.json"
+    signal_mid_write(monkeypatch)
+    with pytest.raises(Terminated):
+        write_text(report, "{" + " " * 1000 + "}\n", "--report")
+    monkeypatch.undo()
+    assert not report.exists()
+
+
+def signal_mid_write(monkeypatch: pytest.MonkeyPatch) -> None:
+    """``Path.open`` gives files whose first write puts 100 characters, then raises
+    ``Terminated``: a signal in the middle of writing an output."""
+    from odocan.sim.exceptions import Terminated
+
     opened = Path.open
 
     class _Signalled(io.StringIO):
@@ -225,7 +236,3 @@ def test_a_signal_mid_write_leaves_no_partial_report(
         return _Signalled(opened(self, "w", encoding="utf-8"))
 
     monkeypatch.setattr(Path, "open", signalled)
-    with pytest.raises(Terminated):
-        write_text(report, "{" + " " * 1000 + "}\n", "--report")
-    monkeypatch.undo()
-    assert not report.exists()

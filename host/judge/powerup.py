@@ -9,6 +9,8 @@ after a stall at power-up has the stall's evidence instead (``host.judge.stallpo
 
 from __future__ import annotations
 
+from collections.abc import Collection
+
 import numpy as np
 import numpy.typing as npt
 
@@ -114,17 +116,9 @@ def counted_only_the_log(
         return None
     if "ENC_E2E_OK" not in page or not accepted[page["index"]].any():
         return None
-    keep = accepted[page["index"]]
-    first, ok = int(page["index"][keep][0]), int(page["ENC_E2E_OK"][keep][0])
-    heard = accepted[summary["index"]] & (summary["index"] < first)
-    last = (int(summary["index"][heard][-1]), int(summary["COUNTER"][heard][-1])) \
-        if heard.any() and "COUNTER" in summary else None
-    made = made_at(first, int(page["COUNTER"][keep][0]) if "COUNTER" in page else None, last,
-                   status_counter_modulo(decoder))
+    first, made, counts = _first_count(page, summary, accepted, decoder)
     encoders = decoder.select(frames, "WHEEL_ENCODERS")
     in_log = int(np.count_nonzero(accepted[encoders] & (encoders < made)))
-    lost = int(page["ENC_E2E_LOST"][keep][0]) if "ENC_E2E_LOST" in page else 0
-    counts = {ok, (ok + lost) & 0xFFFF}  # and the frames it lost after the bus carried them
     if in_log & 0xFFFF in counts or pose_named(frames, accepted, decoder, made) in counts:
         return True
     return by_tick and heard_by_tick(frames, accepted, decoder, (first, made)) in counts
@@ -158,23 +152,32 @@ def primed_after(frames: FrameArrays, accepted: npt.NDArray[np.bool_],
     if not len(uptime) or int(uptime[0]) != 0 or not holds_first_cycle(
             int(status["COUNTER"][accepted[status["index"]]][0])):
         return None
+    first, made, counts = _first_count(page, summary, accepted, decoder)
+    encoders = decoder.select(frames, "WHEEL_ENCODERS")
+    in_log = int(np.count_nonzero(accepted[encoders] & (encoders < made)))
+    before_first = int(np.count_nonzero(accepted[encoders] & (encoders < int(heard_status[0]))))
+    by_tick = heard_by_tick(frames, accepted, decoder, (first, made))
+    return primed_by_count(in_log, counts, by_tick, before_first)
+
+
+def _first_count(page: dict[str, np.ndarray], summary: dict[str, np.ndarray],
+                 accepted: npt.NDArray[np.bool_], decoder: BulkDecoder
+                 ) -> tuple[int, int, set[int]]:
+    """The first accepted count page's frame index, the frame it was made at (``made_at``, by
+    the summaries heard before it) and its counts: ENC_E2E_OK, and ENC_E2E_OK + ENC_E2E_LOST
+    (u8; the frames it lost after the bus carried them)."""
     keep = accepted[page["index"]]
-    first = int(page["index"][keep][0])
-    ok = int(page["ENC_E2E_OK"][keep][0])
+    first, ok = int(page["index"][keep][0]), int(page["ENC_E2E_OK"][keep][0])
     lost = int(page["ENC_E2E_LOST"][keep][0]) if "ENC_E2E_LOST" in page else 0
     heard = accepted[summary["index"]] & (summary["index"] < first)
     last = (int(summary["index"][heard][-1]), int(summary["COUNTER"][heard][-1])) \
         if heard.any() and "COUNTER" in summary else None
     made = made_at(first, int(page["COUNTER"][keep][0]) if "COUNTER" in page else None, last,
                    status_counter_modulo(decoder))
-    encoders = decoder.select(frames, "WHEEL_ENCODERS")
-    in_log = int(np.count_nonzero(accepted[encoders] & (encoders < made)))
-    before_first = int(np.count_nonzero(accepted[encoders] & (encoders < int(heard_status[0]))))
-    by_tick = heard_by_tick(frames, accepted, decoder, (first, made))
-    return primed_by_count(in_log, (ok, (ok + lost) & 0xFFFF), by_tick, before_first)
+    return first, made, {ok, (ok + lost) & 0xFFFF}
 
 
-def primed_by_count(in_log: int, counts: tuple[int, int], by_tick: int | None,
+def primed_by_count(in_log: int, counts: Collection[int], by_tick: int | None,
                     before_first: int) -> int | None:
     """``primed_after``'s rule on its counts: the one ``k`` (1 .. ``before_first``) that the
     log's frames before the page (``in_log``) hold beyond a count the firmware made
