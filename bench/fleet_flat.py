@@ -292,6 +292,9 @@ def main() -> int:
     parser.add_argument("--robots", type=int, default=50)
     parser.add_argument("--ticks", type=int, default=600)
     parser.add_argument("--repeat", type=int, default=1)
+    parser.add_argument("--hold-s", type=float, default=None, metavar="S",
+                        help="the bridge's frame hold (fleetrun.HOLD_S; 0: every frame judged "
+                             "as it comes; trees since host.mqtt.framehold)")
     parser.add_argument("--publish-hz", type=float, default=10.0,
                         help="the bridge's pose telemetry rate per robot (FleetRun.publish_hz)")
     parser.add_argument("--firmware", choices=FIRMWARES, default="python",
@@ -306,6 +309,8 @@ def main() -> int:
                              "alternately (a pair per --repeat)")
     args = parser.parse_args()
     fleetrun.TickCollector.every_ticks = args.young_gc_every or 1 << 62
+    if args.hold_s is not None:
+        setattr(fleetrun, "HOLD_S", args.hold_s)  # noqa: B010 (read by run_fleet)
     if args.parts:
         global PARTS
         PARTS = Parts()

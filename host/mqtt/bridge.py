@@ -39,20 +39,23 @@ import time
 from collections import Counter
 from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass, field
+from functools import partial
 from typing import Any
 
 import can
 
 from odocan.host.judge.reference import Geometry
 from odocan.host.mqtt import topics
-from odocan.host.mqtt.broker import BrokerURL, first_error
-from odocan.host.mqtt.clientids import DEFAULT_PREFIX, reader_client_id
+from odocan.host.mqtt.bridgeconfig import BridgeConfig as BridgeConfig  # (its home before)
+from odocan.host.mqtt.broker import first_error
+from odocan.host.mqtt.clientids import reader_client_id
 from odocan.host.mqtt.cmdreader import COMMAND_QUEUE, CommandReader, RobotCommands
 from odocan.host.mqtt.endverdict import EndJudge, EndVerdict
 from odocan.host.mqtt.expiry import Expired, Fresh
+from odocan.host.mqtt.framehold import FrameHold
 from odocan.host.mqtt.link import RobotLink, Verdict
 from odocan.host.mqtt.livecommands import PendingAck
-from odocan.host.mqtt.pacing import ACK_TIMEOUT_S, MAX_QUEUED, WINDOW_FRAMES, CommandPacer
+from odocan.host.mqtt.pacing import CommandPacer
 from odocan.host.mqtt.periodic import publish_in_turns
 from odocan.host.mqtt.stallwatch import StallWatch
 from odocan.host.mqtt.telemetry import Publication, RobotTelemetry
@@ -88,31 +91,6 @@ class RobotEndpoint:
     publish_phase_s: float = 0.0  # its first pose published this long after the first sample
     profile_name: str | None = None  # its robot profile's (--robot), said in a profile mismatch
     from_page: bool = False  # no --robot: the firmware's PROFILE page picks (judge.liverobot)
-
-
-@dataclass(frozen=True)
-class BridgeConfig:
-    """How the bridge publishes (periods in seconds, rates in Hz)."""
-
-    broker: BrokerURL
-    publish_hz: float = 10.0
-    status_period_s: float = 1.0
-    rates_period_s: float = 1.0
-    keepalive_s: int = 5
-    client_prefix: str = DEFAULT_PREFIX
-    queue_batches: int = 1024
-    slice_frames: int = 64  # frames handled in one go before the event loop gets a turn
-    connect_timeout_s: float = 5.0  # the first connection, else BrokerError
-    command_expiry_s: float = 5.0  # a command without its own MQTT v5 expiry, at most this old
-    telemetry_buffer: int = 1000  # QoS-0 publications per robot waiting for the socket
-    reliable_buffer: int = 1000  # QoS-1 publications per robot waiting for their PUBACK
-    # command pacing per robot (``host.mqtt.pacing``): frames un-answered on the bus, the
-    # ODOM_ACK's deadline after a command's last frame, commands waiting beyond the window
-    command_window_frames: int = WINDOW_FRAMES
-    command_ack_timeout_s: float = ACK_TIMEOUT_S
-    command_queue: int = MAX_QUEUED
-    pace_period_s: float = 0.05  # timeouts and expiries of paced commands checked this often
-
 
 
 class _Robot:
@@ -312,6 +290,10 @@ class Bridge:
         self._pending: Batch = []  # the batch being handled, slice by slice (``_consume``)
         self._pending_at = 0  # its first frame not handled yet
         self.stalls = StallWatch(lambda: any(r.link.connected.is_set() for r in self.robots))
+        self.hold = FrameHold(len(self.robots), config.hold_s) if config.hold_s > 0 else None
+        for index, robot in enumerate(self.robots):  # its held frames judged first
+            robot.link.on_command = partial(self._flushed, index, robot.on_command)
+            robot.link.last_status = partial(self._flushed, index, robot.last_status)
 
     @property
     def links(self) -> list[RobotLink]:
@@ -433,15 +415,33 @@ class Bridge:
         self._handle(pending)
         while not self.queue.empty():
             self._handle(self.queue.get_nowait())
+        for index in range(len(self.robots)):
+            self._flush(index)
+
+    def _flush(self, index: int) -> None:
+        """Robot ``index``'s held frames judged now, before its telemetry is read (framehold)."""
+        if self.hold is not None and self.hold.held[index]:
+            self._feed(self.hold.take_robot(index))
+
+    def _flushed(self, index: int, then: Callable[..., Any], *args: Any) -> Any:
+        self._flush(index)
+        return then(*args)
+
+    def _waits(self, index: int, t_s: float) -> bool:
+        return not self.robots[index].pacer.busy and self.robots[index].telemetry.pose_waits(t_s)
 
     def _handle(self, batch: Batch) -> None:
+        """``batch`` counted, held (``hold_s``) or judged (``_feed``)."""
+        self.frames_in += len(batch)
+        self._feed(batch if self.hold is None else self.hold.take(batch, self._waits))
+
+    def _feed(self, batch: Batch) -> None:
         """Feed each frame of ``batch`` to its robot's telemetry, queue what it publishes (and
         the pacer's answers while it is busy). Per frame of every robot: the robot's parts as
         ``_Robot`` holds them (its telemetry's plans: a frame of a DBC message goes to its
         identifier's plan, no ``feed_fields`` call around it), a fleet's ``(t, id, payload)``
         tuple taken apart, not spread (``feed_frame``'s fast path in line)."""
         robots = self.robots
-        self.frames_in += len(batch)
         for index, frame in batch:
             robot = robots[index]
             if robot.signer is not None:
@@ -479,12 +479,14 @@ class Bridge:
                                (self._publish_rates, self._publish_status), clock, sleep)
 
     def _publish_rates(self, index: int, now_s: float) -> None:
+        self._flush(index)
         robot = self.robots[index]
         leaf, payload = robot.telemetry.rates(now_s)
         robot.link.publish(leaf, {**payload, "link": robot.link.counters(),
                                   "pacing": robot.pacer.counters()})
 
     def _publish_status(self, index: int, _now_s: float) -> None:
+        self._flush(index)
         robot = self.robots[index]
         robot.link.publish(*robot.status())
 
@@ -492,7 +494,8 @@ class Bridge:
         """Every ``pace_period_s``: the paced commands' timeouts and expiries, answered."""
         while True:
             await asyncio.sleep(self.config.pace_period_s)
-            for robot in self.robots:
+            for index, robot in enumerate(self.robots):
                 if robot.pacer.busy:
+                    self._flush(index)
                     for leaf, payload in robot.paced([]):
                         robot.link.publish(leaf, payload)

@@ -83,6 +83,7 @@ from odocan.host.mqtt.fleetjudge import (
     watch_halts,
     watched_verdict,
 )
+from odocan.host.mqtt.framehold import HOLD_S
 from odocan.host.mqtt.options import broker_for
 from odocan.host.mqtt.ticktrace import TickTrace, from_env, young_collection
 from odocan.host.protocol.secoc import SecocSigner
@@ -139,7 +140,8 @@ async def run_fleet(
                                 run.max_miss_ratio)
             bridge = Bridge(_endpoints(fleet, run), end_rule=rule, config=BridgeConfig(
                 broker=url, publish_hz=run.publish_hz, client_prefix=run.client_prefix,
-                connect_timeout_s=run.connect_timeout_s, command_expiry_s=run.command_expiry_s))
+                connect_timeout_s=run.connect_timeout_s, command_expiry_s=run.command_expiry_s,
+                hold_s=HOLD_S))  # each robot's frames judged in one go (framehold)
             watch_halts(fleet, [robot.telemetry for robot in bridge.robots])
             if trace is not None:
                 _trace_bridge(trace, bridge)

@@ -351,6 +351,11 @@ class RobotTelemetry(CommandFollowing):
         self.tracker.on_pose_y(int(s[0]), s[1], int(s[2]), int(s[3]), t_s)  # (by position)
         return []
 
+    def pose_waits(self, t_s: float) -> bool:
+        """A sample at bus time ``t_s`` publishes no pose (``_samples``): its frames may be held
+        (``host.mqtt.framehold``); false before the first pose, after the clock went back."""
+        return self._last_pub_t <= t_s < self._last_pub_t + self.publish_period_s - 1e-6
+
     def _samples(self) -> list[Publication]:
         """The on-board samples the tracker settled on this frame: the latest published, at
         most ``publish_hz`` times per second of bus time (its ODOM_POSE_Y's)."""
