@@ -8,7 +8,7 @@ import math
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, NamedTuple
+from typing import Any, NamedTuple, overload
 
 from odocan.firmware.encoders import (
     CTRL_UPTIME_MAX,
@@ -337,6 +337,14 @@ class ErrorStats:
             return None
         return {**self.latest, "max_dpos_m": self.max_dpos_m,
                 "max_dheading_rad": self.max_dheading_rad, "samples": self.samples}
+
+
+@overload
+def pose_dict(pose: FramePose) -> dict[str, float]: ...
+
+
+@overload
+def pose_dict(pose: FramePose | None) -> dict[str, float] | None: ...
 
 
 def pose_dict(pose: FramePose | None) -> dict[str, float] | None:

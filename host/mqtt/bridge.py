@@ -9,26 +9,25 @@ transport queued (``sim.framebatch.Received``: no ``Message`` built per frame):
   this process lost of the bus is ``status``'s ``receive``);
 * from the in-process fleet (``sim.fleet``), the fleet's timer task offers its batches directly.
 
-A full queue drops the batch and counts it (``frames_dropped``): the bus never waits for MQTT.
-The task ``can-frames`` feeds each robot's ``RobotTelemetry`` and queues its publications on the
+A full queue drops the batch and counts it (``frames_dropped``): the bus never waits for MQTT. The
+task ``can-frames`` feeds each robot's ``RobotTelemetry`` and queues its publications on the
 robot's ``RobotLink``, ``slice_frames`` frames at a time with a loop turn between slices (so a
-large fleet's tick never holds the loop for long); ``periodic`` publishes ``status`` and
-``rates``, the robots' turns spread over the period (a robot a turn, up to ``periodic.SLOTS``
-turns a period); each link
-runs its own connection. Commands are validated by the robot's ``CommandEncoder`` and only then
-sent on the robot's bus, paced (``host.mqtt.pacing``: a window of frames un-answered, the rest
-queued); each one is answered on ``cmd/result`` (accepted, rejected with the reason, expired),
-then once more with its end (acked, nacked, expired, rejected, timeout). No frame and no
-command can stop the bridge: a handler that raises anyway is counted (``frames_failed``,
-``commands_failed``) and logged once. ``rates`` carries each link's counters (``link``:
-telemetry dropped, QoS-1 dropped, refused, commands expired, reconnects) and its pacer's
-(``pacing``: commands queued, frames in flight, refused, expired in the queue, timed out,
-aborted). When the bridge stops, every command taken and not answered yet is answered
-``aborted`` (the reason says whether it ran) before the links say ``offline`` and disconnect,
-and a command that arrives meanwhile is answered ``aborted`` too, not sent. With an
-``end_rule`` (``odocan bridge``'s, ``odocan fleet``'s), each robot is judged once its watch ended
-(``host.mqtt.endverdict``) and its ``offline`` status carries that verdict as ``watch_verdict``
-(``end_verdicts``: the same verdicts, for the bridge's lines and exit code).
+large fleet's tick never holds the loop for long); ``periodic`` publishes ``status`` and ``rates``,
+the robots' turns spread over the period (a robot a turn, up to ``periodic.SLOTS`` turns a period);
+each link runs its own connection. Commands are validated by the robot's ``CommandEncoder`` and
+only then sent on the robot's bus, paced (``host.mqtt.pacing``: a window of frames un-answered, the
+rest queued); each one is answered on ``cmd/result`` (accepted, rejected with the reason, expired),
+then once more with its end (acked, nacked, expired, rejected, timeout). No frame and no command
+can stop the bridge: a handler that raises anyway is counted (``frames_failed``,
+``commands_failed``) and logged once. ``rates`` carries each link's counters (``link``: telemetry
+dropped, QoS-1 dropped, refused, commands expired, reconnects) and its pacer's (``pacing``:
+commands queued, frames in flight, refused, expired in the queue, timed out, aborted). When the
+bridge stops, every command taken and not answered yet is answered ``aborted`` (the reason says
+whether it ran) before the links say ``offline`` and disconnect, and a command that arrives
+meanwhile is answered ``aborted`` too, not sent. With an ``end_rule`` (``odocan bridge``'s,
+``odocan fleet``'s), each robot is judged once its watch ended (``host.mqtt.endverdict``) and its
+``offline`` status carries that verdict as ``watch_verdict`` (``end_verdicts``: the same verdicts,
+for the bridge's lines and exit code).
 """
 
 from __future__ import annotations

@@ -381,10 +381,10 @@ class RobotTelemetry(CommandFollowing):
         self, pose: FramePose, ref: FramePose | None, enc: int, counter: int, t_s: float
     ) -> list[Publication]:
         head = {"t_s": t_s, "counter": counter, "enc_counter": enc, "enc_seq": pose.seq}
-        pubs: list[Publication] = [("pose", stamp({**head, **_pose_dict(pose), **self._twist}))]
+        pubs: list[Publication] = [("pose", stamp({**head, **pose_dict(pose), **self._twist}))]
         if ref is None or ref.seq != pose.seq:
             return self._with_truth(pubs, t_s)
-        pubs.append(("reference", stamp({**head, **_pose_dict(ref)})))
+        pubs.append(("reference", stamp({**head, **pose_dict(ref)})))
         vs_ref = difference(pose, ref)
         error: dict[str, Any] = {**head, "pose_vs_reference": vs_ref, "pose_wrong": pose_wrong(
             vs_ref["dpos_m"], vs_ref["dheading_rad"], self.tracker.allowance_m(pose.seq))}
@@ -405,7 +405,7 @@ class RobotTelemetry(CommandFollowing):
         if ref is not None:  # sampled at that very encoder frame (difference: the tracker's)
             self._truth_error = {"enc_seq": ref.seq, **self.tracker.reference_vs_truth.latest}
         self._truth = {"t_s": t_s, "counter": int(s["COUNTER"]), "enc_counter": enc,
-                       "enc_seq": truth.seq, **_pose_dict(truth)}
+                       "enc_seq": truth.seq, **pose_dict(truth)}
         if t_s < self._truth_pub_t:  # the bus clock went back (a restart, a replay): follow it
             self._truth_pub_t = -math.inf
         period_s = self.publish_period_s
@@ -495,11 +495,4 @@ class RobotTelemetry(CommandFollowing):
         drive's status as before)."""
         adopted = self.tracker.adopted.as_dict()
         return {"reference_adopted": adopted} if adopted else {}
-
-
-def _pose_dict(pose: FramePose) -> dict[str, float]:
-    """``x_m``, ``y_m``, ``heading_rad`` in (-pi, pi] and ``heading_unwrapped_rad``."""
-    fields = pose_dict(pose)
-    assert fields is not None
-    return fields
 
