@@ -157,7 +157,21 @@ def primed_after(frames: FrameArrays, accepted: npt.NDArray[np.bool_],
     in_log = int(np.count_nonzero(accepted[encoders] & (encoders < made)))
     before_first = int(np.count_nonzero(accepted[encoders] & (encoders < int(heard_status[0]))))
     by_tick = heard_by_tick(frames, accepted, decoder, (first, made))
-    return primed_by_count(in_log, counts, by_tick, before_first)
+    k = primed_by_count(in_log, counts, by_tick, before_first)
+    return None if k is None or _first_pose_before(frames, accepted, decoder, k) else k
+
+
+def _first_pose_before(frames: FrameArrays, accepted: npt.NDArray[np.bool_],
+                       decoder: BulkDecoder, k: int) -> bool:
+    """Whether the firmware's first pose names an encoder frame before ``k``: then it cannot
+    have primed on ``k`` (a pose names the frame it integrated last, never one before its
+    priming frame). A recorder stamping ODOM_STATUS late (a gateway's 30-50 ms) shifts the
+    count page and its tick bound alike past frames the firmware had counted, so the count says
+    a k it never primed on (tests/test_status_stamped_late.py); its poses are not delayed."""
+    poses = decoder.select(frames, "ODOM_POSE_X")
+    heard = poses[accepted[poses]]
+    named = None if not len(heard) else pose_named(frames, accepted, decoder, int(heard[0]) + 1)
+    return named is not None and named <= k
 
 
 def _first_count(page: dict[str, np.ndarray], summary: dict[str, np.ndarray],
