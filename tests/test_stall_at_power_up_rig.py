@@ -46,6 +46,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import Any
 
 import can
 import pytest
@@ -177,15 +178,7 @@ def test_without_its_first_count_pages_a_wrong_firmware_fails(tmp_path: Path, fr
     messages = _without_first_count_pages(_wrong(_messages(), 0, bias_lsb, from_pose))
     at = max(from_pose, 1)
     assert _gap_m(messages, at)[0] > POSITION_LSB_M  # the float64 evidence
-    path = _written(messages, tmp_path / "wrong.log")
-    analysis = analyze(read_log(path), PMIR, "exact")
-    assert not analysis.passed
-    assert main(["analyze", str(path), "--robot", "pmir", "--integrator", "exact",
-                 "--stream", "always"]) == 1
-    monitor, bridge, end_s = _live(messages)
-    assert monitor.health(end_s)["state"] == "POSE WRONG"
-    assert bridge.tracker.wrongs.as_dict()["episodes"] >= 1
-    assert _end_verdicts(bridge) == ("FAIL", "FAIL")
+    analysis, bridge = _fails_every_judge(messages, tmp_path / "wrong.log")
     if bias_lsb == 10_000:  # the same start as analyze's: the same error
         beyond_m = analysis.report["onboard_vs_reference"]["max_position_error_beyond_allowance_m"]
         assert bridge.tracker.max_beyond_allowance_m == pytest.approx(beyond_m,
@@ -266,16 +259,8 @@ def test_frame_zero_moved_with_its_pages_a_wrong_firmware_fails_every_judge(
     frame it may have primed on, ``analyze`` FAILs it (whole and streamed: the stream judges
     it whole), the live judges too (POSE WRONG, both end verdicts)."""
     messages = frame_zero_moved(_wrong(_messages(), 0, 10_000, from_pose))
-    path = _written(messages, tmp_path / "wrong.log")
-    analysis = analyze(read_log(path), PMIR, "exact")
-    assert not analysis.passed
+    analysis, _ = _fails_every_judge(messages, tmp_path / "wrong.log")
     assert analysis.report["onboard_vs_reference"]["max_position_error_beyond_allowance_m"] > 0.5
-    assert main(["analyze", str(path), "--robot", "pmir", "--integrator", "exact",
-                 "--stream", "always"]) == 1
-    monitor, bridge, end_s = _live(messages)
-    assert monitor.health(end_s)["state"] == "POSE WRONG"
-    assert bridge.tracker.wrongs.as_dict()["episodes"] >= 1
-    assert _end_verdicts(bridge) == ("FAIL", "FAIL")
 
 
 def test_frame_zero_moved_without_a_stall_no_false_fail(tmp_path: Path) -> None:
@@ -298,3 +283,19 @@ def test_frame_zero_moved_without_a_stall_no_false_fail(tmp_path: Path) -> None:
     monitor, bridge, end_s = _live(wrong)
     assert (monitor.health(end_s)["state"], _end_verdicts(bridge)) == ("POSE WRONG",
                                                                         ("FAIL", "FAIL"))
+
+
+def _fails_every_judge(messages: tuple[can.Message, ...], path: Path) -> tuple[Any, Any]:
+    """``messages`` written to ``path``: ``analyze`` FAILs them whole and streamed, the monitor
+    ends POSE WRONG, the bridge latched a wrong episode and both end verdicts FAIL; returns the
+    whole log's analysis and the bridge for the caller's figures."""
+    path = _written(messages, path)
+    analysis = analyze(read_log(path), PMIR, "exact")
+    assert not analysis.passed
+    assert main(["analyze", str(path), "--robot", "pmir", "--integrator", "exact",
+                 "--stream", "always"]) == 1
+    monitor, bridge, end_s = _live(messages)
+    assert monitor.health(end_s)["state"] == "POSE WRONG"
+    assert bridge.tracker.wrongs.as_dict()["episodes"] >= 1
+    assert _end_verdicts(bridge) == ("FAIL", "FAIL")
+    return analysis, bridge
