@@ -50,7 +50,13 @@ from odocan.host.judge.livepose import FramePose
 from odocan.host.judge.livestart import start_reference
 from odocan.host.judge.livewindow import CYCLE_S, window_counts
 from odocan.host.judge.nearthreshold import AFTER_PERIODS, COUNTER_RESET_BIT, SUMMARY_PAGE
-from odocan.host.judge.reprimereplay import Odometry, QuietFrames, Replayed, replayed
+from odocan.host.judge.reprimereplay import (
+    Odometry,
+    QuietFrames,
+    Replayed,
+    replayed,
+    replayed_at_power_up,
+)
 from odocan.host.judge.samples import POSITION_LSB_M
 from odocan.host.judge.stallreprime import FIFO_SPAN, R_SPAN, detail, possible
 
@@ -251,8 +257,9 @@ class ReprimeHold:
         samples = [pose for pose, _, _ in held]
         odometry = Odometry(tracker.geometry, tracker.integrator, tracker.counter_bits)
         recent = window_counts(tracker.window, samples[0].seq - R_SPAN)
-        return replayed(odometry, anchor, self._frozen, recent, samples,
-                        self._power_up or self._primed)
+        if self._power_up:  # primed on frame 0 or 1 (``replayed_at_power_up``)
+            return replayed_at_power_up(odometry, self._frozen, recent, samples)
+        return replayed(odometry, anchor, self._frozen, recent, samples, self._primed)
 
     def _within_reach(self, pose: FramePose, origin: tuple[float, float], reach_m: float
                       ) -> bool:
