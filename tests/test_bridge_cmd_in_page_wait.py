@@ -104,7 +104,8 @@ def test_a_set_pose_sent_in_the_wait_restarts_the_reference_at_the_pose_set() ->
     assert event["encoder_frame"] == start, event  # not "at the next on-board pose"
     assert math.isclose(event["x_m"], X_RAW * 1e-4, abs_tol=1e-12)
     ref = telemetry.tracker.reference
-    assert ref is not None and ref.seq > start + 200
+    assert ref is not None
+    assert ref.seq > start + 200
     x, y, h = expected[ref.seq - start]
     assert math.hypot(ref.x_m - x, ref.y_m - y) < 1e-9
     assert abs(ref.heading_rad - h) < 1e-9

@@ -273,7 +273,11 @@ class _Model(_Judges, Protocol):
 
     status: dict[str, Any]
     events: deque[dict[str, Any]]
-    robot: _Named
+
+    @property
+    def robot(self) -> _Named:
+        """The robot the judges judge with (``liverobot.LiveRobot``)."""
+        ...
 
 
 def take_page(model: _Judges, max_wheel_speed_m_s: float, crc: int) -> RunningProfile:

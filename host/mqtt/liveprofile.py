@@ -28,8 +28,13 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 from odocan.host.judge.livedistance import LiveDistance
 from odocan.host.judge.liverobot import PageWait, decide
-from odocan.host.judge.profilepage import GIVEN_AS, diagnose_profile, profile_crc, take_page
-from odocan.host.judge.profilepage import unbounded_text
+from odocan.host.judge.profilepage import (
+    GIVEN_AS,
+    diagnose_profile,
+    profile_crc,
+    take_page,
+    unbounded_text,
+)
 from odocan.host.judge.reference import INTEGRATORS
 from odocan.host.judge.tracking import PoseTracker
 from odocan.host.mqtt.livecommands import SentFrame
