@@ -101,6 +101,9 @@ def test_the_monitor_keeps_the_default_for_a_custom_profile(logs: dict[str, Path
     assert model.robot.said("odocan monitor") is None
     assert fails, "the odd robot judged as pmir"
     assert "profile hash differs" in model.status["profile_mismatch"]
+    assert ", the default robot pmir 0x" in model.status["profile_mismatch"]  # analyze's words
+    assert "--robot" not in model.status["profile_mismatch"]  # none was given
+    assert model.robot.judged_as() == "; judged as robot 'pmir' (the default robot)"
 
 
 def bridged(log: Path, from_page: bool) -> RobotTelemetry:
@@ -137,7 +140,11 @@ def test_the_bridge_keeps_the_default_for_a_custom_profile(logs: dict[str, Path]
     status = telemetry.status()[1]
     assert status["robot_profile"] == {"name": "pmir", "source": "default", "page_fits": []}
     assert status["profile"]["verdict"] == "MISMATCH"
-    assert end_verdict(telemetry, profile_name="pmir").verdict == "FAIL"
+    assert ", the default robot pmir 0x" in status["profile"]["detail"]  # analyze's words
+    verdict = end_verdict(telemetry, profile_name="pmir")
+    assert verdict.verdict == "FAIL"
+    assert "; judged as robot 'pmir' (the default robot)" in verdict.reason
+    assert "--robot" not in verdict.reason.replace("give --robot", "")  # none was given
 
 
 @pytest.fixture

@@ -15,10 +15,13 @@ import stat
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import pytest
 
+from odocan.host.mqtt.ticktrace import TickTrace
 from odocan.host.outputs import OutputError, write_text
+from odocan.host.report.junit import Check, write_junit
 from odocan.sim.exceptions import Terminated
 from tests.test_partial_output import _limited, signal_mid_write
 
@@ -121,3 +124,51 @@ def test_a_full_disk_with_no_older_file_leaves_none(tmp_path: Path) -> None:
         os._exit(2)
     assert os.waitpid(pid, 0)[1] == 0
     assert list(tmp_path.iterdir()) == []
+
+
+def _junit(path: Path) -> None:
+    write_junit(path, "run", [Check("onboard_vs_reference", False, "x" * 1000)])
+
+
+def _tick_trace(path: Path) -> None:
+    trace = TickTrace(path)
+    trace.rows = [{"k": k, "late_ms": 0.0} for k in range(100)]
+    trace.write()
+
+
+@pytest.mark.parametrize("write", [_junit, _tick_trace])
+def test_a_signal_mid_write_keeps_the_older_junit_and_tick_trace(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, write: Any
+) -> None:
+    """``write_junit`` and the fleet's tick trace (``ODOCAN_TICK_TRACE``) wrote in place: a
+    signal part-way left the older file cut to the new one's first 100 characters."""
+    out = tmp_path / "out.xml"
+    out.write_bytes(OLD)
+    signal_mid_write(monkeypatch)
+    with pytest.raises(Terminated):
+        write(out)
+    monkeypatch.undo()
+    assert out.read_bytes() == OLD
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out.xml"]
+
+
+@pytest.mark.parametrize("write", [_junit, _tick_trace])
+def test_a_full_disk_keeps_the_older_junit_and_tick_trace(tmp_path: Path, write: Any) -> None:
+    """Past RLIMIT_FSIZE (EFBIG, a full disk alike): the older file whole, no part left, one
+    ``OutputError`` (before: the older file cut to the limit, an OSError)."""
+    out = tmp_path / "out.xml"
+    out.write_bytes(OLD)
+    pid = os.fork()
+    if pid == 0:  # a child under the limit, so pytest's own files are not limited
+        _limited()
+        try:
+            write(out)
+        except OutputError as exc:
+            os._exit(0 if "File too large; the partial file removed, the one there before kept"
+                     in str(exc) else 1)
+        except BaseException:
+            os._exit(3)
+        os._exit(2)
+    assert os.waitpid(pid, 0)[1] == 0
+    assert out.read_bytes() == OLD
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out.xml"]

@@ -16,6 +16,7 @@ import resource
 import signal
 import subprocess
 import sys
+import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import can
@@ -84,3 +85,23 @@ def test_a_recording_that_did_not_fail_is_not_in_the_report(tmp_path: Path) -> N
     said = json.loads(report.read_text())
     assert said["passed"] is True
     assert "recording" not in said
+
+
+def test_the_junit_of_a_stopped_recording_fails(tmp_path: Path) -> None:
+    """``--junit`` beside a ``--log`` a full disk stopped: the JUnit said 3 tests, 0 failures
+    (a CI reading it saw a green run) where the JSON said ``passed: false`` and the run exited
+    2; it carries the recording's failure now, a ``recording`` testcase with its figures."""
+    log, junit = tmp_path / "drive.log", tmp_path / "j.xml"
+    done = _run_limited(log, 100_003, "--junit", str(junit))
+    assert done.returncode == 2, done.stderr
+    suite = ET.parse(junit).getroot().find("testsuite")
+    assert suite is not None
+    assert suite.get("failures") == "1"
+    failed = [case for case in suite.findall("testcase") if case.find("failure") is not None]
+    assert [case.get("name") for case in failed] == ["recording"]
+    failure = failed[0].find("failure")
+    assert failure is not None
+    frames = len(list(can.LogReader(log)))
+    assert failure.get("message") == (f"--log {log}: File too large (recording stopped after "
+                                      f"{frames} frames)")
+    assert f"stopped_after_frames = {frames}" in (failure.text or "")

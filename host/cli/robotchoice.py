@@ -36,11 +36,9 @@ from odocan.host.judge.robotsource import DEFAULT as DEFAULT  # one rule, live a
 from odocan.host.judge.robotsource import DEFAULT_ROBOT as DEFAULT_ROBOT
 from odocan.host.judge.robotsource import FROM_PAGE as FROM_PAGE
 from odocan.host.judge.robotsource import GIVEN as GIVEN
+from odocan.host.judge.robotsource import GIVEN_AS as GIVEN_AS
 from odocan.sim import robot
 from odocan.sim.robot import RobotProfile
-
-GIVEN_AS = {GIVEN: "--robot", FROM_PAGE: "its PROFILE page's robot",
-            DEFAULT: "the default robot"}  # a mismatch line's name for where the robot came from
 
 
 @dataclass(frozen=True)

@@ -26,7 +26,7 @@ from odocan.host.judge.livedistance import LiveDistance, robot_of
 from odocan.host.judge.livetwist import LiveTwist
 from odocan.host.judge.profilepage import PROFILE_PAGE, RunningProfile, shipped_robots
 from odocan.host.judge.reference import Geometry
-from odocan.host.judge.robotsource import DEFAULT, DEFAULT_ROBOT, FROM_PAGE, GIVEN
+from odocan.host.judge.robotsource import DEFAULT, DEFAULT_ROBOT, FROM_PAGE, GIVEN, GIVEN_AS
 from odocan.host.judge.tracking import PoseTracker
 from odocan.host.protocol.busfacts import ENC_COUNTER_MASK
 from odocan.host.protocol.e2e import crc8h2f_p02_one, e2e_messages
@@ -64,9 +64,16 @@ class LiveRobot:
             return None
         return f"{prefix}: robot {self.profile.name!r} (from the firmware's PROFILE page)"
 
+    @property
+    def given_as(self) -> str:
+        """How a mismatch line names the robot, as ``analyze``'s (``robotchoice.GIVEN_AS``):
+        ``(--robot)`` only when it was given (a defaulted pmir once read "not 'pmir' (--robot)"
+        with no --robot on the command line)."""
+        return GIVEN_AS[self.source]
+
     def judged_as(self) -> str:
         """``; judged as robot 'NAME' (SOURCE)``, beside a wrong pose."""
-        why = "from the firmware's PROFILE page" if self.source == FROM_PAGE else "--robot"
+        why = "from the firmware's PROFILE page" if self.source == FROM_PAGE else self.given_as
         return f"; judged as robot {self.profile.name!r} ({why})"
 
 

@@ -49,7 +49,7 @@ NM_PER_M = 1_000_000_000
 GIVEN_AS = "--robot"  # how a mismatch names the robot the log is judged with, given
 HEAD_FRAMES = 1 << 13  # frames of a streamed log's head read for the page (~23 s of the rig's bus)
 UNBOUNDED = ("the firmware's PROFILE page gives max wheel speed 0 (no bound: a firmware in "
-             "FAULT?); the judges keep {kept_m_s:g} m/s (the last page's bound, else --robot "
+             "FAULT?); the judges keep {kept_m_s:g} m/s (the last page's bound, else {given_as} "
              "{name}'s)")
 
 
@@ -178,13 +178,14 @@ def profile_mismatch(
     said = diagnose_profile(running, given, integrator, given_as)
     texts = [] if said is None else [said.text]
     if running is not None and not running.bounded:
-        texts.insert(0, unbounded_text(given, given.max_wheel_speed_mm_s))
+        texts.insert(0, unbounded_text(given, given.max_wheel_speed_mm_s, given_as))
     return "; ".join(texts) or None
 
 
-def unbounded_text(given: RobotProfile, kept_mm_s: int) -> str:
-    """``UNBOUNDED`` said for ``given`` (``--robot``), the judges keeping ``kept_mm_s``."""
-    return UNBOUNDED.format(kept_m_s=kept_mm_s / MM_PER_M, name=given.name)
+def unbounded_text(given: RobotProfile, kept_mm_s: int, given_as: str = GIVEN_AS) -> str:
+    """``UNBOUNDED`` said for ``given`` (``--robot``; named ``given_as``), the judges keeping
+    ``kept_mm_s``."""
+    return UNBOUNDED.format(kept_m_s=kept_mm_s / MM_PER_M, name=given.name, given_as=given_as)
 
 
 def diagnose_profile(
@@ -258,11 +259,25 @@ class _Judges(Protocol):
     distance: LiveDistance
 
 
+class _Named(Protocol):
+    """How the monitor's robot is named in a mismatch (``liverobot.LiveRobot``)."""
+
+    @property
+    def given_as(self) -> str:
+        """``--robot``, ``the default robot`` or ``its PROFILE page's robot``."""
+        ...
+
+
 class _Model(_Judges, Protocol):
     """What ``follow_profile`` needs of ``host.judge.monitor.BusMonitor``."""
 
     status: dict[str, Any]
     events: deque[dict[str, Any]]
+
+    @property
+    def robot(self) -> _Named:
+        """The robot the judges judge with (``liverobot.LiveRobot``)."""
+        ...
 
 
 def take_page(model: _Judges, max_wheel_speed_m_s: float, crc: int) -> RunningProfile:
@@ -294,10 +309,11 @@ def follow_profile(model: _Model, t_s: float, max_wheel_speed_m_s: float, crc: i
     model.status.update(profile_crc=shown, max_wheel_speed_m_s=kept_mm_s / MM_PER_M)
     reported = str(model.status.get("integrator", "")).lower()  # the firmware's own: a judge's
     integrator = reported if reported in INTEGRATORS else tracker.integrator or "exact"  # choice
-    found = diagnose_profile(running, model.distance.robot, integrator)  # is no mismatch
+    found = diagnose_profile(running, model.distance.robot, integrator,  # is no mismatch
+                             model.robot.given_as)  # (the default robot): analyze's words
     texts = [] if found is None else [found.text]
     if not running.bounded:
-        texts.insert(0, unbounded_text(model.distance.robot, kept_mm_s))
+        texts.insert(0, unbounded_text(model.distance.robot, kept_mm_s, model.robot.given_as))
     said = "; ".join(texts) or None
     model.status["profile_mismatch"] = said
     if said is not None:

@@ -12,7 +12,7 @@ from __future__ import annotations
 import contextlib
 from collections import deque
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 from cantools.database.can import Database
 from cantools.database.errors import DecodeError
@@ -30,6 +30,7 @@ from odocan.host.mqtt.dbcnames import choice, named_value
 from odocan.host.mqtt.topics import RESULT_LEAF, stamp
 
 if TYPE_CHECKING:
+    from odocan.host.judge.liverobot import PageWait
     from odocan.host.mqtt.liveprofile import ProfileStatus
     from odocan.host.mqtt.liveroutes import Route
 
@@ -37,6 +38,14 @@ Publication = tuple[str, dict[str, Any]]
 COMMANDS = ("ODOM_SET_POSE", "ODOM_CONFIG", "NAV_GOAL", "ODOM_AUTH")  # the bridge sends these
 FOLLOWED = ("ODOM_SET_POSE", "ODOM_CONFIG", "ODOM_AUTH")  # its own followed when sent
 ECHO_FRAMES = 32  # own command frames kept for their echo (``_echo``)
+
+
+class SentFrame(NamedTuple):
+    """A command frame the bridge sent while its frames wait for the PROFILE page: followed
+    when they are judged, in their order (``command_sent``)."""
+
+    can_id: int
+    data: bytes
 
 
 @dataclass
@@ -60,6 +69,7 @@ class CommandFollowing:
     twist: LiveTwist
     events: deque[dict[str, Any]]
     profile: ProfileStatus
+    robot_wait: PageWait[Any] | None
 
     @property
     def firmware(self) -> dict[str, Any]:
@@ -148,7 +158,14 @@ class CommandFollowing:
 
     def command_sent(self, can_id: int, data: bytes) -> None:
         """A command frame the bridge itself sent, followed now (``FOLLOWED``), and kept for
-        its echo should its bus loop it back (``_echo``)."""
+        its echo should its bus loop it back (``_echo``). While frames wait for the PROFILE
+        page (``host.judge.liverobot``) it waits with them, followed after those heard before
+        it: followed now, its APPLY took effect after encoder frame -1 of judges then replaced
+        (the reference adopted the next on-board pose, the pose set never checked, the kept
+        check not made)."""
+        if self.robot_wait is not None and self.robot_wait.held:
+            self.robot_wait.held.append(SentFrame(can_id, data))
+            return
         route = self._routes.get(can_id)
         if route is None or route.name not in COMMANDS:
             return

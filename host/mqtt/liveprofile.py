@@ -28,9 +28,16 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 from odocan.host.judge.livedistance import LiveDistance
 from odocan.host.judge.liverobot import PageWait, decide
-from odocan.host.judge.profilepage import diagnose_profile, profile_crc, take_page, unbounded_text
+from odocan.host.judge.profilepage import (
+    GIVEN_AS,
+    diagnose_profile,
+    profile_crc,
+    take_page,
+    unbounded_text,
+)
 from odocan.host.judge.reference import INTEGRATORS
 from odocan.host.judge.tracking import PoseTracker
+from odocan.host.mqtt.livecommands import SentFrame
 from odocan.host.mqtt.liveplan import plans
 from odocan.sim.robot import MM_PER_M
 
@@ -54,11 +61,13 @@ class _Robot(Protocol):
 class ProfileStatus:
     """One robot's PROFILE page judged (module docstring); ``section`` is its ``status`` entry."""
 
-    def __init__(self, profile_name: str | None = None) -> None:
+    def __init__(self, profile_name: str | None = None, given_as: str = GIVEN_AS) -> None:
         """``profile_name``: the name of the robot profile the bridge runs (``--robot``), said
-        in the mismatch; None: the robot's own name."""
+        in the mismatch; None: the robot's own name. ``given_as``: how the mismatch names it,
+        as ``analyze`` does (``the default robot`` when no --robot was given)."""
         self.section: dict[str, Any] | None = None
         self._profile_name = profile_name
+        self._given_as = given_as
         self._crc: int | None = None  # the page judged last
 
     def forget(self) -> None:
@@ -76,11 +85,11 @@ class ProfileStatus:
         if self._profile_name is not None:
             given = dataclasses.replace(given, name=self._profile_name)
         integrator = _integrator(robot)
-        said = diagnose_profile(running, given, integrator)
+        said = diagnose_profile(running, given, integrator, self._given_as)
         kept_mm_s = robot.tracker.geometry.max_wheel_speed_mm_s  # the page's, unless it gave none
         texts = [] if said is None else [said.text]
         if not running.bounded:
-            texts.insert(0, unbounded_text(given, kept_mm_s))
+            texts.insert(0, unbounded_text(given, kept_mm_s, self._given_as))
         self.section = {
             "verdict": "OK" if said is None else "MISMATCH",
             "profile_crc": f"0x{crc:08X}",
@@ -113,11 +122,14 @@ def judge_waited(telemetry: RobotTelemetry) -> list[Publication]:
     if wait is None:
         return []
     held = decide(telemetry, wait, name=telemetry.name)
-    telemetry.profile = ProfileStatus(telemetry.robot.profile.name)
+    telemetry.profile = ProfileStatus(telemetry.robot.profile.name, telemetry.robot.given_as)
     telemetry.plans.update(plans(telemetry, telemetry._routes))  # the bridge's own dict
     published: list[Publication] = []
-    for t_s, can_id, data, extended in held:
-        published += telemetry.feed_fields(t_s, can_id, data, extended)
+    for item in held:
+        if isinstance(item, SentFrame):  # the bridge's own command, in its place (livecommands)
+            telemetry.command_sent(*item)
+        else:
+            published += telemetry.feed_fields(*item)
     return published
 
 

@@ -167,12 +167,12 @@ class RobotTelemetry(CommandFollowing):
         self.events = self.tracker.restarts.events = deque[dict[str, Any]](maxlen=STATUS_EVENTS)
         self._init_commands()  # set-poses, configs, the ACKs awaited (host.mqtt.livecommands)
         self.reboots = 0
-        self.profile = ProfileStatus(profile_name)  # ODOM_STATUS PROFILE vs these parameters
         self.stretches: HaltStretches | None = None  # an overloaded fleet's (host.mqtt.overload)
         # per 11-bit identifier (host.mqtt.liveplan): ``plans[id](t_s, data)`` is
         # ``feed_fields(t_s, id, data, False)`` (the bridge calls it without that call)
         self.robot = LiveRobot(robot_of(profile_name or name, geometry, counter_bits),
                                DEFAULT if from_page else GIVEN)  # odocan's DBC: the page picks
+        self.profile = ProfileStatus(profile_name, self.robot.given_as)  # ODOM_STATUS PROFILE
         self.robot_wait = PageWait[Any](self.db) if from_page and db is None else None
         self.plans = plans(self, self._routes) if self.robot_wait is None else {}
         self._ended = False  # ``end_watch`` ran

@@ -29,6 +29,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from odocan.host.outputs import replaced
 from odocan.sim.realtime import DeadlineStats
 
 ENV = "ODOCAN_TICK_TRACE"
@@ -103,9 +104,11 @@ class TickTrace:
         self._end_wall, self._end_cpu, self._end_proc = wall, cpu, proc
 
     def write(self) -> None:
-        """The rows to ``path``, one JSON object a line (the folder made if needed)."""
+        """The rows to ``path``, one JSON object a line (the folder made if needed), in full or
+        not at all (``host.outputs.replaced``: written in place, a full disk or a signal part-way
+        cut an older trace); a failed write is one ``OutputError`` naming the path."""
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        with self.path.open("w") as out:
+        with replaced(self.path, ENV) as target, target.open("w", encoding="utf-8") as out:
             for row in self.rows:
                 out.write(json.dumps(row) + "\n")
 

@@ -5,8 +5,9 @@
 * ``analysis_checks(report)``: the two checks behind ``run``/``analyze``/``replay``'s verdict
   (on-board vs float64 reference, position and heading, against the tolerance), plus the
   replay's own comparison with the logged firmware when the report has it, each set-pose
-  APPLY's check of the fields it kept (``set_pose_kept``), and a failed
-  ``completed`` when a signal stopped the command before it finished (``host.stopped``).
+  APPLY's check of the fields it kept (``set_pose_kept``), a failed
+  ``completed`` when a signal stopped the command before it finished (``host.stopped``), and a
+  failed ``recording`` when a write error (a full disk) stopped ``--log``.
 * ``umbmark_checks``/``calibration_checks``/``experiment_checks``: the figures of the benchmark
   and, when the report carries a verdict (``passed``, ``faults``), a ``verdict`` testcase that
   fails with its reasons.
@@ -82,10 +83,22 @@ def analysis_checks(report: dict[str, Any]) -> list[Check]:
     stopped = report.get("stopped")
     if stopped:  # a signal ended it before what it was asked: that is no pass
         checks.append(Check("completed", False, stopped_text(stopped), dict(stopped)))
+    checks += _recording_check(report.get("recording"))
     if not report.get("passed") and all(check.passed for check in checks):
         checks.append(Check("verdict", False, "the command's verdict is FAIL",
                             {"reasons": report.get("faults")}))
     return checks
+
+
+def _recording_check(recording: object) -> list[Check]:
+    """A failed ``recording`` testcase when a write error stopped ``--log`` (the report's
+    ``recording``: the JSON says ``passed: false``, the run exits 2): without it the JUnit read
+    0 failures, a green CI page for a log holding part of the run."""
+    if not isinstance(recording, dict):
+        return []
+    said = (f"--log {recording.get('path')}: {recording.get('error')} (recording stopped after "
+            f"{recording.get('stopped_after_frames')} frames)")
+    return [Check("recording", False, said, dict(recording))]
 
 
 def _within(name: str, value: float | None, limit: float, unit: str) -> Check:

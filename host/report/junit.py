@@ -51,5 +51,9 @@ def junit_xml(suite: str, checks: list[Check], *, time_s: float = 0.0,
 
 
 def write_junit(path: Path, suite: str, checks: list[Check], *, time_s: float = 0.0) -> None:
-    """Write ``junit_xml(...)`` to ``path`` (UTF-8)."""
-    path.write_text(junit_xml(suite, checks, time_s=time_s), encoding="utf-8")
+    """Write ``junit_xml(...)`` to ``path`` (UTF-8) in full or not at all, as ``--junit``
+    (``host.outputs.write_text``: it wrote in place, and a full disk or a signal part-way cut
+    an older file there); a failed write is one ``OutputError`` naming the path."""
+    from odocan.host.outputs import write_text
+
+    write_text(path, junit_xml(suite, checks, time_s=time_s), "--junit")

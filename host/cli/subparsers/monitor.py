@@ -195,7 +195,7 @@ def _do_monitor(args: argparse.Namespace) -> int:
 
 def _say_failures(args: argparse.Namespace, model: BusMonitor, profile: robot.RobotProfile) -> bool:
     """Print the watch's FAIL lines (and the PROFILE page's mismatch) on stderr; whether any."""
-    judged_as = (f"{model.robot.judged_as()}{_robot_hint(args, profile)}"
+    judged_as = (f"{model.robot.judged_as()}{_robot_hint(args, profile, model.robot.given_as)}"
                  if model.tracker.wrongs.count else "")  # (the hint reads the whole --log)
     fails = failures(model.tracker, model.distance, model.twist, model.sources, judged_as)
     if args.require_firmware and (why := nothing_judged(  # judged nothing: no pass (CI)
@@ -213,9 +213,10 @@ def _say_failures(args: argparse.Namespace, model: BusMonitor, profile: robot.Ro
     return bool(fails)
 
 
-def _robot_hint(args: argparse.Namespace, profile: robot.RobotProfile) -> str:
+def _robot_hint(args: argparse.Namespace, profile: robot.RobotProfile, given_as: str) -> str:
     """With ``--log``: ``; robot mismatch: ...`` when the heard poses fit another shipped
-    profile and not ``profile`` (a firmware set up for another robot reads as wrong)."""
+    profile and not ``profile`` (a firmware set up for another robot reads as wrong), named
+    ``given_as`` (``liverobot.LiveRobot.given_as``)."""
     if args.log is None:
         return ""
     from odocan.host.io.logs import read_log
@@ -227,7 +228,7 @@ def _robot_hint(args: argparse.Namespace, profile: robot.RobotProfile) -> str:
     except OdocanError:
         return ""
     integrator = args.integrator or logged_integrator(heard) or "exact"
-    hint = robot_mismatch(heard, profile, integrator, Tolerance())
+    hint = robot_mismatch(heard, profile, integrator, Tolerance(), given_as)
     return "" if hint is None else "; " + hint.replace("the log's poses", "the heard poses")
 
 
