@@ -32,7 +32,18 @@ it boots 5 ms before the tick it primes in). Before the summary the two cannot b
 (an old pose at (0, 0, 0) followed by its COUNTER 1 and 2 reads as a power-up pose whose summary
 was stamped 45 ms late); naming the old pose's frame started the life 5 frames early, its page
 of counts no longer proved the power-up and its start was fitted (issue #11: a fitted start
-can absorb a constant offset). One rule for the whole log (``reboots``), the streamed
+can absorb a constant offset).
+
+Nor has it a word when the first pose heard after the summary (its CRC holding, less than
+``BOOT_WINDOW_S`` after it) does not count on from it (``counts_on``): a life's pose of COUNTER c
+names a frame at most ``ENC_FRAMES_PER_POSE`` x c encoder COUNTER steps after its power-up
+pose's (one pose every other encoder frame; a frame it lost makes it fewer), or none comes.
+The bus lost the new firmware's first pose frames and the latest pose of COUNTER 0 at (0, 0, 0)
+was the old firmware's, 2..6 frames before the new one primed: a robot standing at its origin,
+set moving, its MCU reset (a brown-out at motor start). Naming the old pose's frame put the
+robot's first steps into the reference, never into the firmware's pose: a correct firmware
+FAILed by 8..24 mm (issue #11, ``tests/test_reboot_lost_powerup.py``); the other rules name the
+frame then. One rule for the whole log (``reboots``), the streamed
 (``stream_lives``) and the live judges (``tracking.PoseTracker.power_up``).
 """
 
@@ -47,6 +58,7 @@ import numpy.typing as npt
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.bootticks import BOOT_WINDOW_S, POSE_MESSAGE
 from odocan.host.judge.powerup import NAMED_SPAN
+from odocan.host.protocol import busfacts
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.protocol.e2e import crc8h2f_p02, e2e_messages
 
@@ -54,6 +66,11 @@ from odocan.host.protocol.e2e import crc8h2f_p02, e2e_messages
 # for one that reads no power-up pose (module docstring)
 NO_WORD = -1
 PowerUpPoses = tuple[npt.NDArray[np.int64], npt.NDArray[np.float64], npt.NDArray[np.int64]]
+# (log positions, bus times s, E2E COUNTERs, ENC_COUNTERs) of every pose whose CRC holds
+PoseRows = tuple[npt.NDArray[np.int64], npt.NDArray[np.float64], npt.NDArray[np.int64],
+                 npt.NDArray[np.int64]]
+ENC_FRAMES_PER_POSE = (busfacts.POSE_CYCLE_MS // busfacts.POSE_FRAMES_PER_CYCLE
+                       // busfacts.ENC_CYCLE_MS)  # 2: encoder frames from one pose to the next
 
 
 def is_powerup_pose(counter: int, x_raw: float, heading_raw: float) -> bool:
@@ -94,6 +111,43 @@ def powerup_poses(frames: FrameArrays, decoder: BulkDecoder, offset: int = 0) ->
             named[keep].astype(np.int64))
 
 
+def pose_enc_rows(frames: FrameArrays, decoder: BulkDecoder, offset: int = 0) -> PoseRows:
+    """Every ODOM_POSE_X of ``frames`` whose CRC holds (whatever its sequence): positions (plus
+    ``offset``), bus times, E2E COUNTERs and ENC_COUNTERs (``counts_on``); empty without them."""
+    empty = (np.zeros(0, np.int64), np.zeros(0, np.float64), np.zeros(0, np.int64),
+             np.zeros(0, np.int64))
+    try:
+        rows = decoder.decode(frames, POSE_MESSAGE)
+    except (DecodeError, KeyError):
+        return empty
+    if not {"COUNTER", "ENC_COUNTER"} <= rows.keys() or not len(rows["index"]):
+        return empty
+    keep = _crc_holds(frames, decoder, rows["index"])
+    return (rows["index"][keep].astype(np.int64) + offset,
+            rows["timestamp_s"][keep].astype(np.float64), rows["COUNTER"][keep].astype(np.int64),
+            rows["ENC_COUNTER"][keep].astype(np.int64))
+
+
+def counts_on(counter: int, enc_steps: int) -> bool:
+    """Whether a pose of E2E COUNTER ``counter`` naming a frame ``enc_steps`` ENC_COUNTER steps
+    (mod 16) after the one a power-up pose named is of that pose's life (module docstring)."""
+    most = ENC_FRAMES_PER_POSE * counter
+    return counter > 0 and most <= busfacts.ENC_COUNTER_MASK and enc_steps <= most
+
+
+def first_after(rows: PoseRows, position: int, t_s: float, named_enc: int) -> bool | None:
+    """``counts_on`` of the first pose of ``rows`` after the summary at log ``position``, bus
+    time ``t_s``, from a power-up pose that named ENC_COUNTER ``named_enc``: False when it came
+    ``BOOT_WINDOW_S`` after the summary or later; None when ``rows`` end before it."""
+    at, times, counters, encs = rows
+    k = int(np.searchsorted(at, position, side="right"))
+    if k == len(at):
+        return None
+    if not 0.0 <= float(times[k]) - t_s < BOOT_WINDOW_S:
+        return False
+    return counts_on(int(counters[k]), (int(encs[k]) - named_enc) & busfacts.ENC_COUNTER_MASK)
+
+
 def pose_before(poses: PowerUpPoses, position: int, t_s: float) -> tuple[int, int] | None:
     """The power-up pose a summary at log ``position`` and bus time ``t_s`` follows: the latest
     of ``poses`` before it, heard less than ``BOOT_WINDOW_S`` before it (its position and
@@ -117,14 +171,20 @@ def named_frame(encoders: tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]], p
 
 
 def named_start(poses: PowerUpPoses, encoders: tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]],
-                position: int, t_s: float) -> int | None:
+                position: int, t_s: float, after: PoseRows | None = None
+                ) -> tuple[int, int] | None:
     """The encoder frame the firmware whose boot summary (UPTIME 0) is at log ``position``, bus
-    time ``t_s``, primed on, as its power-up pose names it (module docstring); None when no
-    power-up pose precedes it in the window or the log lacks the frame it names."""
+    time ``t_s``, primed on, as its power-up pose names it, and that pose's ENC_COUNTER (module
+    docstring); None when no power-up pose precedes it in the window, the log lacks the frame it
+    names, or (``after``: the log's poses) the first pose after the summary does not count on
+    from it (``first_after``; a stream tells that later)."""
     pose = pose_before(poses, position, t_s)
     if pose is None or restarted_after(poses, position, t_s):
         return None
-    return named_frame(encoders, *pose)
+    if after is not None and not first_after(after, position, t_s, pose[1]):
+        return None
+    frame = named_frame(encoders, *pose)
+    return None if frame is None else (frame, pose[1])
 
 
 def restarted_after(poses: PowerUpPoses, position: int, t_s: float) -> bool:
@@ -151,10 +211,13 @@ def _crc_holds(frames: FrameArrays, decoder: BulkDecoder, rows: npt.NDArray[np.i
 
 class LivePowerUp:
     """``named_start`` live (the monitor's and the bridge's tracker): the latest power-up pose
-    heard, when and the encoder frame (the tracker's seq) it names among those heard before it."""
+    heard, when and the encoder frame (the tracker's seq) it names among those heard before it;
+    after a summary took it (``named_seq``), whether the first pose after counts on from it."""
 
     def __init__(self) -> None:
-        self.latest: tuple[float, int | None] | None = None  # bus time s, named seq
+        self.latest: tuple[float, int | None, int] | None = None  # bus time s, named seq, ENC
+        self.told: tuple[float, int] | None = None  # the summary that took it: bus time s, ENC
+        self.counted: bool | None = None  # its first pose after (``first_after``); None: none yet
 
     def heard(self, counter: int, x: float, heading: float, enc_counter: int, t_s: float,
               rows: Sequence[Sequence[float]]) -> None:
@@ -162,13 +225,17 @@ class LivePowerUp:
         ENC_COUNTER, bus time s); ``rows``: the encoder frames heard before it (seq, place,
         COUNTER, ...: ``livewindow.ENC_COLUMNS``). One of COUNTER 0 that reads no power-up pose
         voids the one before (module docstring)."""
+        if self.told is not None and self.counted is None:  # the first pose after the summary
+            summary_s, named_enc = self.told
+            self.counted = 0.0 <= t_s - summary_s < BOOT_WINDOW_S and counts_on(
+                counter, (enc_counter - named_enc) & busfacts.ENC_COUNTER_MASK)
         if counter != 0:
             return
         if not is_powerup_pose(counter, x, heading):
-            self.latest = (t_s, None)
+            self.latest = (t_s, None, enc_counter)
             return
         tail = [row for row in list(rows)[-NAMED_SPAN:] if int(row[2]) == enc_counter]
-        self.latest = (t_s, int(tail[-1][0]) if tail else None)
+        self.latest = (t_s, int(tail[-1][0]) if tail else None, enc_counter)
 
     def heard_raw(self, signals: dict[str, Any], t_s: float,
                   rows: Sequence[Sequence[float]]) -> None:
@@ -179,7 +246,22 @@ class LivePowerUp:
 
     def named_seq(self, summary_s: float) -> int | None:
         """The encoder frame (seq) the power-up pose heard less than ``BOOT_WINDOW_S`` before
-        a boot summary heard at bus time ``summary_s`` names; None when none."""
+        a boot summary heard at bus time ``summary_s`` names; None when none. Its word holds
+        once the first pose after the summary counts on from it (``corroborated``)."""
+        self.told, self.counted = None, None
         if self.latest is None or not 0.0 <= summary_s - self.latest[0] < BOOT_WINDOW_S:
             return None
+        if self.latest[1] is not None:
+            self.told = (summary_s, self.latest[2])
         return self.latest[1]
+
+    @property
+    def waits_next(self) -> bool:
+        """Whether the next pose heard is wanted whatever its COUNTER (``corroborated``)."""
+        return self.told is not None and self.counted is None
+
+    @property
+    def corroborated(self) -> bool:
+        """Whether the first pose after the summary that took the power-up pose counted on from
+        it (``first_after``); False while none came."""
+        return bool(self.counted)

@@ -74,6 +74,7 @@ class Lives:
         self.boot: tuple[int, float] | None = None  # after a reboot: primed guess, wait until
         self.boot_poses: list[FramePose] = []  # the new life's samples while it waits
         self.boot_named = False  # ``boot``'s frame named by its power-up pose (``bootnamed``)
+        self.boot_unnamed = -1  # ... the guess without it (its first pose after not counting on)
         self.held: dict[int, Sample] = {}  # ... as settled (unjudged), by encoder frame
         self.pending: FramePose | None = None  # the first pose, heard before the integrator
         self.backlog_counts: list[Counted] = []  # the frames since the pending pose's
@@ -117,18 +118,23 @@ class Lives:
     def drop_backlog(self) -> None:
         self.pending, self.backlog_counts, self.backlog_poses = None, [], []
 
-    def await_boot(self, guess: int, now_s: float, named: bool = False) -> None:
+    def await_boot(self, guess: int, now_s: float, unnamed: int | None = None) -> None:
         """A reboot: the new life's samples wait for the frame it primed on (``guess`` until
-        its first count page names it; ``named``: its power-up pose named it, ``bootnamed``,
-        the page's word not taken over it) up to ``BOOT_COUNT_WAIT_S`` after ``now_s``."""
+        its first count page names it) up to ``BOOT_COUNT_WAIT_S`` after ``now_s``;
+        ``unnamed``: its power-up pose named ``guess`` (``bootnamed``), the page's word not
+        taken over it once the first pose after the summary counted on from it, else this."""
         self.boot = (guess, now_s + BOOT_COUNT_WAIT_S)
-        self.boot_named = named
+        self.boot_named = unnamed is not None
+        self.boot_unnamed = guess if unnamed is None else unnamed
         self.boot_poses, self.held = [], {}
 
     def expire(self) -> None:
         """The wait for the count page is over: start without it."""
         assert self.boot is not None
-        self.finish_boot(self.boot[0]) if self.boot[0] >= 0 else self.finish_first(False)
+        if self.boot[0] < 0:
+            self.finish_first(False)
+        else:
+            self.finish_boot(self.boot[0] if self._named() else self.boot_unnamed)
 
     def on_counts(self, ok: int, lost: int, proven: bool) -> None:
         """``PoseTracker.on_enc_counts``' start: the page ends a wait, or proves a power-up."""
@@ -140,12 +146,16 @@ class Lives:
             self.finish_boot(self.primed_late, first_life=True)
         elif boot is not None and boot[0] < 0:  # the first life's samples wait
             self.finish_first(proven)
-        elif boot is not None and self.boot_named:
+        elif boot is not None and self._named():
             self.finish_boot(boot[0])
         elif boot is not None and (at := primed_at(tracker.window, ok, lost)) is not None:
             self.finish_boot(at)
         elif proven and not started and tracker.integrator is not None:
             self.finish_boot(0, first_life=True)  # the samples judged before keep their errors
+
+    def _named(self) -> bool:
+        """Whether the waiting boot's frame is its power-up pose's word (``await_boot``)."""
+        return self.boot_named and self._tracker.powerup.corroborated
 
     def finish_boot(self, primed: int, first_life: bool = False) -> None:
         """Start the new life's reference at (0, 0, 0) at encoder frame ``primed`` (seq), judge

@@ -27,7 +27,9 @@ frame (``Life.boot``), with E2E sequences starting afresh (a reboot is not frame
   all say 0) and is checked again on the life (``host.judge.powerup.saw_only_the_log``);
 * above both, when the summary (UPTIME 0) follows the new firmware's power-up pose within 80 ms,
   the frame that pose names (``host.judge.bootnamed``): the two rules above read ODOM_STATUS
-  stamps, which a recorder may have delayed (every one 15..50 ms late: 1..5 frames late).
+  stamps, which a recorder may have delayed (every one 15..50 ms late: 1..5 frames late);
+  not when the first pose after the summary does not count on from it (the bus lost the new
+  power-up pose: the one named was the old firmware's, ``bootnamed.first_after``).
 * except when the new firmware stalled before its first pose (``stalled_first``): its count page
   misses the frames its halted MCU's FIFO overran, so the summary's rule stands.
 
@@ -55,7 +57,7 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
-from odocan.host.judge.bootnamed import named_start, powerup_poses
+from odocan.host.judge.bootnamed import named_start, pose_enc_rows, powerup_poses
 from odocan.host.judge.bootticks import ahead_ticks, boot_ticks, poses_before, status_before
 from odocan.host.judge.breaks import merged_breaks
 from odocan.host.judge.gapseen import crc_holds
@@ -94,15 +96,16 @@ def split_lives(frames: FrameArrays, decoder: BulkDecoder) -> list[Life]:
     keep = accepted[rows["index"]]
     encoders, counters = rows["index"][keep], rows["COUNTER"][keep].astype(np.int64)
     pages = _encoder_count_pages(frames, decoder)
-    poses = powerup_poses(frames, decoder)
+    poses, after = powerup_poses(frames, decoder), pose_enc_rows(frames, decoder)
     starts: list[int] = []
     limits = [b[0] for b in boots[1:]] + [len(frames)]
     for (position, uptime_s, state, _), limit in zip(boots, limits, strict=True):
         start = _life_start(position, uptime_s, state, encoders)
         counted = (None if stalled_first(frames, decoder, encoders, position, limit)
                    else _counted_start(position, limit, (encoders, counters), pages))
-        named = (named_start(poses, (encoders.astype(np.int64), counters), position,
-                             float(frames.timestamp_s[position])) if uptime_s == 0 else None)
+        said = (named_start(poses, (encoders.astype(np.int64), counters), position,
+                            float(frames.timestamp_s[position]), after) if uptime_s == 0 else None)
+        named = None if said is None else said[0]
         for found in (counted, named):  # the power-up pose's word last: not stamp-bound
             if found is not None and found > (starts[-1] if starts else 0):
                 start = found

@@ -303,7 +303,7 @@ def pose_frame(watch: SourceWatch, message: Message, data: bytes, e2e: Any, t_s:
         counter = pose_heard(data, e2e.data_ids if e2e is not None else None)
         if counter is not None and message.name == POSE_MESSAGE:
             watch.hear_pose(t_s, counter)
-            if counter == 0 and tracker is not None:
+            if tracker is not None and (counter == 0 or tracker.powerup.waits_next):
                 tracker.powerup.heard_raw(_plain_decoder(message)(data), t_s,
                                           tracker.window.rows)
         elif counter is not None:

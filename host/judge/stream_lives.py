@@ -29,11 +29,14 @@ from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.bootnamed import (
     PowerUpPoses,
     carried_on,
+    first_after,
     named_start,
     no_powerup_poses,
+    pose_enc_rows,
     powerup_poses,
 )
 from odocan.host.judge.bootticks import (
+    BOOT_WINDOW_S,
     boot_ahead,
     continues_summary,
     pose_rows,
@@ -72,6 +75,8 @@ class _Boot:
     before_s: int
     start: int  # from the summary (``reboots._life_start``)
     named: int | None = None  # named by its power-up pose (``bootnamed.named_start``)
+    naming: tuple[int, int] | None = None  # ... and its ENC_COUNTER, until the first pose after
+    # the summary tells whether it counts on from it (``bootnamed.first_after``)
     paged: bool = False  # its first count page was heard (its start from it: ``counted``)
     counted: int | None = None  # ``primed.counted_start`` of that page
     talked_s: float | None = None  # its last ODOM_STATUS (CRC holding) before its first pose
@@ -110,6 +115,7 @@ class StreamLives:
     # reboot if that tells one, whether it broke the status sequence, whether its pose left it
     # to the next summary; the chunk's events after it wait with it (``_deferred``)
     _deferred: list[tuple[int, _Boot | tuple[int, int]]] = field(default_factory=list)
+    _naming: list[_Boot] = field(default_factory=list)  # reboots whose ``naming`` is not told
 
     def feed(self, chunk: FrameArrays, accepted: npt.NDArray[np.bool_]) -> None:
         """Take the next chunk's accepted encoder frames, reboots and count pages."""
@@ -123,6 +129,7 @@ class StreamLives:
                                     powerup_poses(chunk, self.decoder, self._offset))
         events = sorted(self._deferred + self._boot_events(chunk) + self._page_events(chunk),
                         key=lambda event: event[0])
+        self._corroborate(chunk)
         self._track(chunk)
         waits = self._ahead[0].position if self._ahead is not None else None
         self._deferred = [] if waits is None else [e for e in events if e[0] > waits]
@@ -132,6 +139,23 @@ class StreamLives:
         self._counters = self._counters[-ENCODERS_KEPT:]
         self._enc_t = self._enc_t[-ENCODERS_KEPT:]
         self._offset += len(chunk)
+
+    def _corroborate(self, chunk: FrameArrays) -> None:
+        """The reboots whose power-up pose named a frame (``_Boot.naming``) and the chunk's first
+        pose after their summary: ``named`` when it counts on from that pose; none when it does
+        not, or the chunk ends ``BOOT_WINDOW_S`` after the summary with no pose after it
+        (``bootnamed.first_after``, the whole log's rule); else told by a later chunk."""
+        if not self._naming:
+            return
+        rows = pose_enc_rows(chunk, self.decoder, self._offset)
+        end_s = float(chunk.timestamp_s[-1]) if len(chunk) else -np.inf
+        for boot in self._naming:
+            assert boot.naming is not None
+            counted = first_after(rows, boot.position, boot.t_s, boot.naming[1])
+            if counted is None and end_s - boot.t_s < BOOT_WINDOW_S:
+                continue
+            boot.named, boot.naming = (boot.naming[0] if counted else None), None
+        self._naming = [b for b in self._naming if b.naming is not None]
 
     def _run(self, events: list[tuple[int, _Boot | tuple[int, int]]]) -> None:
         """Reboots and count pages in log order."""
@@ -314,8 +338,9 @@ class StreamLives:
         start = int(earlier[-1]) if uptime_s == 0 and name != "INIT" and len(earlier) else at
         named = (named_start(self._powerups, (self._encoders, self._counters), at, t_s)
                  if uptime_s == 0 else None)
-        boot = _Boot(at, uptime_s, t_s, before, start, named)
+        boot = _Boot(at, uptime_s, t_s, before, start, naming=named)
         self._tracking.append(boot)
+        self._naming += [boot] if named is not None else []
         return boot
 
     def _ahead_posed(self, rows: tuple[npt.NDArray[np.int64], npt.NDArray[np.float64],

@@ -376,8 +376,11 @@ class PoseTracker:
             return
         named = self.powerup.named_seq(self.now_s)  # its power-up pose's word (bootnamed)
         latest = self.enc_seq if seq is None else seq
-        guess = named if named is not None else latest if primed_now else latest + 1
-        self.lives.await_boot(guess, self.now_s, named=named is not None)
+        unnamed = latest if primed_now else latest + 1
+        if named is None:
+            self.lives.await_boot(unnamed, self.now_s)
+        else:  # its word once the next pose counts on from it (bootnamed)
+            self.lives.await_boot(named, self.now_s, unnamed)
 
     def new_life(self) -> None:
         """A new firmware life (a reboot): the reference starts again at the next pose, and

@@ -274,7 +274,7 @@ class RobotTelemetry(CommandFollowing):
         if route.name == POSE_MESSAGE:
             if (counter := pose_heard(data, self._pose_ids.data_ids)) is not None:
                 self.sources.hear_pose(t_s, counter)
-                if counter == 0:  # (bootnamed: the E2E check may refuse a new life's)
+                if counter == 0 or self.tracker.powerup.waits_next:  # (bootnamed)
                     self.tracker.powerup.heard_raw(route.signals(data), t_s,
                                                    self.tracker.window.rows)
             return
