@@ -144,6 +144,7 @@ from odocan.host.judge.reboots import (
 from odocan.host.judge.reference import PROFILE_SPEED, Geometry, SpeedBound
 from odocan.host.judge.reference_path import build_reference, firmware_steps, restart_detail
 from odocan.host.judge.reportfacts import covered_s, frame_counts, realtime, robot_dict
+from odocan.host.judge.reprimecount import power_up_lost
 from odocan.host.judge.resent import worst_sent
 from odocan.host.judge.samples import (
     HEADING_LSB_RAD,
@@ -355,6 +356,7 @@ def _analyze_life(
     ref_all = build_reference(enc, onboard, robot, integrator, power_up=power_up,
                          max_wheel_speed_mm_s=max_wheel_speed_mm_s, breaks=stalls,
                          slack_m=tolerance.position_m, start_pose=start_pose,
+                         reprime_lost=power_up_lost(frames, accepted, decoder, enc, stalls),
                          seen=(seen := chosen_seen(  # an evidenceless ambiguous gap
                              enc, onboard, Geometry.of(robot), integrator,
                              e0=0 if power_up or start_pose is not None else int(onboard.enc[0]),

@@ -85,6 +85,7 @@ def build_reference(
     slack_m: float = POSITION_LSB_M,
     start_pose: tuple[float, float, float] | None = None,
     seen: Seen = NOTHING,
+    reprime_lost: dict[int, int] | None = None,
 ) -> Reference:
     """Integrate the encoder deltas from the first on-board sample on; the position placed
     again after gaps and after the stalls' ``breaks`` (within ``breaks.bound_offsets``' bound,
@@ -92,7 +93,8 @@ def build_reference(
     ``start_pose``: the exact start at the first encoder frame (x m, y m, heading rad: a
     set-pose's, ``host.judge.setposes``), as at power-up. ``seen``: what the firmware's E2E pages
     prove it took (``host.judge.gapseen``): a gap it missed too, a stall over which it took
-    exactly the log's frames, is placed with no allowance."""
+    exactly the log's frames, is placed with no allowance. ``reprime_lost``: the re-primes'
+    ENC_E2E_LOST by break (``reprimecount.power_up_lost``)."""
     bits = min(robot.counter_bits, WIRE_COUNTER_BITS)
     exact_at_first = power_up or start_pose is not None
     e0 = 0 if exact_at_first else int(onboard.enc[0])  # at power-up: pose 0 at the first frame
@@ -107,7 +109,7 @@ def build_reference(
     at = onboard.enc - e0
     reprimes = stall_reprimes(declared_stalls(breaks, enc, e0, seen.resets, least_of(
         geometry, bits, max_wheel_speed_mm_s)), onboard, e0, (rel_x, rel_y, rel_h), start_pose or (
-        (0.0, 0.0, 0.0) if power_up else None))  # stallreprime: re-primed where it said
+        (0.0, 0.0, 0.0) if power_up else None), reprime_lost)  # stallreprime: as it said
     if reprimes:
         left_out(d_left, d_right, reprimes)
         rel = integrate(d_left, d_right, geometry, integrator)

@@ -40,6 +40,7 @@ from typing import Any
 import numpy as np
 
 from odocan.host.judge.nearthreshold import COUNTER_RESET_BIT, Resets
+from odocan.host.judge.reprimecount import kept_pairs
 from odocan.host.judge.samples import (
     HEADING_LSB_RAD,
     POSITION_LSB_M,
@@ -124,12 +125,15 @@ def declared_stalls(breaks: IntArray | None, enc: Encoders, e0: int, resets: Res
 
 def stall_reprimes(declared: dict[int, float], onboard: Poses, e0: int,
                    rel: tuple[FloatArray, FloatArray, FloatArray],
-                   start: tuple[float, float, float] | None) -> dict[int, Reprime]:
+                   start: tuple[float, float, float] | None,
+                   lost: dict[int, int] | None = None) -> dict[int, Reprime]:
     """Per declared stall (``declared_stalls``, frames from ``e0``) the pair (f, r) chosen
     (module docstring), from the reference's path from the start (``rel``: x, y m, heading rad
     per frame from e0, the fine steps) and the on-board samples; ``start``: the exact start
-    pose at e0 (power-up, set-pose), None when fitted. A stall without samples after it, or
-    without a sample or an exact start before it, is left to the exact rule."""
+    pose at e0 (power-up, set-pose), None when fitted; ``lost``: per stall's break (absolute
+    frame) the first count page's ENC_E2E_LOST that pins its pairs (``reprimecount``). A stall
+    without samples after it, or without a sample or an exact start before it, is left to the
+    exact rule."""
     at = onboard.enc - e0
     out: dict[int, Reprime] = {}
     for b, stall_s in sorted(declared.items()):
@@ -146,7 +150,8 @@ def stall_reprimes(declared: dict[int, float], onboard: Poses, e0: int,
         if len(after) == 0:
             continue
         pair = _chosen(b, int(at[after[0]]), anchor, rel, (
-            at[after], onboard.x_m[after], onboard.y_m[after], onboard.heading_rad[after]))
+            at[after], onboard.x_m[after], onboard.y_m[after], onboard.heading_rad[after]),
+            (lost or {}).get(b + e0))
         if pair is not None:
             out[b] = Reprime(pair[0], pair[1], stall_s)
     return out
@@ -154,32 +159,33 @@ def stall_reprimes(declared: dict[int, float], onboard: Poses, e0: int,
 
 def _chosen(b: int, first: int, anchor: tuple[int, float, float, float],
             rel: tuple[FloatArray, FloatArray, FloatArray],
-            samples: tuple[IntArray, FloatArray, FloatArray, FloatArray]
-            ) -> tuple[int, int] | None:
+            samples: tuple[IntArray, FloatArray, FloatArray, FloatArray],
+            lost: int | None = None) -> tuple[int, int] | None:
     """The pair (f, r) whose re-primed path, placed on the ``anchor`` (frame from e0, its
     on-board x, y, heading), ends nearest the ``samples`` after (frames from e0, x, y,
     heading), in LSBs (the worst sample's position plus heading); ``first``: the first of
-    them."""
+    them; ``lost``: ENC_E2E_LOST, the pairs it allows only (``reprimecount.kept_pairs``)."""
     rx, ry, rh = rel
     k0, ax, ay, ah = anchor
     turn0 = ah - float(rh[k0])
     cos0, sin0 = math.cos(turn0), math.sin(turn0)
     at, on_x, on_y, on_h = samples
     best: tuple[float, int, int] | None = None
-    for f in range(b - 1, min(b - 1 + FIFO_SPAN, first - 1) + 1):
-        for r in range(max(f + 1, first - R_SPAN), first + 1):
-            left = float(rh[r] - rh[f])  # the turn the re-prime left out
-            c, s = math.cos(-left), math.sin(-left)
-            dx, dy = rx[at] - rx[r], ry[at] - ry[r]
-            px = rx[f] - rx[k0] + c * dx - s * dy
-            py = ry[f] - ry[k0] + s * dx + c * dy
-            ex = ax + cos0 * px - sin0 * py - on_x
-            ey = ay + sin0 * px + cos0 * py - on_y
-            eh = wrap_pi(turn0 + rh[at] - left - on_h)
-            score = float(np.max(np.hypot(ex, ey) / POSITION_LSB_M
-                                 + np.abs(eh) / HEADING_LSB_RAD))
-            if best is None or score < best[0]:
-                best = (score, f, r)
+    pairs = [(f, r) for f in range(b - 1, min(b - 1 + FIFO_SPAN, first - 1) + 1)
+             for r in range(max(f + 1, first - R_SPAN), first + 1)]
+    for f, r in kept_pairs(pairs, lost):
+        left = float(rh[r] - rh[f])  # the turn the re-prime left out
+        c, s = math.cos(-left), math.sin(-left)
+        dx, dy = rx[at] - rx[r], ry[at] - ry[r]
+        px = rx[f] - rx[k0] + c * dx - s * dy
+        py = ry[f] - ry[k0] + s * dx + c * dy
+        ex = ax + cos0 * px - sin0 * py - on_x
+        ey = ay + sin0 * px + cos0 * py - on_y
+        eh = wrap_pi(turn0 + rh[at] - left - on_h)
+        score = float(np.max(np.hypot(ex, ey) / POSITION_LSB_M
+                             + np.abs(eh) / HEADING_LSB_RAD))
+        if best is None or score < best[0]:
+            best = (score, f, r)
     return None if best is None else (best[1], best[2])
 
 
