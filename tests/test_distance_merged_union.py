@@ -19,9 +19,8 @@ The live judges (``livedistance``) gave the stall the fine path since the last t
 before it, read from the encoder frames they keep (64): after 3 s those were gone and the
 allowance unbounded, so a DISTANCE 20 m short from the stall on PASSed the monitor and the
 bridge. Now the path at the last twist judged is kept: 5 m short FAILs them. Their allowance
-there is still 3.1 m (the stall's path and, added on top, the ENC_E2E_OK span's whole path:
-``liveskip`` applies it to the twists waiting for its page, so it is not in a union; looser,
-never tighter).
+there was then still 3.1 m (the stall's path and, added on top, the ENC_E2E_OK span's whole
+path); it is the union now (``liveunion``, ``tests/test_live_distance_union.py``).
 """
 
 from __future__ import annotations

@@ -6,15 +6,19 @@ Per accepted encoder frame the firmware's step (its own ``livepose.StepGate``: r
 counter restarts) adds |dS| rounded to 2^-40 m to an exact int sum, as the whole-log judge does,
 with the same slack (``distance.base_slack``: the wire's 0.5 mm, 2^-39 m a frame, 2^-48 m a
 count) and the same gap allowance above (the firmware may have taken a gap's frames one by one:
-``distance.gap_extra_m``). Below: after a stall the tracker tells (the firmware merged the frames
-it missed) the fine path since the last sample; after a stall before the first pose
-(``livefirst``) the fine path from the frame the firmware could first have primed on (from the
-life's first frame once that left: looser by the path between); after an ODOM_STATUS page whose
-ENC_E2E_LOST grew (the firmware lost frames: merged steps) the fine path since the page before;
-where its
-ENC_E2E_OK grew by less than the frames the host took (a jittered capture: the host's E2E took
-frames the firmware refused) ``skipdefect``'s allowance, as ``analyze`` gives it: a twist is
-judged once the page after its frame is heard (``host.judge.liveskip``).
+``distance.gap_extra_m``). Below, the fine path over the union of the spans whose frames the
+firmware may have merged, each frame once (``host.judge.liveunion``, as ``analyze``'s
+``distance.merged_path_m``): a stall the tracker tells (the last sample's frame to the first
+judged after it); a stall before the first pose (``livefirst``: from the frame the firmware
+could first have primed on, from the life's first frame once that left: looser by the path
+between); an ODOM_STATUS page whose ENC_E2E_LOST grew (the page before's latest frame to its
+own); a span where ENC_E2E_OK grew by more than ``skipdefect.MAX_RUN`` less than the frames the
+host took. Where it grew by fewer less (a jittered capture: the host's E2E took frames the
+firmware refused), ``skipdefect``'s defect allowance, as ``analyze`` gives it. A twist is judged
+once the page after its frame is heard (``host.judge.liveskip``), with the spans known then.
+Summed span by span (before), a 3 s stall mid-drive let DISTANCE fall 3.09 m from the last
+twist before it to the first judged after, where ``analyze`` lets it fall 1.52 m: a DISTANCE
+2.3 m short PASSed live.
 
 A sample (ODOM_TWIST) names its encoder frame by the tracker's rule for a pose half
 (``samples.match_encoder`` over its window: the sender's steps, the age bound, the held and
@@ -46,6 +50,7 @@ from odocan.host.judge.distance import (
 from odocan.host.judge.livepose import RestartLog, StepGate
 from odocan.host.judge.liveresent import may_alias_live
 from odocan.host.judge.liveskip import WAIT_FRAMES, LiveSkips
+from odocan.host.judge.liveunion import MergedSpans
 from odocan.host.judge.livewindow import HALF_WINDOW, Columns
 from odocan.host.judge.reference import PROFILE_SPEED, Geometry, SpeedBound
 from odocan.host.judge.samples import SILENCE_CYCLES
@@ -112,18 +117,22 @@ class LiveDistance:
         self._running = -1  # the largest frame named
         self._judged_last = False  # the last twist was judged (a resend of it is too)
         self._last_twist: tuple[float, int] = (math.nan, 0)  # bus time, frames heard before
-        self._lower_m = 0.0
+        self._union = MergedSpans()  # the spans whose frames may be merged (liveunion)
+        self._merged = (-1, 0)  # the last twist judged: its path, the union's growth to it
+        # lossy pages' spans, for the twists heard after them: twists heard before, span
+        self._lossy: list[tuple[int, tuple[int, int, int, int]]] = []
         self._last_units = 0  # the path at the last frame judged (``_last_e``)
         self._stalls = -1
-        self._page_units: int | None = None
+        self._page: tuple[int, int] | None = None  # the last ENC_E2E page: latest frame, path
         self._lost: int | None = None
         self._r0: float | None = None
         self._feasible: Feasible | None = None
         self._zero = Feasible(0.0, 0.0)  # the same samples judged from 0 at the first frame
         self._wrong = False
         self._skips = LiveSkips()  # ENC_E2E_OK grown by less than the frames taken (liveskip)
-        # twists waiting for the page after their frame: frame, (judge, lo, hi, up, down) mm
-        self._waiting: list[tuple[int, list[tuple[Feasible, float, float, float, float]]]] = []
+        # twists waiting for the page after their frame: frame, its path, (judge, lo, hi, up) mm
+        self._waiting: list[tuple[int, int, list[tuple[Feasible, float, float, float]]]] = []
+        self._queued = self._judged = 0  # twists queued, judged (``_lossy``)
         self.first_seq: int | None = None
         self.power_up = False  # the first life, heard from the firmware's power-up
 
@@ -152,6 +161,8 @@ class LiveDistance:
                              c + abs(d_left) + abs(d_right), up)
         frames[seq] = sums
         frames.pop(seq - KEPT_FRAMES, None)
+        if seq >= self._union.want:  # a span's end: the frame after a page (liveskip's)
+            self._union.on_frame(seq, sums[0])
         if self._waiting and self._waiting[0][0] <= seq - WAIT_FRAMES:  # no page came for them
             self._take_waiting(seq - WAIT_FRAMES)
 
@@ -169,11 +180,16 @@ class LiveDistance:
             if self._feasible is not None:  # judged from 0 all along, as the whole log is
                 self._zero.excess_mm = max(self._zero.excess_mm, self._feasible.excess_mm)
                 self._feasible, self._r0 = self._zero, 0.0
-        units = self._sums[0]
-        if self._lost is not None and (lost - self._lost) % 256 and self._page_units is not None:
-            self._lower_m += (units - self._page_units) / UNITS_PER_M
-        self._lost, self._page_units = lost, units
-        self._skips.on_page(ok, tracker.enc_seq)
+        seq, units = tracker.enc_seq, self._sums[0]
+        if self._lost is not None and (lost - self._lost) % 256 and self._page is not None:
+            self._lossy.append((self._queued, (*self._page, seq, units)))
+        self._lost, page_before, self._page = lost, self._page, (seq, units)
+        self._skips.on_page(ok, seq)
+        for first, end in self._skips.merged:  # past MAX_RUN frames skipped: the fine path
+            start = page_before if page_before and page_before[0] == first else None
+            self._union.add(first, start[1] if start else self._frames.get(first, (0,))[0],
+                            end, None)
+        self._skips.merged.clear()
         self._take_waiting(self._skips.covered)
 
     def on_twist(self, tracker: PoseTracker, enc_counter: int, raw_mm: int, t_s: float,
@@ -200,11 +216,11 @@ class LiveDistance:
         if self._stalls >= 0 and tracker.stall.stalls > self._stalls and self._last_e >= 0:
             # merged since the last sample (its path kept: a 3 s stall outlives the frames
             # kept, and the allowance was unbounded, a DISTANCE 20 m short then PASSed)
-            self._lower_m += (at[0] - self._last_units) / UNITS_PER_M
+            self._union.add(self._last_e, self._last_units, e, at[0])
         elif self._last_e < 0 and (primed := tracker.first.stalled_from) is not None \
                 and self.first_seq is not None and primed >= self.first_seq:
             before = self._frames.get(primed)  # a stall before the first pose (livefirst):
-            self._lower_m += (at[0] - (before[0] if before else 0)) / UNITS_PER_M  # merged since
+            self._union.add(primed, before[0] if before else 0, e, at[0])  # merged since
         self._stalls, self._last_e, self._last_units = tracker.stall.stalls, e, at[0]
         units, n, c, up = at
         diff = raw_mm - units * (1000.0 / UNITS_PER_M)
@@ -215,22 +231,29 @@ class LiveDistance:
         base = WIRE_SLACK_MM + 1e3 * (n * STEP_SLACK_M + c * COUNT_SLACK_M)
         takes = []
         if self._feasible is not self._zero:  # a power-up proven later (a page held back)
-            takes.append((self._zero, r - base, r + base, 1e3 * up, 1e3 * self._lower_m))
+            takes.append((self._zero, r - base, r + base, 1e3 * up))
         r0 = self._r0 or 0.0
         r = r0 + (r - r0) - WIRE_MM * round((r - r0) / WIRE_MM)
-        takes.append((self._feasible, r - base, r + base, 1e3 * up, 1e3 * self._lower_m))
-        self._waiting.append((e, takes))  # judged once a page covers its frame (liveskip)
+        takes.append((self._feasible, r - base, r + base, 1e3 * up))
+        self._waiting.append((e, units, takes))  # judged once a page covers its frame (liveskip)
         self.samples += 1
+        self._queued += 1
 
     def _take_waiting(self, upto: float) -> None:
         """Judge the twists waiting whose frame is ``upto`` or before, in order, with the
-        allowance of the spans ``liveskip`` knows at their frame."""
+        allowance below known at their frame: the union of the merged spans (``liveunion``)
+        and ``liveskip``'s defects."""
         k = 0
         while k < len(self._waiting) and self._waiting[k][0] <= upto:
-            e, takes = self._waiting[k]
-            skip_mm = 1e3 * self._skips.allowance_m(e)
-            for judge, lo, hi, up_mm, down_mm in takes:
-                judge.take_one(lo, hi, up_mm, down_mm + skip_mm)
+            e, units, takes = self._waiting[k]
+            while self._lossy and self._lossy[0][0] <= self._judged:  # heard after the page:
+                self._union.add(*self._lossy.pop(0)[1])  # the twists before it judged without
+            self._judged += 1
+            since, grown = self._merged
+            self._merged = (units, grown + self._union.grown_units(since, e, units))
+            down_mm = 1e3 * (self._merged[1] / UNITS_PER_M + self._skips.allowance_m(e))
+            for judge, lo, hi, up_mm in takes:
+                judge.take_one(lo, hi, up_mm, down_mm)
             k += 1
         del self._waiting[:k]
 

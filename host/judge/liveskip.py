@@ -9,9 +9,12 @@ a frame it merged its step with the next: its path grows by |sum dS_i| instead o
 Its ENC_E2E_OK shows it: between two ENC_E2E pages it grew by n less than the host's accepted
 frames. The span is (the page before's latest frame, this page's latest frame], the steps into
 its frames and the one after; its allowance at frame j is n times the largest defect
-sum |dS_i| - |sum dS_i| of up to n + 1 consecutive steps there ending at or before j (the fine
-path since the span's first frame past ``MAX_RUN`` skipped), summed over the spans, in whole
-2^-40 m as ``skipdefect`` sums them.
+sum |dS_i| - |sum dS_i| of up to n + 1 consecutive steps there ending at or before j, summed
+over the spans, in whole 2^-40 m as ``skipdefect`` sums them. Past ``MAX_RUN`` skipped, the
+span's fine path (its first frame to the one after its last) bounds it: such a span is handed
+to the judge (``merged``) for the union of the spans whose frames may be merged
+(``liveunion``), as ``analyze`` puts it in ``distance.merged_path_m``'s union, not summed here
+(a stall's frames lie in it, the stall's span and the lossy page's too).
 
 A span is known only when its closing page is heard, after the twists naming its frames: the
 judge waits with a twist (``LiveDistance``) until a page covers its frame (``covers``), or until
@@ -49,6 +52,7 @@ class LiveSkips:
         self.covered = -1  # the latest frame a page was heard after
         self._spans: list[tuple[int, int, int]] = []  # (first, last, n) still growing
         self._done_units = 0  # the allowance of spans ended (n times their largest defect)
+        self.merged: list[tuple[int, int]] = []  # spans past MAX_RUN (first, end): the caller's
 
     def on_step(self, seq: int, signed_m: float) -> None:
         """Frame ``seq`` (the next one) and the firmware's signed step into it (m): kept as it
@@ -100,7 +104,9 @@ class LiveSkips:
         if self._page is not None:
             ok_before, seq_before = self._page
             fewer = (seq - seq_before) - (ok - ok_before) % OK_WRAP
-            if fewer > 0:
+            if fewer > MAX_RUN:  # its fine path: a span of the judge's union (liveunion)
+                self.merged.append((seq_before, seq + 1))
+            elif fewer > 0:
                 self._spans.append((seq_before, seq, fewer))
         self._page = (ok, seq)
 
