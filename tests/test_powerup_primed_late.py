@@ -185,8 +185,8 @@ def test_status_stamped_late_live_starts_where_analyze_does(
     verdict = "PASS" if analysis.passed else "FAIL"
     assert _end_verdicts(bridge) == (verdict, verdict)
     assert (monitor.health(end_s)["state"] == "POSE WRONG") == (not analysis.passed)
-    for tracker in (monitor.tracker, bridge.tracker):
-        started = tracker.raw.started
+    for tracker in (monitor.tracker, bridge.tracker):  # (the correct firmware's first pose
+        started = tracker.raw.started  # reads (0, 0, 0) on frame 2: fitted or taken alike)
         assert started is not None
         assert (started[:4] == (k, 0.0, 0.0, 0.0)) == bool(taken)
 
