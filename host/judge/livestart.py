@@ -12,7 +12,7 @@ from odocan.host.judge.liveadopted import UNHEARD_BOOT
 from odocan.host.judge.livefit import LiveFit
 from odocan.host.judge.liveplacing import place_reference
 from odocan.host.judge.livepose import FramePose, Sample
-from odocan.host.judge.livewindow import Counted, primed_at, window_counts
+from odocan.host.judge.livewindow import Counted, first_named_before, primed_at, window_counts
 from odocan.host.judge.reference import ReferenceOdometry
 
 if TYPE_CHECKING:
@@ -80,7 +80,8 @@ class Lives:
         self.backlog_counts: list[Counted] = []  # the frames since the pending pose's
         self.backlog_poses: list[FramePose] = []
         self.power_up_proven = False  # the first life's first page proved a power-up at 0
-        self.primed_late: int | None = None  # ... or at this frame (``powerup.primed_after``)
+        self.primed_late: int | None = None  # ... or at this frame by its count, taken unless
+        # the first pose names one before it (``powerup.primed_after``: ``first_named_before``)
 
     def waits(self, pose: FramePose, now_s: float) -> bool:
         """Whether the on-board ``pose`` waits for its life's start (a boot's frame, the
@@ -137,13 +138,17 @@ class Lives:
             self.finish_boot(self.boot[0] if self._named() else self.boot_unnamed)
 
     def on_counts(self, ok: int, lost: int, proven: bool) -> None:
-        """``PoseTracker.on_enc_counts``' start: the page ends a wait, or proves a power-up."""
+        """``PoseTracker.on_enc_counts``' start: the page ends a wait, or proves a power-up; the
+        first life's samples start from (0, 0, 0) on the frame its first count page says it
+        primed on (``primed_late``) unless its first pose names a frame before it, as
+        ``powerup.primed_after`` vetoes it (a recorder stamping ODOM_STATUS late)."""
         boot, tracker = self.boot, self._tracker
         started = self.power_up_proven  # by the stall (``livefirst``): not started again
         self.power_up_proven |= proven  # (``livefirst``: also when no frame was heard yet)
         if boot is not None and boot[0] < 0 and self.primed_late is not None \
-                and tracker.integrator is not None:  # primed on frame k: from (0, 0, 0) there
-            self.finish_boot(self.primed_late, first_life=True)
+                and tracker.integrator is not None and not first_named_before(
+                    tracker.pairs.halves["x"], tracker.window, self.primed_late):
+            self.finish_boot(self.primed_late, first_life=True)  # from (0, 0, 0) on frame k
         elif boot is not None and boot[0] < 0:  # the first life's samples wait
             self.finish_first(proven)
         elif boot is not None and self._named():

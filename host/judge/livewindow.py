@@ -11,6 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from odocan.host.judge.powerup import NAMED_SPAN
 from odocan.host.judge.primed import counted_start
 from odocan.host.judge.samples import (
     QUEUED_GAP_CYCLES,
@@ -151,6 +152,11 @@ class Columns:
         self.rows.append(row)
         self._count += 1
         self._unflushed.append(row)  # copied into ``_data`` when a column is read
+
+    @property
+    def holds_first(self) -> bool:
+        """The window still holds the first row ever appended (fewer than ``size`` since)."""
+        return self._count <= self.size
 
     @property
     def whole(self) -> bool:
@@ -317,3 +323,23 @@ def primed_at(window: Columns, ok: int, lost: int) -> int | None:
     seqs = window.col("seq").astype(np.int64)
     return counted_start((seqs, window.col("counter").astype(np.int64)), int(seqs[-1]) + 1,
                          ok, lost)
+
+
+def first_named_before(halves: Columns, window: Columns, primed: int) -> bool:
+    """``powerup._first_pose_before`` live: whether the first pose half heard (``halves``: the
+    ODOM_POSE_X halves) names an encoder frame before seq ``primed`` (its ENC_COUNTER: the
+    latest of the last ``NAMED_SPAN`` frames heard before it with that COUNTER, as
+    ``powerup.named_count``), so the firmware cannot have primed there (a recorder stamping
+    ODOM_STATUS late overcounts the count page: ``tests/test_status_stamped_late.py``). False
+    when it names none (``analyze`` then takes the count too); True when it cannot be told: no
+    half heard yet, or the windows no longer hold it or the frames before it (then the count's
+    frame is not taken, the start stays fitted)."""
+    if not len(halves) or not halves.holds_first:
+        return True
+    pos, named = halves.col("pos")[0], halves.col("enc_counter")[0]
+    before = np.flatnonzero(window.col("pos") < pos)[-NAMED_SPAN:]
+    seqs = window.col("seq")
+    if len(before) < NAMED_SPAN and not window.holds_first:  # frames before it forgotten
+        return True
+    hits = before[window.col("counter")[before] == named]
+    return bool(len(hits)) and int(seqs[hits[-1]]) < primed

@@ -34,6 +34,7 @@ from odocan.host.judge.livegapseen import heard_status
 from odocan.host.judge.powerup import (
     NAMED_SPAN,
     holds_first_cycle,
+    primed_by_count,
     same_tick,
     tick_bound_s,
 )
@@ -124,12 +125,12 @@ class SourceWatch:
                                STATUS_CYCLE_MS)
         by_tick = None if bound_s is None else heard_before_live(tracker, bound_s, heard[0])
         spanned = (ok + int(signals.get("ENC_E2E_LOST", 0))) & 0xFFFF  # accepted or lost
-        # ``powerup.primed_after`` (the firmware primed on frame k) is not taken live yet: a
-        # recorder stamping ODOM_STATUS 50 ms late shifts the count past frames the firmware
-        # counted, and the live judge does not hold the first pose's frame that vetoes it
-        # offline (tests/test_status_stamped_late.py: a correct firmware 1.9 mm off); so live
-        # the start stays fitted there (a firmware 1 m off from its first pose: a strict xfail)
-        return bool({ok, spanned} & {heard[0] & 0xFFFF, heard[1], by_tick})
+        if {ok, spanned} & {heard[0] & 0xFFFF, heard[1], by_tick}:
+            return True
+        # the count's k; taken unless the first pose names a frame before it (``Lives.on_counts``)
+        tracker.lives.primed_late = primed_by_count(heard[0], (ok, spanned), by_tick,
+                                                    self.before_first)
+        return False
 
     def observe(self, t_s: float, uptime_s: int, state: str, counter: int | None = None,
                 ahead: bool = False, seq: int | None = None) -> str | None:
