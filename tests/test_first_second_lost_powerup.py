@@ -93,7 +93,7 @@ def _every_judge(messages: tuple[can.Message, ...], path: Path, primed_t: float
     whole = analyze(read_log(path), PMIR, "exact").report
     streamed = analyze_file(path, PMIR, "exact", chunk_frames=97)
     assert json.dumps(streamed) == json.dumps(whole)
-    assert len(whole["reboots"]) == 1 and whole["reboots"][0]["reference_start"] == "power-up"
+    assert [r["reference_start"] for r in whole["reboots"]] == ["power-up"]
     monitor, bridge = _live(messages)
     assert [e["kind"] for e in monitor.events if e["kind"] == "reboot"] == ["reboot"]
     assert bridge.reboots == 1
@@ -116,7 +116,8 @@ def test_a_first_second_reset_whose_power_up_pose_is_lost_passes_the_correct_fir
     messages = _drive(reboot_at)
     own, judges = _every_judge(_lost(messages, reboot_at, pairs, 0), tmp_path / "right.log",
                                _primed_t(messages, reboot_at))
-    assert own.samples > 100 and own.passed
+    assert own.samples > 100
+    assert own.passed
     assert judges["analyze"][0] == "PASS"
     assert judges["monitor"][0] == "OK"
     assert judges["bridge"][0] == "PASS"
@@ -148,5 +149,21 @@ def test_the_c_firmware_passes_too(tmp_path: Path) -> None:
     messages = _drive(30, "c")
     own, judges = _every_judge(_lost(messages, 30, 1, 0), tmp_path / "c.log",
                                _primed_t(messages, 30))
+    assert own.passed
+    assert [v for v, _ in judges.values()] == ["PASS", "OK", "PASS"]
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "a reset 32 k ticks in (the old pose's last COUNTER 15): the new COUNTER 1, 40 ms after it, "
+    "is what one life sends two frames on, so only the ODOM_STATUS sequence breaks; no second "
+    "evidence is read yet (DISTANCE or the count page going back): the correct firmware FAILs"))
+@pytest.mark.parametrize("reboot_at", [32, 64])
+def test_a_reset_after_the_old_poses_counter_15_is_not_told_yet(
+    reboot_at: int, tmp_path: Path
+) -> None:
+    """Measured: FAIL by 93 mm (tick 32), 0.25 m (64), 0.41 m (96) in every judge."""
+    messages = _drive(reboot_at)
+    own, judges = _every_judge(_lost(messages, reboot_at, 1, 0), tmp_path / "lap.log",
+                               _primed_t(messages, reboot_at))
     assert own.passed
     assert [v for v, _ in judges.values()] == ["PASS", "OK", "PASS"]
