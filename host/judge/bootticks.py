@@ -182,9 +182,29 @@ def boot_ahead(summary_s: float, status_broke: bool, t_s: float, counter: int,
     ``counter``, its CRC holding; ``before``: bus time and COUNTER of the pose heard before it,
     None: none; no other summary between them: the caller's): COUNTER 0 less than
     ``BOOT_WINDOW_S`` after the summary, the pose or the summary breaking its message's
-    sequence. The next summary tells (``continues_summary``)."""
+    sequence; or, its power-up pose lost on the bus, a small COUNTER restarted
+    (``restarts_small``) after a summary that broke the ODOM_STATUS sequence (issue #11: a reset
+    10..60 ticks into the firmware's first second, its first pose pair lost, FAILed the correct
+    firmware 9 mm..0.23 m in every judge). The next summary tells (``continues_summary``)."""
+    soon = RULE_HOLDS and 0.0 <= t_s - summary_s < BOOT_WINDOW_S
+    if counter != 0:  # its power-up pose lost: both sequences must break (``restarts_small``)
+        return bool(soon and status_broke and restarts_small(counter, t_s, before))
     broke = status_broke or before is None or breaks_sequence(before[1], t_s - before[0])
-    return bool(RULE_HOLDS and counter == 0 and broke and 0.0 <= t_s - summary_s < BOOT_WINDOW_S)
+    return bool(soon and broke)
+
+
+def restarts_small(counter: int, t_s: float, before: tuple[float, int] | None) -> bool:
+    """Whether an ODOM_POSE_X of E2E ``counter`` (1 .. ``BOOT_POSE_FRAMES`` - 1) heard at bus
+    time ``t_s`` is a new firmware's whose power-up pose the bus lost: its COUNTER restarted
+    small, sooner than one life could count on to it from the pose heard before (``before``:
+    bus time, COUNTER; None: no pose before, nothing to break). One life sends the
+    ``(counter - COUNTER before) mod 16`` frames between (16 for the same COUNTER) one
+    ``POSE_PERIOD_S`` apart, never faster (lost frames, stalls: later). The summary's own break
+    is the caller's (``boot_ahead``): two messages' sequences broken, not one."""
+    if before is None or not 0 < counter < BOOT_POSE_FRAMES:
+        return False
+    frames = (counter - before[1] - 1) % POSE_COUNTER_LAP + 1
+    return bool(t_s - before[0] < frames * POSE_PERIOD_S - SEQUENCE_SLACK_S)
 
 
 def continues_summary(summary_s: float, t_s: float, uptime_s: int, counter: int) -> bool:

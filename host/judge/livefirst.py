@@ -78,6 +78,7 @@ class FirstStall:
         self.broke_s: float | None = None  # UPTIME 0; the first ODOM_STATUS that said otherwise
         self.posed_s: float | None = None  # the first pose half's bus time
         self.unproven = False  # its power-up stalled over a moving robot (``unproven_why``)
+        self.told_s: tuple[float, ...] = ()  # a told-ahead life's frames before it was told
 
     def keep_first(self, times_s: tuple[float, ...],
                    counts: tuple[tuple[int, int], ...] = ()) -> None:
@@ -142,6 +143,14 @@ class FirstStall:
             return None
         return min(bisect.bisect_left(times, bound_s), made)
 
+    def told(self, heard_s: list[float]) -> None:
+        """A reboot told by the first pose after its summary (``sources.SourceWatch.take_ahead``):
+        the bus times of that summary and of the frames its firmware sent since (poses,
+        ODOM_STATUS, whatever their E2E sequence: refused until the reboot was told). Its first
+        sample comes after them: no stall (issue #11: a reset at tick 10, its first pose pair
+        lost, read as a stall; the position placed at a wrong firmware's pose, 1 LSB PASSed)."""
+        self.told_s = tuple(heard_s)
+
     def talked_before(self, t_s: float) -> tuple[float, int] | None:
         """The latest ODOM_STATUS before bus time ``t_s`` (its time, the frames heard before),
         None when none is kept."""
@@ -157,7 +166,7 @@ class FirstStall:
             return None
         ys = tracker.pairs.halves["y"]  # the pose halves sent before it are alive too
         sent_s = ys.col("t_s") if len(ys) else np.zeros(0)
-        alive_s = np.sort(np.concatenate(([talked[0]], sent_s)))
+        alive_s = np.sort(np.concatenate(([talked[0]], sent_s, self.told_s)))
         at = first_after_stall(t_s, window_encoders(tracker.window), alive_s)
         return None if at is None else int(tracker.window.col("seq")[at])
 

@@ -125,7 +125,7 @@ class BusMonitor:
         self.frames_total = 0
         self.undecodable = 0
         self.started_monotonic_s = time.monotonic()
-        self.sources = SourceWatch()
+        self.sources = SourceWatch(first=self.tracker.first)
         self.events = self.tracker.restarts.events = deque[dict[str, Any]](maxlen=MAX_EVENTS)
         self.latch = StatusLatch()  # the firmware's states and ERROR_MASK bits, latched
         self.set_pose = SetPoseFollower()  # ODOM_SET_POSE staged and applied (its ACKs)
@@ -379,7 +379,7 @@ class BusMonitor:
         detail += ": " + src.start_new_life(self.tracker, self.e2e, self.db, uptime_s, state, seq)
         self.distance.new_life()
         since_s = self.sources.life_from_s - SAME_TICK_S  # its first ticks' (bootticks)
-        self.tracker.vs_reference.withdraw_from(since_s)  # its poses vs the old reference
+        self.tracker.withdraw_from(since_s)  # its poses vs the old reference
         self.twist.new_life(since_s)  # its first ticks' twists
         self.set_pose.forget(since_s)  # the new firmware's kept
         self.kept.forget()

@@ -91,6 +91,9 @@ class SourceWatch:
     # its bus time, UPTIME, STATE, the encoder frame latest heard, whether it broke the sequence
     ahead_posed: tuple[float, int, str, int | None] | None = None  # such a summary (its first
     # four) whose first pose after it leaves the next summary to tell (``told_ahead``)
+    first: Any = None  # the live tracker's ``livefirst.FirstStall``: told, at ``take_ahead``,
+    ahead_heard: list[float] = field(default_factory=list)  # the frames (bus times) heard since
+    # the summary (poses, ODOM_STATUS, any sequence: the E2E check refused them till then)
 
     def on_page(self, page: str, signals: dict[str, Any], tracker: PoseTracker) -> bool:
         """An accepted ODOM_STATUS ``page`` (``"summary"``, ``"e2e_wheel_encoders"``, ...):
@@ -159,7 +162,7 @@ class SourceWatch:
                 held = booted and not ahead and self.pose
                 self.life_from_s = min(t_s, self.pose[0]) if held and self.pose else t_s
             elif broke is not None:  # the first pose after it may tell it (``hear_pose``)
-                self.ahead = (t_s, uptime_s, state, seq, broke)
+                self.ahead, self.ahead_heard = (t_s, uptime_s, state, seq, broke), [t_s]
         elif self.other_s is not None and abs(offset - self.other_s) <= UPTIME_MATCH_S:
             kind = "two sources"
             self.conflict_until_s = t_s + CONFLICT_HOLD_S
@@ -183,6 +186,8 @@ class SourceWatch:
         before = None if self.pose is None or self.pose_s is None else (self.pose_s, self.pose[1])
         self.pose = next_run(self.pose, t_s, counter, self.pose_s)
         self.pose_s = t_s
+        if self.ahead is not None or self.ahead_posed is not None:
+            self.ahead_heard.append(t_s)
         ahead, self.ahead = self.ahead, None
         if ahead is not None and boot_ahead(ahead[0], ahead[4], t_s, counter, before):
             self.ahead_posed = ahead[:4]
@@ -201,14 +206,20 @@ class SourceWatch:
 
     def take_ahead(self, t_s: float, uptime_s: int) -> None:
         """The summary at bus time ``t_s`` (UPTIME ``uptime_s``) was a power-up tick, told by
-        the first pose after it (``bootticks.boot_ahead``): a reboot there, as ``observe``'s."""
+        the first pose after it (``bootticks.boot_ahead``): a reboot there, as ``observe``'s.
+        The frames its firmware sent since (refused by the E2E check until now) tell ``first``
+        it talked then: no stall before its first sample (``livefirst.FirstStall.told``)."""
         self.offset_s, self.life_from_s, self.page_pending = uptime_s - t_s, t_s, False
+        if self.first is not None:
+            self.first.told(self.ahead_heard)
 
     def hear_status(self, t_s: float, counter: int) -> None:
         """An ODOM_STATUS frame (any page) whose CRC holds, heard at bus time ``t_s`` with E2E
         ``counter``, whatever its sequence, before it is observed: the one before a summary
         tells whether it breaks the sequence (``bootticks.status_breaks``)."""
         self.status_before, self.status_last = self.status_last, (t_s, counter)
+        if self.ahead_posed is not None:
+            self.ahead_heard.append(t_s)
 
     def conflict_text(self) -> str:
         """The verdict's reason once two sources were seen (``two_sources_text``); "" before."""

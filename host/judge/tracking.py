@@ -382,6 +382,15 @@ class PoseTracker:
         else:  # its word once the next pose counts on from it (bootnamed)
             self.lives.await_boot(named, self.now_s, unnamed)
 
+    def withdraw_from(self, t_s: float) -> None:
+        """A reboot told late (its boot summary held back, or told by the first pose after it:
+        ``bootticks``): the samples compared from bus time ``t_s`` on were the new firmware's
+        against the old life's reference; their errors and the wrong episodes they latched are
+        taken back (issue #11: a reset 30 ticks in, its first pose pair lost, its next poses
+        latched an 84 mm episode that FAILed the correct firmware at the bridge's end)."""
+        self.vs_reference.withdraw_from(t_s)
+        self.wrongs.withdraw_from(t_s)
+
     def new_life(self) -> None:
         """A new firmware life (a reboot): the reference starts again at the next pose, and
         the truth is compared in the new life's frame, its origin taken at the life's first

@@ -161,7 +161,7 @@ class RobotTelemetry(CommandFollowing):
                                 for sig in status.signals}
         self._page_names = {int(v): str(n).lower()
                             for v, n in (status.get_signal_by_name("PAGE").choices or {}).items()}
-        self.sources = SourceWatch()  # reboots, as the monitor tells them (host.judge.sources)
+        self.sources = SourceWatch(first=self.tracker.first)  # reboots (host.judge.sources)
         self.latch = StatusLatch()  # the firmware's states and ERROR_MASK bits, latched
         # ... set-poses and the counter restarts the reference follows (its ``RestartLog``)
         self.events = self.tracker.restarts.events = deque[dict[str, Any]](maxlen=STATUS_EVENTS)
@@ -303,7 +303,7 @@ class RobotTelemetry(CommandFollowing):
         start_new_life(self.tracker, self.e2e, self.db, uptime_s, state, seq)
         self.distance.new_life()
         since_s = self.sources.life_from_s - SAME_TICK_S  # its first ticks' (bootticks)
-        self.tracker.vs_reference.withdraw_from(since_s)  # its poses vs the old reference
+        self.tracker.withdraw_from(since_s)  # its poses vs the old reference
         self.twist.new_life(since_s)  # its first ticks' twists: the new one's
         self.set_pose.forget(since_s)  # what the new firmware ACKed: kept
         self.kept.forget()

@@ -1,0 +1,169 @@
+"""A reset in the firmware's first second of uptime whose new power-up pose pair the bus lost
+(issue #11: a FAIL must never blame a correct firmware).
+
+The case (lockstep rig, pmir on the circle, ``FaultRig``): ``board.reboot()`` at tick 10, 30 or
+60, and the bus loses the new firmware's first ODOM_POSE_X and ODOM_POSE_Y (its poses of E2E
+COUNTER 0). The power-up tick's signature (``host.judge.bootticks``) needed that pose, or a
+later pose of COUNTER 0 after the summary; without it no judge told the reboot and the correct
+firmware FAILed everywhere against the old life's reference: measured before the fix, 9.4 mm
+(tick 10), 84 mm (tick 30), 0.23 m (tick 60) in analyze (whole and streamed), the monitor and
+the bridge. What else the reset leaves: its boot summary (UPTIME 0, COUNTER 0) breaks the
+ODOM_STATUS sequence, the first pose heard after it restarts its COUNTER small (1, 2) sooner
+than one life could count on to it, and the next summary continues the boot summary's
+(``bootticks.restarts_small``). A reset at tick 150 (after the pose's first lap) is the control.
+
+Each judge's verdict is checked against ``tests/independent_checker.py`` (float64 odometry on
+cantools-decoded frames, told the frame the new firmware primed on by the test's own look at
+the frames before the loss), never against host code. Wrong firmwares (1, 3 LSB and 1 m off in X
+from the new power-up) FAIL every judge.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+from pathlib import Path
+
+import can
+import pytest
+
+from odocan.firmware import frames as fr
+from odocan.host.io.logs import read_log
+from odocan.host.judge.analysis import POSITION_LSB_M, analyze
+from odocan.host.judge.stream_analysis import analyze_file
+from odocan.host.mqtt.endverdict import end_verdict
+from odocan.sim.board import TICK_S
+from odocan.sim.scenarios import get_scenario
+from tests import host_frames as hf
+from tests import independent_checker as ic
+from tests.fault_rig import FaultRig
+from tests.test_first_second_reboot import DB, PMIR, POSE_IDS, _decoded, _live, _robot, _written
+
+RUN_S = 3.0
+
+
+@functools.cache
+def _drive(reboot_at: int, firmware: str = "python") -> tuple[can.Message, ...]:
+    """The rig's frames: pmir on the circle, its MCU reset before tick ``reboot_at``."""
+    heard: list[can.Message] = []
+    scenario = get_scenario("circle", PMIR, duration_s=60.0)
+    with FaultRig(scenario=scenario, firmware=firmware) as rig:
+        rig.observers.append(lambda _k, got: heard.extend(got))
+        rig.before_board.append(lambda k: rig.board.reboot() if k == reboot_at else None)
+        rig.run(RUN_S)
+    return tuple(heard)
+
+
+def _primed_t(messages: tuple[can.Message, ...], reboot_at: int) -> float:
+    """cantools, on the frames before the loss: the new firmware's first ODOM_POSE_X reads X 0
+    at COUNTER 0; the bus time of the encoder frame it primed on (the latest before it)."""
+    first = next(m for m in messages if m.arbitration_id == fr.ODOM_POSE_X_ID
+                 and m.timestamp >= reboot_at * TICK_S)
+    assert (_decoded(first)["X"], _decoded(first)["COUNTER"]) == (0, 0)
+    return max(m.timestamp for m in messages if m.arbitration_id == fr.WHEEL_ENCODERS_ID
+               and m.timestamp <= first.timestamp)
+
+
+def _lost(messages: tuple[can.Message, ...], reboot_at: int, pairs: int,
+          bias_lsb: int) -> tuple[can.Message, ...]:
+    """The bus loses the new firmware's first ``pairs`` pose pairs; its X ``bias_lsb`` off
+    from then (E2E re-protected with the frame's own COUNTER: a wrong firmware)."""
+    out, seen = [], dict.fromkeys(POSE_IDS, 0)
+    for m in messages:
+        if m.arbitration_id in POSE_IDS and m.timestamp >= reboot_at * TICK_S:
+            seen[m.arbitration_id] += 1
+            if seen[m.arbitration_id] <= pairs:
+                continue
+            if bias_lsb and m.arbitration_id == fr.ODOM_POSE_X_ID:
+                signals = _decoded(m)
+                signals["X"] += bias_lsb
+                data = bytearray(DB.encode_message(m.arbitration_id, signals, scaling=False))
+                hf.p02_protect(data, int(signals["COUNTER"]), fr.ODOM_POSE_X_DATA_IDS)
+                m = can.Message(arbitration_id=m.arbitration_id, data=bytes(data),
+                                is_extended_id=False, timestamp=m.timestamp)
+        out.append(m)
+    return tuple(out)
+
+
+def _every_judge(messages: tuple[can.Message, ...], path: Path, primed_t: float
+                 ) -> tuple[ic.Verdict, dict[str, tuple[str, float]]]:
+    """The checker's verdict and each judge's (verdict, worst position error m)."""
+    own = ic.check(_written(messages, path), _robot(), "exact", lambda _t: (0.0, 0.0, 0.0),
+                   reboots_t_s=[primed_t])
+    whole = analyze(read_log(path), PMIR, "exact").report
+    streamed = analyze_file(path, PMIR, "exact", chunk_frames=97)
+    assert json.dumps(streamed) == json.dumps(whole)
+    assert [r["reference_start"] for r in whole["reboots"]] == ["power-up"]
+    monitor, bridge = _live(messages)
+    assert [e["kind"] for e in monitor.events if e["kind"] == "reboot"] == ["reboot"]
+    assert bridge.reboots == 1
+    bridge.end_watch()
+    worst = whole["onboard_vs_reference"]["max_position_error_m"]
+    return own, {
+        "analyze": ("PASS" if whole["passed"] else "FAIL", worst),
+        "monitor": (monitor.health(messages[-1].timestamp)["state"],
+                    monitor.tracker.vs_reference.max_dpos_m),
+        "bridge": (end_verdict(bridge).verdict, bridge.tracker.vs_reference.max_dpos_m),
+    }
+
+
+@pytest.mark.parametrize("pairs", [1, 2])
+@pytest.mark.parametrize("reboot_at", [10, 30, 60, 150])
+def test_a_first_second_reset_whose_power_up_pose_is_lost_passes_the_correct_firmware(
+    reboot_at: int, pairs: int, tmp_path: Path
+) -> None:
+    """Before: no judge told the reset; FAIL by 9.4 mm, 84 mm, 0.23 m (ticks 10, 30, 60)."""
+    messages = _drive(reboot_at)
+    own, judges = _every_judge(_lost(messages, reboot_at, pairs, 0), tmp_path / "right.log",
+                               _primed_t(messages, reboot_at))
+    assert own.samples > 100
+    assert own.passed
+    assert judges["analyze"][0] == "PASS"
+    assert judges["monitor"][0] == "OK"
+    assert judges["bridge"][0] == "PASS"
+    for name, (_, error_m) in judges.items():
+        assert error_m == pytest.approx(own.max_position_error_m, abs=0.1 * POSITION_LSB_M), name
+
+
+@pytest.mark.parametrize("bias_lsb", [1, 3, 10_000])
+@pytest.mark.parametrize("reboot_at", [10, 30, 60])
+def test_a_wrong_firmware_after_such_a_reset_fails_every_judge(
+    reboot_at: int, bias_lsb: int, tmp_path: Path
+) -> None:
+    """1 LSB .. 1 m off from the new power-up: FAIL everywhere, never PASS nor OK (at tick 10
+    the live judges once took the silence of the poses the E2E check refused for a stall and
+    placed the position at the wrong pose: a 1 LSB firmware PASSed the bridge)."""
+    messages = _drive(reboot_at)
+    own, judges = _every_judge(_lost(messages, reboot_at, 1, bias_lsb), tmp_path / "wrong.log",
+                               _primed_t(messages, reboot_at))
+    assert not own.passed
+    assert judges["analyze"][0] == "FAIL"
+    assert judges["monitor"][0] == "POSE WRONG"
+    assert judges["bridge"][0] == "FAIL"
+    for name, (_, error_m) in judges.items():
+        assert error_m == pytest.approx(own.max_position_error_m, abs=0.1 * POSITION_LSB_M), name
+
+
+def test_the_c_firmware_passes_too(tmp_path: Path) -> None:
+    """The C port's frames, the same reset at tick 30 and the same loss."""
+    messages = _drive(30, "c")
+    own, judges = _every_judge(_lost(messages, 30, 1, 0), tmp_path / "c.log",
+                               _primed_t(messages, 30))
+    assert own.passed
+    assert [v for v, _ in judges.values()] == ["PASS", "OK", "PASS"]
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "a reset 32 k ticks in (the old pose's last COUNTER 15): the new COUNTER 1, 40 ms after it, "
+    "is what one life sends two frames on, so only the ODOM_STATUS sequence breaks; no second "
+    "evidence is read yet (DISTANCE or the count page going back): the correct firmware FAILs"))
+@pytest.mark.parametrize("reboot_at", [32, 64])
+def test_a_reset_after_the_old_poses_counter_15_is_not_told_yet(
+    reboot_at: int, tmp_path: Path
+) -> None:
+    """Measured: FAIL by 93 mm (tick 32), 0.25 m (64), 0.41 m (96) in every judge."""
+    messages = _drive(reboot_at)
+    own, judges = _every_judge(_lost(messages, reboot_at, 1, 0), tmp_path / "lap.log",
+                               _primed_t(messages, reboot_at))
+    assert own.passed
+    assert [v for v, _ in judges.values()] == ["PASS", "OK", "PASS"]
