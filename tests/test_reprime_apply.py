@@ -20,8 +20,10 @@ Live (``livekept._reprimed``) the same bound, the FIFO's frames at the speed bou
 window no longer holds them (166 mm on pmir): +1 m is POSE WRONG on both judges, and the
 bridge's end verdict is UNJUDGED with the bound named (``livekept.coarse_why``), not PASS.
 Without an APPLY the re-prime is judged (``stallreprime``) and PASSes: the hole was the APPLY's.
-Found, not fixed (strict xfail): on the circle with the APPLY 3 ticks after, ``analyze`` FAILs
-the correct firmware (before and after this change) at the lone sample before the APPLY.
+Found then (a strict xfail), fixed since (``host.judge.acrosscut``): on the circle with the
+APPLY 3 ticks after, ``analyze`` FAILed the correct firmware at the lone sample before the
+APPLY (its re-prime's word came after the cut); swept over 64 drives in
+``tests/test_reprime_sweep.py``.
 """
 
 from __future__ import annotations
@@ -193,13 +195,14 @@ def test_the_bridge_s_end_verdict_says_the_coarse_check_not_pass() -> None:
                          verdict.reason), verdict.reason
 
 
-@pytest.mark.xfail(strict=True, reason="known false FAIL, not fixed here: the life before the "
-                   "APPLY ends 30 ms after the stall, so the firmware's COUNTER_RESET word (its "
-                   "next summary) lies in the next life's frames; its lone sample is judged with "
-                   "the exact heading across the re-prime (2.38 rad off)")
 @pytest.mark.parametrize("halted", [490, 1000])
 def test_the_correct_firmware_on_the_circle_with_the_apply_3_ticks_after_passes(
         halted: int, tmp_path: Path) -> None:
+    """Before: FAIL (a strict xfail): the life before the APPLY ended 30 ms after the stall,
+    so the firmware's COUNTER_RESET word (its next summary) lay in the next life's frames, and
+    its lone sample was judged with the exact heading across the re-prime (2.38 rad off). Now
+    that life's word is read on past the cut (``acrosscut.later_word``); the whole sweep:
+    ``tests/test_reprime_sweep.py``."""
     report = _report(drive("circle", halted, 3), tmp_path / "right.log")
     assert _kept(report)["passed"]  # (the kept check holds)
     assert report["passed"], report["onboard_vs_reference"]

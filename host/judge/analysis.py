@@ -110,6 +110,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from odocan.host.io.logs import FrameArrays
+from odocan.host.judge import acrosscut
 from odocan.host.judge.compare import (
     check_twist,
     error_summary,
@@ -249,6 +250,7 @@ def analyze(
                              wall_seconds=wall_seconds, max_wheel_speed_mm_s=max_wheel_speed_mm_s)
     _, accepted = check_frames(frames, db)
     integrator, source = pick_integrator(frames, accepted, decoder, integrator)
+    across = acrosscut.cut_evidence(frames, db, firmware_lives, lives)  # a stall across a cut
     done: list[tuple[Life, Analysis, float]] = []
     failure: AnalysisError | None = None
     silent: list[Life] = []
@@ -263,7 +265,9 @@ def analyze(
                                    decoder=BulkDecoder(db), boot=life.boot,
                                    rebase=life.t_s is not None and life.config is None,
                                    max_wheel_speed_mm_s=bound,
-                                   start_pose=life.set_pose and life.set_pose.start_pose())
+                                   start_pose=life.set_pose and life.set_pose.start_pose(),
+                                   later=acrosscut.later_word(across, lives, k, frames.timestamp_s),
+                                   backlog=acrosscut.backlog_first(across, life))
         except AnalysisError as exc:  # a life without on-board samples: reported, not compared
             failure = failure or exc
             silent.append(life)
@@ -328,17 +332,22 @@ def _analyze_life(
     wall_seconds: float | None = None,
     max_wheel_speed_mm_s: SpeedBound = PROFILE_SPEED,
     start_pose: tuple[float, float, float] | None = None,
+    later: acrosscut.Word | None = None,
+    backlog: bool = False,
 ) -> Analysis:
     """``analyze`` of one firmware life (``host.judge.reboots``); ``boot``: the frames start at
     a reboot, the firmware's pose 0 at their first encoder frame; ``rebase``: the frames are a
     life after a reboot or a set-pose, the truth is compared in its frame
     (``compare.life_origin``); ``start_pose``: a set-pose's, exact at the first encoder frame
-    (``host.judge.setposes``)."""
+    (``host.judge.setposes``); ``later``: the same firmware's summaries after a cut, ``backlog``:
+    its first sample names a backlog frame (``acrosscut``)."""
     e2e, accepted = check_frames(frames, db)
     integrator, source = pick_integrator(frames, accepted, decoder, integrator)
     enc = page_numbered(frames, decoder, encoder_frames(frames, accepted, decoder))
     halves = pose_halves(frames, accepted, decoder, enc)
     onboard, unmatched, sent_s = onboard_samples(frames, accepted, decoder, enc, halves)
+    if backlog:  # the first after a stall the cut hid: names a backlog frame (acrosscut)
+        onboard, sent_s = acrosscut.without_first(onboard, sent_s)
     pose_sent_s = accepted_rows(frames, accepted, decoder, "ODOM_POSE_Y")["timestamp_s"]
     alive_s = alive_times(frames, accepted, decoder)
     onboard, stalls = after_stalls(onboard, sent_s, enc, pose_sent_s, alive_s)
@@ -362,7 +371,8 @@ def _analyze_life(
                              e0=0 if power_up or start_pose is not None else int(onboard.enc[0]),
                              bits=min(robot.counter_bits, WIRE_COUNTER_BITS),
                              max_wheel_speed_mm_s=max_wheel_speed_mm_s,
-                             seen=seen_in_log(frames, decoder, enc, power_up=power_up))))
+                             seen=acrosscut.heard_later(seen_in_log(
+                                 frames, decoder, enc, power_up=power_up), later))))
     onboard = worst_sent(onboard, halves, ref_all, tolerance.position_m, tolerance.heading_rad)
     ref = ref_all.at(onboard.enc)
     truth_origin = None

@@ -144,9 +144,11 @@ def check_cut(read: Callable[[int, int], FrameArrays], head: tuple[int, bool], t
     lo, hi = window(cut.position, head[0], tail_stop)
     kept = kept_check(read(lo, hi), lo, cut, robot, integrator, db, max_wheel_speed_mm_s,
                       boot=(head[1] or head[0] == 0) and lo == head[0], log_start=lo == 0)
-    if kept == NO_START and head[1] and head[0] < lo <= head[0] + HEAD_FRAMES:
-        return kept_check(read(head[0], hi), head[0], cut, robot, integrator, db,
-                          max_wheel_speed_mm_s, boot=True)  # a reboot's life read whole
+    if isinstance(kept, str) and head[1] and head[0] < lo <= head[0] + HEAD_FRAMES:
+        whole = kept_check(read(head[0], hi), head[0], cut, robot, integrator, db,
+                           max_wheel_speed_mm_s, boot=True)  # a reboot's life read whole
+        if kept == NO_START or (isinstance(whole, dict) and whole.get("reprimed")):
+            return whole
     return kept
 
 
@@ -182,9 +184,10 @@ def kept_check(frames: FrameArrays, lo: int, cut: SetPoseCut, robot: RobotProfil
                           frames, accepted, decoder, poses, log_start=log_start),  # no power-up)
                       primed=lambda: stalled and not refused)
     after = _around(poses, int(at[0]))[1]
-    if kept == NO_START and refused and after is not None:  # re-primed: bounded (reprimekept)
-        return reprime_kept((poses, enc, sent_s), alive_s, int(at[0]), after, cut.staged, odo,
-                            summaries_of(frames, accepted, decoder))
+    if isinstance(kept, str) and refused and after is not None:  # re-primed: reprimekept
+        bounded = reprime_kept((poses, enc, sent_s), alive_s, int(at[0]), after, cut.staged,
+                               odo, summaries_of(frames, accepted, decoder))
+        return bounded if kept == NO_START or isinstance(bounded, dict) else kept
     return kept
 
 

@@ -29,6 +29,7 @@ import numpy as np
 
 from odocan.host.io.frames import concat_frames
 from odocan.host.io.logs import CHUNK_FRAMES, FrameArrays, iter_log, warn_on_stderr
+from odocan.host.judge import acrosscut
 from odocan.host.judge.analysis import STALL_DETAIL, Tolerance
 from odocan.host.judge.breaks import placed_offsets
 from odocan.host.judge.configs import in_force
@@ -175,10 +176,19 @@ def _analyze_lives(
     failure: AnalysisError | None = None
     silent: list[Life] = []
     kept: dict[int, Kept] = {}  # per set-pose's life: what it kept (setposekept)
+
+    def read(lo: int, hi: int) -> FrameArrays:
+        return concat_frames(list(frames_of(LifeSpan(lo, hi, False))()))
+
     for k, (span, (life_robot, life_integrator, bound)) in enumerate(zip(spans, in_force(
             [_as_life(span) for span in spans], robot,
             first_integrator(spans, frames_of, db, integrator, source), max_wheel_speed_mm_s),
             strict=True)):
+        if k and (span.set_pose is not None or span.config is not None) and acrosscut.backlog_in(
+                read(max(spans[k - 1].start, span.start - acrosscut.WINDOW_FRAMES),
+                     min(span.stop, span.start + acrosscut.WINDOW_FRAMES)), db,
+                span.start - max(spans[k - 1].start, span.start - acrosscut.WINDOW_FRAMES)):
+            raise NotStreamable(acrosscut.STREAM)
         try:
             report, t_first = _life(frames_of(span), life_robot, life_integrator,
                                     tolerance=tolerance, db=db, boot=span.boot,
@@ -191,8 +201,7 @@ def _analyze_lives(
             continue
         if span.set_pose is not None:
             kept[len(done)] = check_cut(
-                lambda lo, hi: concat_frames(list(frames_of(LifeSpan(lo, hi, False))())),
-                (spans[k - 1].start, spans[k - 1].boot), span.stop, span.set_pose, life_robot,
+                read, (spans[k - 1].start, spans[k - 1].boot), span.stop, span.set_pose, life_robot,
                 life_integrator, db, bound)
         done.append((span, report, t_first))
     if not done:

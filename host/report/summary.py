@@ -202,8 +202,9 @@ def kept_unjudged(report: dict[str, Any]) -> list[str]:
             said.append(f"{at} not judged ({event['kept_not_judged']})")
         elif isinstance(kept, dict) and kept["passed"] and \
                 kept["bound_m"] > COARSE_KEPT_LSB * POSITION_LSB_M:
-            said.append(f"{at} judged only within {kept['bound_m'] * 1e3:.4g} mm (the merged "
-                        "steps before it)")
+            why = ("the frames the firmware may have integrated around its re-prime"
+                   if kept.get("reprimed") else "the merged steps before it")
+            said.append(f"{at} judged only within {kept['bound_m'] * 1e3:.4g} mm ({why})")
     return said
 
 
