@@ -346,8 +346,7 @@ def _analyze_life(
     enc = page_numbered(frames, decoder, encoder_frames(frames, accepted, decoder))
     halves = pose_halves(frames, accepted, decoder, enc)
     onboard, unmatched, sent_s = onboard_samples(frames, accepted, decoder, enc, halves)
-    if backlog:  # the first after a stall the cut hid: names a backlog frame (acrosscut)
-        onboard, sent_s = acrosscut.without_first(onboard, sent_s)
+    onboard, sent_s = acrosscut.without_first(onboard, sent_s) if backlog else (onboard, sent_s)
     pose_sent_s = accepted_rows(frames, accepted, decoder, "ODOM_POSE_Y")["timestamp_s"]
     alive_s = alive_times(frames, accepted, decoder)
     onboard, stalls = after_stalls(onboard, sent_s, enc, pose_sent_s, alive_s)
