@@ -12,7 +12,8 @@ from odocan.host.judge.liveadopted import UNHEARD_BOOT
 from odocan.host.judge.livefit import LiveFit
 from odocan.host.judge.liveplacing import place_reference
 from odocan.host.judge.livepose import FramePose, Sample
-from odocan.host.judge.livewindow import Counted, first_named_before, primed_at, window_counts
+from odocan.host.judge.liveprimed import UNTOLD_PRIME, choose_primed
+from odocan.host.judge.livewindow import Counted, primed_at, window_counts
 from odocan.host.judge.reference import ReferenceOdometry
 
 if TYPE_CHECKING:
@@ -80,8 +81,10 @@ class Lives:
         self.backlog_counts: list[Counted] = []  # the frames since the pending pose's
         self.backlog_poses: list[FramePose] = []
         self.power_up_proven = False  # the first life's first page proved a power-up at 0
-        self.primed_late: int | None = None  # ... or at this frame by its count, taken unless
-        # the first pose names one before it (``powerup.primed_after``: ``first_named_before``)
+        self.primed_late: int | None = None  # ... or at this frame by its count, or before
+        # (``powerup.primed_after``; a recorder stamping ODOM_STATUS late: ``liveprimed``)
+        self.primed_from: tuple[int | None, list[int]] | None = None  # the frame chosen, those
+        # it may have primed on (``finish_primed``)
 
     def waits(self, pose: FramePose, now_s: float) -> bool:
         """Whether the on-board ``pose`` waits for its life's start (a boot's frame, the
@@ -140,15 +143,14 @@ class Lives:
     def on_counts(self, ok: int, lost: int, proven: bool) -> None:
         """``PoseTracker.on_enc_counts``' start: the page ends a wait, or proves a power-up; the
         first life's samples start from (0, 0, 0) on the frame its first count page says it
-        primed on (``primed_late``) unless its first pose names a frame before it, as
-        ``powerup.primed_after`` vetoes it (a recorder stamping ODOM_STATUS late)."""
+        primed on, that page's frame or one before it that its first pose allows
+        (``finish_primed``: a recorder stamping ODOM_STATUS late overcounts the page)."""
         boot, tracker = self.boot, self._tracker
         started = self.power_up_proven  # by the stall (``livefirst``): not started again
         self.power_up_proven |= proven  # (``livefirst``: also when no frame was heard yet)
         if boot is not None and boot[0] < 0 and self.primed_late is not None \
-                and tracker.integrator is not None and not first_named_before(
-                    tracker.pairs.halves["x"], tracker.window, self.primed_late):
-            self.finish_boot(self.primed_late, first_life=True)  # from (0, 0, 0) on frame k
+                and tracker.integrator is not None:
+            self.finish_primed(self.primed_late)
         elif boot is not None and boot[0] < 0:  # the first life's samples wait
             self.finish_first(proven)
         elif boot is not None and self._named():
@@ -157,6 +159,18 @@ class Lives:
             self.finish_boot(at)
         elif proven and not started and tracker.integrator is not None:
             self.finish_boot(0, first_life=True)  # the samples judged before keep their errors
+
+    def finish_primed(self, k: int) -> None:
+        """The first life's samples from (0, 0, 0) on the frame it primed on, one of 0 .. k
+        its first pose allows (``liveprimed.choose_primed``; ``primed_from``: that frame and
+        them); when not told, from its first pose, fitted, the start said adopted."""
+        primed, frames = choose_primed(self._tracker, k, self.boot_poses)
+        self.primed_from = (primed, frames)
+        if primed is not None:
+            self.finish_boot(primed, first_life=True)
+            return
+        self._tracker.adopted.owe(UNTOLD_PRIME.format(lo=min(frames), hi=max(frames)))
+        self.finish_first(False)
 
     def _named(self) -> bool:
         """Whether the waiting boot's frame is its power-up pose's word (``await_boot``)."""

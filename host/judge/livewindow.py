@@ -325,21 +325,17 @@ def primed_at(window: Columns, ok: int, lost: int) -> int | None:
                          ok, lost)
 
 
-def first_named_before(halves: Columns, window: Columns, primed: int) -> bool:
-    """``powerup._first_pose_before`` live: whether the first pose half heard (``halves``: the
-    ODOM_POSE_X halves) names an encoder frame before seq ``primed`` (its ENC_COUNTER: the
-    latest of the last ``NAMED_SPAN`` frames heard before it with that COUNTER, as
-    ``powerup.named_count``), so the firmware cannot have primed there (a recorder stamping
-    ODOM_STATUS late overcounts the count page: ``tests/test_status_stamped_late.py``). False
-    when it names none (``analyze`` then takes the count too); True when it cannot be told: no
-    half heard yet, or the windows no longer hold it or the frames before it (then the count's
-    frame is not taken, the start stays fitted)."""
+def first_named_seq(halves: Columns, window: Columns) -> int | None:
+    """The encoder frame (seq) the first pose half heard (``halves``: the ODOM_POSE_X halves)
+    names: its ENC_COUNTER is the COUNTER of the latest of the last ``NAMED_SPAN`` frames heard
+    before it with that COUNTER, as ``powerup.named_count``. None when it cannot be told: no
+    half heard yet, the windows no longer hold it or the frames before it, or none has it."""
     if not len(halves) or not halves.holds_first:
-        return True
+        return None
     pos, named = halves.col("pos")[0], halves.col("enc_counter")[0]
     before = np.flatnonzero(window.col("pos") < pos)[-NAMED_SPAN:]
     seqs = window.col("seq")
     if len(before) < NAMED_SPAN and not window.holds_first:  # frames before it forgotten
-        return True
+        return None
     hits = before[window.col("counter")[before] == named]
-    return bool(len(hits)) and int(seqs[hits[-1]]) < primed
+    return int(seqs[hits[-1]]) if len(hits) else None

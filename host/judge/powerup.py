@@ -137,7 +137,10 @@ def primed_after(frames: FrameArrays, accepted: npt.NDArray[np.bool_],
     bound (``heard_by_tick``), when it has one, must count the same: a page held back on the
     bus past later frames overcounts, and is no proof. A recorder started late is not taken:
     the firmware counted the frames it lacks (fewer in the log than counted). None when not
-    proven (``counted_only_the_log`` True is frame 0: not this rule's)."""
+    proven (``counted_only_the_log`` True is frame 0: not this rule's). A recorder stamping
+    ODOM_STATUS late (a gateway's 10-50 ms) shifts the count page and its tick bound alike past
+    frames the firmware had counted, so ``k`` is only ever too large: the firmware primed on
+    frame ``k`` or before (``host.judge.primedrange``)."""
     try:
         status = decoder.decode(frames, "ODOM_STATUS")
         summary = decoder.decode_page(frames, "ODOM_STATUS", 0)
@@ -157,21 +160,19 @@ def primed_after(frames: FrameArrays, accepted: npt.NDArray[np.bool_],
     in_log = int(np.count_nonzero(accepted[encoders] & (encoders < made)))
     before_first = int(np.count_nonzero(accepted[encoders] & (encoders < int(heard_status[0]))))
     by_tick = heard_by_tick(frames, accepted, decoder, (first, made))
-    k = primed_by_count(in_log, counts, by_tick, before_first)
-    return None if k is None or _first_pose_before(frames, accepted, decoder, k) else k
+    return primed_by_count(in_log, counts, by_tick, before_first)
 
 
-def _first_pose_before(frames: FrameArrays, accepted: npt.NDArray[np.bool_],
-                       decoder: BulkDecoder, k: int) -> bool:
-    """Whether the firmware's first pose names an encoder frame before ``k``: then it cannot
-    have primed on ``k`` (a pose names the frame it integrated last, never one before its
-    priming frame). A recorder stamping ODOM_STATUS late (a gateway's 30-50 ms) shifts the
-    count page and its tick bound alike past frames the firmware had counted, so the count says
-    a k it never primed on (tests/test_status_stamped_late.py); its poses are not delayed."""
+def first_pose_named(frames: FrameArrays, accepted: npt.NDArray[np.bool_],
+                     decoder: BulkDecoder) -> int | None:
+    """The log's encoder frame (0-based, accepted ones) the firmware's first pose names: it
+    primed on that frame or before (a pose names the frame it integrated last, never one
+    before its priming frame), whatever a recorder stamping ODOM_STATUS late made its count
+    page say (its poses are not delayed: ``host.judge.primedrange``). None when not told."""
     poses = decoder.select(frames, "ODOM_POSE_X")
     heard = poses[accepted[poses]]
     named = None if not len(heard) else pose_named(frames, accepted, decoder, int(heard[0]) + 1)
-    return named is not None and named <= k
+    return None if named is None else named - 1
 
 
 def _first_count(page: dict[str, np.ndarray], summary: dict[str, np.ndarray],

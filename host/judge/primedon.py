@@ -75,7 +75,7 @@ def judged_from_each(first: Analysis, rerun: Callable[[Pose], Analysis]) -> Anal
     verdict = (f"it passes from frame {p}" if passed else f"it fails from frame {p}"
                if len(tries) == 1 else f"it fails from every one (the least error from frame {p})")
     best.report["reference_start"] = "power-up"
-    named = f"{frames[0]}" if len(frames) == 1 else f"{frames[0]} .. {frames[-1]}"
+    named = f"{frames[0]}" if len(frames) == 1 else f"{min(frames)} .. {max(frames)}"
     why = str(event.get(WHY_KEY, STALL_WHY)).format(frames=named)
     best.report["events"] = [{
         "kind": PRIMED_KIND, "t_s": event["t_s"], "encoder_frame": p,

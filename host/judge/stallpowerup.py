@@ -29,17 +29,15 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
-from odocan.host.judge.powerup import holds_first_cycle, primed_after, starts_at_power_up
-from odocan.host.judge.primedon import FRAMES_KEY, WHY_KEY, candidates, start_pose_primed_on
+from odocan.host.judge.powerup import holds_first_cycle, starts_at_power_up
+from odocan.host.judge.primedon import FRAMES_KEY, candidates
+from odocan.host.judge.primedrange import primed_range_event
 from odocan.host.judge.samples import Encoders, FloatArray, Poses
 from odocan.host.judge.stalls import first_after_stall
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.sim.robot import RobotProfile
 
 UNPROVEN_KIND = "power_up_unproven"  # the report's event when the rule cannot prove it
-PAGE_KIND = "power_up_primed_late"  # the count page says it primed on the log's k-th frame
-PAGE_WHY = ("the firmware's first count page (ENC_E2E_OK, at UPTIME 0 in its first cycle) "
-            "says it primed after the log's first encoder frames, on frame {frames}")
 INIT = "INIT"  # ODOM_STATUS STATE's name (the DBC's VAL_) of a firmware that primed on nothing
 UNPROVEN = ("the firmware stalled before its first pose after its power-up (INIT at UPTIME 0) "
             "while the robot moved: the encoder frame it primed on is not known, so its first "
@@ -108,15 +106,14 @@ def log_power_up(frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: 
     reference started a frame early and FAILed the correct firmware by 29.8 mm / 15.8 mrad.
     Then only an exact count (the frames before the page, or the pose before it) proves the
     power-up, else the stall's rule: frames 0 .. lo unmoved, or unproven, said, with each
-    frame's start (``primedon``: the life judged from each)."""
+    frame's start (``primedon``: the life judged from each); the count page's late priming
+    too, judged from each frame it allows (``primedrange``)."""
     lo = primed_by(frames, accepted, decoder, enc, *times_s)
     if lo is None:
         if starts_at_power_up(frames, accepted, decoder, onboard):
             return True, []
-        k = primed_after(frames, accepted, decoder)  # its count page: primed on frame k
-        return False, [] if k is None else [{
-            "kind": PAGE_KIND, "t_s": float(np.min(times_s[0])), WHY_KEY: PAGE_WHY,
-            FRAMES_KEY: [[k, list(start_pose_primed_on(enc, k, *judged))]]}]
+        return False, primed_range_event(  # its count page: primed on frame k or before
+            frames, accepted, decoder, enc, float(np.min(times_s[0])), judged)
     if unmoved(enc.left, enc.right, lo) or starts_at_power_up(frames, accepted, decoder,
                                                                onboard, by_tick=False):
         return True, []
