@@ -35,6 +35,11 @@ buffered per robot, and robot ``i`` is handed what it has buffered at the ticks 
 robots' publication phases) and at the end; a young GC pass after each tick as before. Each
 robot's judge sees its own frames in the same order (the digest differs only by the order of
 the robots' publications); its state stays hot over K ticks of frames instead of one.
+
+``ODOCAN_ACCEL=1`` runs the per-frame path compiled by mypyc (``host.accel``; the first run
+builds it, minutes); the line says how many modules were compiled. Issue #13, 50 robots,
+``--batch-ticks 10``, least of 6 alternating at load 3.5-5: pure 83.2 us, compiled 46.8 us per
+robot-tick (1.8x), digest 5c38e3fdc759fa9e both.
 """
 
 from __future__ import annotations
@@ -52,6 +57,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import odocan.host.mqtt.topics as topics
+from odocan.host import accel
 from odocan.host.judge.reference import Geometry
 from odocan.host.mqtt.fleetrun import publish_phase_s
 from odocan.host.mqtt.telemetry import RobotTelemetry
@@ -180,6 +186,7 @@ def main() -> int:
     robots, batches = recording
     robot_ticks = robots * len(batches)
     how = f" in groups of {args.group}" if args.group else ""
+    how += f" ({len(accel.active())} modules compiled)" if accel.active() else ""
     if args.group:
         recording = grouped(recording, args.group)
     if args.batch_ticks > 1:

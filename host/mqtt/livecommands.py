@@ -56,7 +56,7 @@ class PendingAck:
     command: str
     final: bool  # the APPLY / GO frame: its ACK completes the command
     data: bytes = b""  # the frame's 8 bytes: what a ``cmd/result`` names when unanswered
-    origin: object = None  # the command sent (ids may repeat, or be null, across commands)
+    origin: object | None = None  # the command sent (ids may repeat, or be null, across commands)
 
 
 class CommandFollowing:

@@ -34,18 +34,23 @@ if TYPE_CHECKING:
 
 Publication = tuple[str, dict[str, Any]]
 Plan = Callable[[float, bytes], list[Publication]]
+Check = Callable[[int, bytes, bool, float | None], str]  # ``E2EMonitor.check``'s signature
 ACCEPTED_E2E = frozenset({"ok", "oksomelost", "unprotected"})
 
 
-def plans(telemetry: RobotTelemetry, routes: dict[int, Route]) -> dict[int, Plan]:
-    """Every route's plan for ``telemetry``, by 11-bit identifier."""
-    return {can_id: plan_of(telemetry, can_id, route) for can_id, route in routes.items()}
+def plans(telemetry: RobotTelemetry, routes: dict[int, Route],
+          check: Check | None = None) -> dict[int, Plan]:
+    """Every route's plan for ``telemetry``, by 11-bit identifier; ``check``: the E2E check
+    they make (else ``telemetry.e2e.check``: a hold's forced verdict, ``forced_plans``)."""
+    return {can_id: plan_of(telemetry, can_id, route, check) for can_id, route in routes.items()}
 
 
-def plan_of(telemetry: RobotTelemetry, can_id: int, route: Route) -> Plan:
+def plan_of(telemetry: RobotTelemetry, can_id: int, route: Route,
+            check: Check | None = None) -> Plan:
     """``route``'s plan: a counted-only message, a watched one (ODOM_STATUS, ODOM_POSE_X), or
     any handled one."""
-    plan = (_counted if route.handler is None else _handled)(telemetry, can_id, route)
+    plan = (_counted if route.handler is None else _handled)(
+        telemetry, can_id, route, check or telemetry.e2e.check)
     if can_id not in telemetry._watched:
         return plan
     watch = telemetry._watch_source
@@ -57,10 +62,10 @@ def plan_of(telemetry: RobotTelemetry, can_id: int, route: Route) -> Plan:
     return watched_plan
 
 
-def _handled(telemetry: RobotTelemetry, can_id: int, route: Route) -> Plan:
+def _handled(telemetry: RobotTelemetry, can_id: int, route: Route, check: Check) -> Plan:
     """A message with a handler: E2E, the tracker's advance (unless the handler's own first
     act), decode, counts, the handler, then the samples the tracker settled."""
-    check, tracker, frames = telemetry.e2e.check, telemetry.tracker, telemetry.frames
+    tracker, frames = telemetry.tracker, telemetry.frames
     refused, undecodable = telemetry._refused, telemetry._undecodable
     name, decode, handler, advances = route.name, route.decode, route.handler, route.advances
     recent = telemetry.hold.recent.append  # a hold's context (host.mqtt.livehold)
@@ -87,9 +92,9 @@ def _handled(telemetry: RobotTelemetry, can_id: int, route: Route) -> Plan:
     return plan
 
 
-def _counted(telemetry: RobotTelemetry, can_id: int, route: Route) -> Plan:
+def _counted(telemetry: RobotTelemetry, can_id: int, route: Route, check: Check) -> Plan:
     """A message without a handler (another node's, e.g. MOTOR_CMD): checked and counted."""
-    check, tracker, frames = telemetry.e2e.check, telemetry.tracker, telemetry.frames
+    tracker, frames = telemetry.tracker, telemetry.frames
     refused, name = telemetry._refused, route.name
     recent = telemetry.hold.recent.append  # a hold's context (host.mqtt.livehold)
 

@@ -26,10 +26,12 @@ def takes(*names: str, advances: bool = False) -> Callable[[F], F]:
     its first act is the tracker's ``advance`` to the frame's time (``PoseTracker.on_encoders``,
     ``on_pose_x``, ``on_pose_y``), so ``RobotTelemetry`` does not advance it before as well."""
     def mark(handler: F) -> F:
-        handler.signal_names = names  # type: ignore[attr-defined]
-        handler.advances = advances  # type: ignore[attr-defined]
-        return handler
+        _TAKES[handler.__qualname__] = (names, advances)  # not on the handler: a mypyc-compiled
+        return handler  # method takes no attributes (host.accel)
     return mark
+
+
+_TAKES: dict[str, tuple[tuple[str, ...], bool]] = {}  # ``takes``'s marks by handler qualname
 
 
 @dataclass(frozen=True, slots=True)
@@ -61,10 +63,9 @@ class Route:
             else:  # another layout: every frame goes to the reboot watch
                 page = (0, 0, 0)
         signals = LiveDecoder(message).decode
-        names = getattr(handler, "signal_names", None)
+        names, advances = _TAKES.get(getattr(handler, "__qualname__", ""), (None, False))
         decode = signals if names is None else values_decoder(message, names, DEFAULTS)
-        return cls(message, message.name, handler, decode, signals, page,
-                   bool(getattr(handler, "advances", False)))
+        return cls(message, message.name, handler, decode, signals, page, advances)
 
     def is_summary(self, data: bytes) -> bool:
         """Whether an ODOM_STATUS payload may be a SUMMARY page (its raw PAGE says so)."""

@@ -51,7 +51,7 @@ from __future__ import annotations
 import math
 from collections import Counter, deque
 from dataclasses import dataclass, field
-from typing import Any, ClassVar
+from typing import Any
 
 import can
 from cantools.database.can import Database
@@ -94,7 +94,7 @@ TRUTH_PARTS = {0: "X", 1: "Y", 2: "HEADING"}  # SIM_TRUTH's PART: the signal it 
 
 def _routes(db: Database) -> dict[int, Route]:
     """The routes of ``db``'s 11-bit messages (``host.mqtt.liveroutes``), shared by every robot."""
-    return routes(db, RobotTelemetry._handlers)
+    return routes(db, _handlers())
 
 
 @dataclass
@@ -253,11 +253,7 @@ class RobotTelemetry(CommandFollowing):
             assert hold.verdict is not None and timestamp_s is not None
             return check_as(can_id, data, timestamp_s, hold.verdict)
 
-        self.e2e.check = check  # type: ignore[method-assign]  # read by the plans made now
-        try:
-            return plans(self, self._routes)
-        finally:
-            del self.e2e.check
+        return plans(self, self._routes, check)  # (not patched onto e2e: mypyc's is final)
 
     def _undecodable(self, route: Route, t_s: float) -> list[Publication]:
         """An E2E-valid frame cantools cannot decode (an undefined multiplexer value)."""
@@ -440,20 +436,6 @@ class RobotTelemetry(CommandFollowing):
             self.on_profile_page(s, t_s)  # (it settles a config two senders left in doubt)
         return []
 
-    _handlers: ClassVar[dict[str, Any]] = {
-        "WHEEL_ENCODERS": _on_encoders,
-        "ODOM_POSE_X": _on_pose_x,
-        "ODOM_POSE_Y": _on_pose_y,
-        "ODOM_TWIST": _on_twist,
-        "SIM_TRUTH": _on_truth,
-        "ODOM_STATUS": _on_status,
-        "ODOM_ACK": CommandFollowing._on_ack,
-        "ODOM_SET_POSE": CommandFollowing._on_set_pose,
-        "ODOM_CONFIG": CommandFollowing._on_config,
-        "NAV_GOAL": CommandFollowing._on_nav_goal,
-        "ODOM_AUTH": CommandFollowing._on_auth,
-    }
-
     # --- periodic ---
     def rates(self, now_s: float) -> Publication:
         """``rates``: frames/s per message since the previous call (wall clock ``now_s``)."""
@@ -496,3 +478,12 @@ class RobotTelemetry(CommandFollowing):
         adopted = self.tracker.adopted.as_dict()
         return {"reference_adopted": adopted} if adopted else {}
 
+
+def _handlers() -> dict[str, Any]:
+    """``RobotTelemetry``'s handler of each message (read off the class once it exists: a
+    mypyc-compiled class body cannot name its own methods)."""
+    t, c = RobotTelemetry, CommandFollowing
+    return {"WHEEL_ENCODERS": t._on_encoders, "ODOM_POSE_X": t._on_pose_x,
+            "ODOM_POSE_Y": t._on_pose_y, "ODOM_TWIST": t._on_twist, "SIM_TRUTH": t._on_truth,
+            "ODOM_STATUS": t._on_status, "ODOM_ACK": c._on_ack, "ODOM_SET_POSE": c._on_set_pose,
+            "ODOM_CONFIG": c._on_config, "NAV_GOAL": c._on_nav_goal, "ODOM_AUTH": c._on_auth}

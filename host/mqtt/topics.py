@@ -102,8 +102,10 @@ _C_ENCODE: Final = None if _MAKE_C_ENCODER is None else _MAKE_C_ENCODER(
     False)  # markers, default, strings, indent, separators, sort_keys, skipkeys, allow_nan
 
 
-def dumps(payload: dict[str, Any]) -> bytes:
-    """Compact JSON; non-finite floats become null (JSON has no NaN). Encoded as it is first
+def dumps(payload: object) -> bytes:
+    """Compact JSON of any JSON value (a publication is a dict; a list is taken too: mypyc's
+    compiled ``dumps`` checks what its annotation says); non-finite floats become null (JSON
+    has no NaN). Encoded as it is first
     (every publication of every robot comes here); only a payload with a NaN or an infinity
     (``ValueError``) is copied with them as null (``finite``) and encoded again."""
     try:

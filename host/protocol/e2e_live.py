@@ -7,6 +7,7 @@ stalled recorder's release read wide (``host.protocol.e2e_evidence.ReleaseWatch`
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from math import isfinite
 from typing import TYPE_CHECKING
 
@@ -91,8 +92,9 @@ def one_period_s(cycle_s: float | None, min_periods: int) -> tuple[float, float]
 class _SeenOnce:
     """A ``ReleaseWatch`` that notes no frame: a held frame given back was noted when heard."""
 
-    def __init__(self, watch: ReleaseWatch) -> None:
-        self.released, self.silent_after = watch.released, watch.silent_after
+    def __init__(self, watch: ReleaseWatch | _SeenOnce) -> None:
+        self.released: Callable[[float | None], bool] = watch.released
+        self.silent_after: Callable[[float | None], bool] = watch.silent_after
 
     def seen(self, timestamp_s: float, key: int = -1) -> None:
         """Noted already (``E2EMonitor.check_as``)."""
@@ -115,8 +117,9 @@ class E2EMonitor:
         self._unknown = dict.fromkeys(UNKNOWN_KEYS, 0)
         self.holds: bool = False  # "held" for a frame the stamps cannot decide (docstring)
         self._held_s: float | None = None  # the bus time of the frame held last
-        self._releases = ReleaseWatch(min((c.cycle_s for c in self._configs.values()
-                                           if c.min_periods == 0 and c.cycle_s), default=0.01))
+        cycle_s = min((c.cycle_s for c in self._configs.values()
+                       if c.min_periods == 0 and c.cycle_s), default=0.01)
+        self._releases: ReleaseWatch | _SeenOnce = ReleaseWatch(cycle_s)  # (check_as: _SeenOnce)
 
     def check(
         self, can_id: int, data: bytes, extended: bool = False, timestamp_s: float | None = None
@@ -190,7 +193,7 @@ class E2EMonitor:
         was, releases = self.holds, self._releases
         self.holds = False
         if timestamp_s == self._held_s:  # the frame that was held: heard once already
-            self._held_s, self._releases = None, _SeenOnce(releases)  # type: ignore[assignment]
+            self._held_s, self._releases = None, _SeenOnce(releases)
         try:
             status = self.check(can_id, data, False, timestamp_s)
         finally:
