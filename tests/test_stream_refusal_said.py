@@ -34,7 +34,11 @@ def _reason() -> str:
 
 
 def _said(log: Path | str) -> str:
-    return f"odocan analyze: {log}: not streamable ({_reason()}): judged whole"
+    """The line, with the whole judge's memory for the log (its size: ``WHOLE_RSS_MB``)."""
+    base, per_mb = stream_choice.WHOLE_RSS_MB[Path(log).suffix]
+    rss_mb = base + per_mb * Path(log).stat().st_size / 1e6
+    return (f"odocan analyze: {log}: not streamable ({_reason()}): judged whole, in about "
+            f"{rss_mb:.0f} MB of memory (the stream aims under 300 MB)")
 
 
 def _analyze(capsys: pytest.CaptureFixture[str], *args: str) -> tuple[int, str, str]:

@@ -61,17 +61,22 @@ def candidates(enc: Encoders, lo: int, robot: RobotProfile, integrator: str) -> 
 
 def judged_from_each(first: Analysis, rerun: Callable[[Pose], Analysis]) -> Analysis:
     """``first`` (fitted, its start unproven) judged again from each candidate start of its
-    unproven event (``rerun``: the life from that exact start): the first that passes, else the
-    one with the least error beyond its allowance, its events saying which frame; ``first``
-    when it has no candidates."""
+    unproven event (``rerun``: the life from that exact start): the first that passes (the
+    later ones not judged: a streamed life is read again per candidate), else the one with the
+    least error beyond its allowance, its events saying which frame; ``first`` when it has no
+    candidates."""
     event = next((e for e in first.report["events"] if FRAMES_KEY in e), None)
     if event is None:
         return first
-    tries = [(p, rerun((pose[0], pose[1], pose[2]))) for p, pose in event[FRAMES_KEY]]
+    tries: list[tuple[int, Analysis]] = []
+    for p, pose in event[FRAMES_KEY]:  # up to the first that passes: it is the one taken
+        tries.append((p, rerun((pose[0], pose[1], pose[2]))))
+        if tries[-1][1].passed:
+            break
     passed = [t for t in tries if t[1].passed]
     p, best = passed[0] if passed else min(tries, key=lambda t: t[1].report[
         "onboard_vs_reference"]["max_position_error_beyond_allowance_m"])
-    frames = [t[0] for t in tries]
+    frames = [int(f) for f, _ in event[FRAMES_KEY]]
     verdict = (f"it passes from frame {p}" if passed else f"it fails from frame {p}"
                if len(tries) == 1 else f"it fails from every one (the least error from frame {p})")
     best.report["reference_start"] = "power-up"

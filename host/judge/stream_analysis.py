@@ -14,11 +14,14 @@ Passes: the whole log once (E2E, the firmware lives, the report's facts); then p
    times. Memory: the chunk and the stages' carried state, never the log.
 A life whose frames came in a burst after a busy bus is refused (``NotStreamable``:
 ``samples._queued`` pairs them by the whole life's median send period). Lives are cut again at
-the applied set-poses and configs (``stream_cuts``), as the whole log's judge cuts them.
+the applied set-poses and configs (``stream_cuts``), as the whole log's judge cuts them. A
+power-up primed late (the first count page's k >= 1) is judged from each frame it may have
+primed on, the life streamed again per candidate (``stream_primed``, from its first frames).
 ``streams`` says when to stream at all."""
 
 from __future__ import annotations
 
+import functools
 import tempfile
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
@@ -65,12 +68,13 @@ from odocan.host.judge.stream_cuts import (
 )
 from odocan.host.judge.stream_distance import stream_distance
 from odocan.host.judge.stream_facts import StreamFacts
-from odocan.host.judge.stream_first import Frames, first_pass
+from odocan.host.judge.stream_first import FirstPass, Frames, first_pass
 from odocan.host.judge.stream_life import LifeInfo, life_chunks
 from odocan.host.judge.stream_lives import LifeSpan, StreamLives
 from odocan.host.judge.stream_losses import SpanDrops
 from odocan.host.judge.stream_place import PlacedChunk, reference_errors, segment_offsets
 from odocan.host.judge.stream_place import start_pose as place_start
+from odocan.host.judge.stream_primed import judged_from_candidates
 from odocan.host.judge.stream_refusal import UNSETTLED
 from odocan.host.judge.stream_refusal import NotStreamable as NotStreamable
 from odocan.host.judge.stream_stalls import StreamBreakCounts
@@ -267,15 +271,6 @@ class FrameSpill:
             yield FrameArrays(**columns)
 
 
-def _refuse_primed_late(facts: StreamFacts, started: bool) -> None:
-    """``NotStreamable`` when the log's first life (not ``started`` by a boot, a rebase, the
-    power-up rule or a set-pose) may have primed on the log's k-th frame
-    (``StreamFacts.primed_late``): the whole log judges it from there."""
-    if not started and facts.primed_late():
-        raise NotStreamable("the firmware's first count page says it primed after the log's "
-                            "first encoder frame (judged whole: powerup.primed_after)")
-
-
 def _life(
     frames: Frames, robot: RobotProfile, integrator: str | None, *, tolerance: Tolerance,
     db: DatabaseSpec, boot: bool, max_wheel_speed_mm_s: SpeedBound,
@@ -290,7 +285,28 @@ def _life(
     integrator, source = facts.integrator(integrator)
     first.check()
     power_up = facts.saw_only_the_log() if boot else facts.starts_at_power_up(first.head)
-    _refuse_primed_late(facts, boot or rebase or power_up or start_pose is not None)
+    judge = functools.partial(
+        _judged, first, frames, robot, (integrator, source), power_up, tolerance=tolerance,
+        db=db, max_wheel_speed_mm_s=max_wheel_speed_mm_s, rebase=rebase, scenario=scenario,
+        seed=seed, wall_seconds=wall_seconds)
+    if not (boot or rebase or power_up or start_pose is not None) and facts.primed_late():
+        event = first.prefix.event(first.first_sent_s, (robot, integrator))  # stream_primed
+        if event:  # judged from each frame it may have primed on, as the whole log's judge
+            return judged_from_candidates(event, lambda pose: judge(start_pose=pose))
+    return judge(start_pose=start_pose)
+
+
+def _judged(
+    first: FirstPass, frames: Frames, robot: RobotProfile, integrators: tuple[str, str],
+    power_up: bool, *, tolerance: Tolerance, db: DatabaseSpec,
+    max_wheel_speed_mm_s: SpeedBound, rebase: bool, scenario: str | None, seed: int | None,
+    wall_seconds: float | None, start_pose: tuple[float, float, float] | None,
+) -> tuple[dict[str, Any], float]:
+    """``_life``'s report from its first pass (``first``; ``integrators``: the integrator and
+    its source; ``start_pose``: a set-pose's or a candidate priming frame's, exact at the
+    life's first encoder frame)."""
+    integrator, source = integrators
+    facts = first.facts
     at_first = power_up or start_pose is not None  # the start exact at the first frame
     e0 = 0 if at_first else int(first.head.enc[0])
     breaks = first.breaks

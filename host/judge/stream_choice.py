@@ -23,6 +23,18 @@ def stream_above_bytes(suffix: str) -> float:
     return max(0.0, (RSS_TARGET_MB / RSS_MARGIN - base) / per_mb) * 1e6
 
 
+def whole_rss_mb(path: str | Path) -> float | None:
+    """About the max RSS (MB) the whole-log path takes on ``path`` (``WHOLE_RSS_MB``'s fit for
+    its format, the most memory-hungry one's when not measured); None when it cannot be read."""
+    try:
+        size_mb = Path(path).stat().st_size / 1e6
+    except OSError:
+        return None
+    base, per_mb = WHOLE_RSS_MB.get(Path(path).suffix.lower(), max(WHOLE_RSS_MB.values(),
+                                                                  key=lambda fit: fit[1]))
+    return base + per_mb * size_mb
+
+
 def streams(path: str | Path, mode: str = "auto") -> bool:
     """Whether to analyse ``path`` as a stream: ``always``, ``never``, or (``auto``) when the
     whole-log path would take more than the max-RSS target for a log that size (the streamed

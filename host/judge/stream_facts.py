@@ -229,8 +229,9 @@ class StreamFacts:
     def primed_late(self) -> bool:
         """The first count page may say the firmware primed on the log's k-th encoder frame
         (``powerup.primed_after``: k 1 or more, the first summary UPTIME 0 in its first
-        cycle): the stream refuses the life, the whole log judges it from there (a refusal
-        wider than the rule: never a fitted start where the whole log's is exact)."""
+        cycle): the stream then reads the whole judge's candidates from the life's first
+        frames (``stream_primed``; a gate wider than the rule: the event, when there is none,
+        leaves the fitted start the whole log's judge takes too)."""
         if not self._has_status or not self._uptime.present or self._uptime.first != 0:
             return False
         if not self._enc_ok.present or self._enc_ok.first is None:

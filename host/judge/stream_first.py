@@ -25,6 +25,7 @@ from odocan.host.judge.stalls import silent
 from odocan.host.judge.stream import StreamE2E, StreamEncoders, StreamPoses
 from odocan.host.judge.stream_facts import StreamFacts
 from odocan.host.judge.stream_losses import StreamLosses
+from odocan.host.judge.stream_primed import PowerUpPrefix
 from odocan.host.judge.stream_refusal import UNSETTLED, NotStreamable
 from odocan.host.judge.stream_stalls import StreamStalls
 from odocan.host.judge.stream_truth import StreamTruth
@@ -92,11 +93,14 @@ class FirstPass:
         self.head = self.tail = poses_of({})
         self.t_first_s = 0.0
         self.before_first = FirstSilence()  # a stall before the first pose (stalls)
+        self.prefix = PowerUpPrefix(self.decoder)  # a power-up primed late (stream_primed)
+        self.first_sent_s = math.inf  # the first on-board sample's bus time (its least)
 
     def feed(self, chunk: FrameArrays) -> None:
         if self.e2e.counts == {} and len(chunk):
             self.t_first_s = float(chunk.timestamp_s[0])
         accepted = self.e2e.feed(chunk)
+        self.prefix.feed(chunk, accepted)
         for name in REQUIRED:
             index = self.decoder.select(chunk, name)
             self.rows[name] += len(index)
@@ -105,6 +109,7 @@ class FirstPass:
         self.encoders += len(enc.index)
         self.stalls = self.stalls or StreamStalls(enc.cycle_s)
         samples, sent = self.poses.feed(chunk, accepted, enc)
+        self.first_sent_s = min(self.first_sent_s, float(np.min(sent, initial=math.inf)))
         watermark = min(float(chunk.timestamp_s[-1]), self.poses.open_sent_s())
         pose_y = self.decoder.select(chunk, "ODOM_POSE_Y")
         pose_t = chunk.timestamp_s[pose_y[accepted[pose_y]]]
@@ -153,6 +158,7 @@ class FirstPass:
         if self.stalls is None:
             return
         samples, sent = self.poses.finish()
+        self.first_sent_s = min(self.first_sent_s, float(np.min(sent, initial=math.inf)))
         self._kept(self.stalls.feed(samples, sent, np.zeros(0), np.inf), samples)
         self._kept(self.stalls.finish(), {"enc": np.zeros(0)})
         self.truths += len(self.truth.finish()[0]["enc"])
