@@ -71,6 +71,7 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
+from odocan.host.judge.distfall import any_within, fall_times
 from odocan.host.protocol import busfacts
 from odocan.host.protocol.busfacts import ENC_COUNTER_MASK
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
@@ -175,7 +176,7 @@ def ahead_candidate(uptime_s: int, counter: int, t_s: float, summary_before_s: f
 
 
 def boot_ahead(summary_s: float, status_broke: bool, t_s: float, counter: int,
-               before: tuple[float, int] | None) -> bool:
+               before: tuple[float, int] | None, fell: bool = False) -> bool:
     """Whether the first ODOM_POSE_X heard after an ``ahead_candidate`` summary (bus time
     ``summary_s``; ``status_broke``: it broke the ODOM_STATUS sequence) may make that summary a
     power-up tick whose firmware sent no pose in it (the pose at bus time ``t_s``, E2E
@@ -185,12 +186,24 @@ def boot_ahead(summary_s: float, status_broke: bool, t_s: float, counter: int,
     sequence; or, its power-up pose lost on the bus, a small COUNTER restarted
     (``restarts_small``) after a summary that broke the ODOM_STATUS sequence (issue #11: a reset
     10..60 ticks into the firmware's first second, its first pose pair lost, FAILed the correct
-    firmware 9 mm..0.23 m in every judge). The next summary tells (``continues_summary``)."""
+    firmware 9 mm..0.23 m in every judge), or the twist's DISTANCE fell (``fell``: a twist of
+    a small COUNTER below the one before, ``fell_around``) where that COUNTER continues the old
+    life's (a reset 32 k ticks in: the correct firmware FAILed 93 mm..0.41 m). The next
+    summary tells (``continues_summary``)."""
     soon = RULE_HOLDS and 0.0 <= t_s - summary_s < BOOT_WINDOW_S
-    if counter != 0:  # its power-up pose lost: both sequences must break (``restarts_small``)
-        return bool(soon and status_broke and restarts_small(counter, t_s, before))
+    if counter != 0:  # its power-up pose lost: a second message's sequence or DISTANCE broke
+        small = 0 < counter < BOOT_POSE_FRAMES
+        return bool(soon and status_broke and small
+                    and (fell or restarts_small(counter, t_s, before)))
     broke = status_broke or before is None or breaks_sequence(before[1], t_s - before[0])
     return bool(soon and broke)
+
+
+def fell_around(falls_s: npt.NDArray[np.float64], summary_s: float, t_s: float) -> bool:
+    """Whether a twist's DISTANCE fell (``distfall.fall_times``: bus times, in order) from
+    ``BOOT_WINDOW_S`` before the summary at ``summary_s`` (its tick's twist comes before it)
+    up to its first pose after it at ``t_s``: ``boot_ahead``'s ``fell``."""
+    return any_within(falls_s, summary_s - BOOT_WINDOW_S, t_s)
 
 
 def restarts_small(counter: int, t_s: float, before: tuple[float, int] | None) -> bool:
@@ -223,6 +236,7 @@ def ahead_ticks(frames: FrameArrays, decoder: BulkDecoder, positions: npt.NDArra
     their CRC holding: UPTIMEs, COUNTERs, bus times; ``statuses``: ``status_before`` of each)
     at once, their first pose after them in ``frames`` (before the next summary)."""
     where, t_pose, counter = pose_rows(frames, decoder)
+    falls_s = fall_times(frames, decoder, BOOT_POSE_FRAMES)[0]
     found = np.zeros(len(positions), dtype=bool)
     if len(where) == 0 or len(positions) == 0:
         return found
@@ -236,7 +250,8 @@ def ahead_ticks(frames: FrameArrays, decoder: BulkDecoder, positions: npt.NDArra
         broke = ahead_candidate(0, 0, float(t_s[i]), float(t_s[i - 1]) if i else None, status)
         before = None if j == 0 else (float(t_pose[j - 1]), int(counter[j - 1]))
         found[i] = (broke is not None and i + 1 < n
-                    and boot_ahead(float(t_s[i]), broke, float(t_pose[j]), int(counter[j]), before)
+                    and boot_ahead(float(t_s[i]), broke, float(t_pose[j]), int(counter[j]), before,
+                                   fell_around(falls_s, float(t_s[i]), float(t_pose[j])))
                     and continues_summary(float(t_s[i]), float(t_s[i + 1]), int(uptime_s[i + 1]),
                                           int(counters[i + 1])))
     return found
