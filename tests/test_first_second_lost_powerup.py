@@ -193,3 +193,46 @@ def test_the_c_firmware_passes_a_reset_at_counter_15_too(tmp_path: Path) -> None
                                _primed_t(messages, 64))
     assert own.passed
     assert [v for v, _ in judges.values()] == ["PASS", "OK", "PASS"]
+
+
+def _twists_lost(messages: tuple[can.Message, ...], reboot_at: int, twists: int
+                 ) -> tuple[can.Message, ...]:
+    """The bus loses the new firmware's first ``twists`` ODOM_TWIST frames as well."""
+    out, seen = [], 0
+    for m in messages:
+        if m.arbitration_id == fr.ODOM_TWIST_ID and m.timestamp >= reboot_at * TICK_S:
+            seen += 1
+            if seen <= twists:
+                continue
+        out.append(m)
+    return tuple(out)
+
+
+@pytest.mark.parametrize("twists", [1, 2, 3])
+@pytest.mark.parametrize("reboot_at", [32, 64])
+def test_its_first_twists_lost_too_the_next_twists_distance_tells_it(
+    reboot_at: int, twists: int, tmp_path: Path
+) -> None:
+    """The new firmware's first 1..3 twists lost as well: the first twist heard (COUNTER 1..3,
+    less than 80 ms after the boot summary) still reads DISTANCE below the old life's last
+    (the live judges read it at the next summary). Before the window reached past the first
+    pose: the monitor and the bridge FAILed the correct firmware with 1 twist lost, all four
+    judges with 2 or 3."""
+    messages = _drive(reboot_at)
+    lost = _twists_lost(_lost(messages, reboot_at, 1, 0), reboot_at, twists)
+    own, judges = _every_judge(lost, tmp_path / "twists.log", _primed_t(messages, reboot_at))
+    assert own.passed
+    assert [v for v, _ in judges.values()] == ["PASS", "OK", "PASS"]
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "the new firmware's first 4 twists and first pose pair lost: the first twist heard has COUNTER "
+    "4, past the boot window (80 ms), so no second evidence ties the summary to a power-up; the "
+    "correct firmware FAILs (93 mm at tick 32) where it should be told or left UNJUDGED"))
+def test_its_first_four_twists_lost_too_is_not_told_yet(tmp_path: Path) -> None:
+    """Measured: FAIL by 93 mm in every judge (the checker PASSes)."""
+    messages = _drive(32)
+    lost = _twists_lost(_lost(messages, 32, 1, 0), 32, 4)
+    own, judges = _every_judge(lost, tmp_path / "four.log", _primed_t(messages, 32))
+    assert own.passed
+    assert [v for v, _ in judges.values()] == ["PASS", "OK", "PASS"]

@@ -199,11 +199,12 @@ def boot_ahead(summary_s: float, status_broke: bool, t_s: float, counter: int,
     return bool(soon and broke)
 
 
-def fell_around(falls_s: npt.NDArray[np.float64], summary_s: float, t_s: float) -> bool:
-    """Whether a twist's DISTANCE fell (``distfall.fall_times``: bus times, in order) from
-    ``BOOT_WINDOW_S`` before the summary at ``summary_s`` (its tick's twist comes before it)
-    up to its first pose after it at ``t_s``: ``boot_ahead``'s ``fell``."""
-    return any_within(falls_s, summary_s - BOOT_WINDOW_S, t_s)
+def fell_around(falls_s: npt.NDArray[np.float64], summary_s: float) -> bool:
+    """Whether a twist's DISTANCE fell (``distfall.fall_times``: bus times, in order) less
+    than ``BOOT_WINDOW_S`` from the summary at ``summary_s``, before it (its tick's twist comes
+    before it) or after (that twist lost too: the next, COUNTER 1..3): ``boot_ahead``'s
+    ``fell``. Live, told at the next summary, a cycle on (all those twists heard by then)."""
+    return any_within(falls_s, summary_s - BOOT_WINDOW_S, summary_s + BOOT_WINDOW_S)
 
 
 def restarts_small(counter: int, t_s: float, before: tuple[float, int] | None) -> bool:
@@ -251,7 +252,7 @@ def ahead_ticks(frames: FrameArrays, decoder: BulkDecoder, positions: npt.NDArra
         before = None if j == 0 else (float(t_pose[j - 1]), int(counter[j - 1]))
         found[i] = (broke is not None and i + 1 < n
                     and boot_ahead(float(t_s[i]), broke, float(t_pose[j]), int(counter[j]), before,
-                                   fell_around(falls_s, float(t_s[i]), float(t_pose[j])))
+                                   fell_around(falls_s, float(t_s[i])))
                     and continues_summary(float(t_s[i]), float(t_s[i + 1]), int(uptime_s[i + 1]),
                                           int(counters[i + 1])))
     return found

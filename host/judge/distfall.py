@@ -44,7 +44,8 @@ from odocan.host.protocol.e2e import crc8h2f_p02, crc8h2f_p02_one, e2e_messages
 TWIST_MESSAGE = "ODOM_TWIST"  # the firmware's twist: its DISTANCE, the path since power-up
 DISTANCE_SIGNAL = "DISTANCE"
 FALL_GAP_S = 1.0  # two twists this close: a fall is no wrap (half of 65.536 m in 1 s)
-RECENT_TWISTS = 8  # kept live: the twists of the last 160 ms (one every 20 ms)
+RECENT_TWISTS = 16  # kept live: the twists of the last 320 ms (one every 20 ms), read at the
+# summary after the boot summary (100 ms on) for those within 80 ms of it (``fell_around``)
 
 
 @dataclass(frozen=True)

@@ -105,6 +105,7 @@ class SourceWatch:
     ahead_heard: list[float] = field(default_factory=list)  # the frames (bus times) heard since
     # the summary (poses, ODOM_STATUS, any sequence: the E2E check refused them till then)
     twist_field: DistanceField | None = None  # where ODOM_TWIST says DISTANCE (``distfall``)
+    ahead_fall: bool = False  # ``ahead_posed`` needs the twists' DISTANCE fell (``told_ahead``)
     twists: deque[tuple[float, bytes]] = field(  # the latest twists heard (bus time, bytes),
         default_factory=lambda: deque(maxlen=RECENT_TWISTS))  # read only at ``hear_pose``
 
@@ -204,10 +205,9 @@ class SourceWatch:
         ahead, self.ahead = self.ahead, None
         if ahead is None:
             return
-        fell = counter != 0 and fell_within(self.twist_field, self.twists,
-                                            ahead[0] - BOOT_WINDOW_S, t_s, BOOT_POSE_FRAMES)
-        if boot_ahead(ahead[0], ahead[4], t_s, counter, before, fell):
-            self.ahead_posed = ahead[:4]
+        sure = boot_ahead(ahead[0], ahead[4], t_s, counter, before)
+        if sure or boot_ahead(ahead[0], ahead[4], t_s, counter, before, fell=True):
+            self.ahead_posed, self.ahead_fall = ahead[:4], not sure  # fell: at ``told_ahead``
 
     def told_ahead(self, t_s: float, uptime_s: int, counter: int
                    ) -> tuple[float, int, str, int | None] | None:
@@ -218,6 +218,10 @@ class SourceWatch:
         posed, self.ahead_posed = self.ahead_posed, None
         if posed is None or not continues_summary(posed[0], t_s, uptime_s, counter):
             return None
+        window = (posed[0] - BOOT_WINDOW_S, posed[0] + BOOT_WINDOW_S)  # (``fell_around``)
+        if self.ahead_fall and not fell_within(self.twist_field, self.twists, *window,
+                                               BOOT_POSE_FRAMES):
+            return None  # its first pose told it only with DISTANCE fallen, which did not
         self.take_ahead(posed[0], posed[1])
         return posed
 

@@ -119,6 +119,7 @@ class StreamLives:
     # to the next summary; the chunk's events after it wait with it (``_deferred``)
     _deferred: list[tuple[int, _Boot | tuple[int, int]]] = field(default_factory=list)
     _naming: list[_Boot] = field(default_factory=list)  # reboots whose ``naming`` is not told
+    _ahead_fall: bool = False  # the ``_ahead`` posed needs a twist's DISTANCE fallen
     _falls: tuple[npt.NDArray[np.float64], tuple[float, int] | None] = field(  # the twists
         default_factory=lambda: (np.zeros(0), None))  # whose DISTANCE fell, the latest twist's
 
@@ -370,9 +371,10 @@ class StreamLives:
         self._ahead = None
         before = ((float(t_pose[j - 1]), int(counter[j - 1])) if j > 0 else
                   None if carried is None else (carried[3], carried[1]))
-        fell = fell_around(self._falls[0], boot.t_s, float(t_pose[j]))  # (``distfall``)
-        if boot_ahead(boot.t_s, broke, float(t_pose[j]), int(counter[j]), before, fell):
+        sure = boot_ahead(boot.t_s, broke, float(t_pose[j]), int(counter[j]), before)
+        if sure or boot_ahead(boot.t_s, broke, float(t_pose[j]), int(counter[j]), before, True):
             self._ahead = (boot, broke, True)  # the next summary tells (``_posed_told``)
+            self._ahead_fall = not sure  # ... its twists' DISTANCE fallen (``distfall``)
 
     def _posed_told(self, t_s: float, uptime_s: int, counter: int
                     ) -> list[tuple[int, _Boot | tuple[int, int]]]:
@@ -382,6 +384,8 @@ class StreamLives:
         ahead, self._ahead = self._ahead, None
         if ahead is None or not ahead[2] or not continues_summary(ahead[0].t_s, t_s, uptime_s,
                                                                   counter):
+            return []
+        if self._ahead_fall and not fell_around(self._falls[0], ahead[0].t_s):
             return []
         self._watch.take_ahead(ahead[0].t_s, ahead[0].uptime_s)
         return [(ahead[0].position, ahead[0])]
