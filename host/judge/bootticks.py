@@ -58,6 +58,8 @@ sequence), the next summary is that firmware's boot summary, COUNTER 0 (told by 
 live judges hold that verdict until that summary (a cycle), then start the life at the
 looked-ahead summary's encoder frame and withdraw what they judged since; the streamed
 ``analyze`` holds the events after the summary across chunks (``stream_lives``).
+A reset 32 k ticks in whose power-up pose the bus lost breaks no pose COUNTER (the old life's
+last read 15): the twist's DISTANCE going back is its second evidence (``host.judge.distfall``).
 One rule, for every judge: ``SourceWatch.observe`` (the live monitor, the bridge, the streamed
 ``analyze``; ``hear_pose`` and ``told_ahead`` live) and ``boot_ticks`` and ``ahead_ticks`` (the
 whole log's quiet stretches, ``SourceWatch.observe_quiet``).

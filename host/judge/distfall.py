@@ -15,16 +15,20 @@ drove a whole wrap less the fall (more than half of 65.536 m) between the two: t
 taken less than ``FALL_GAP_S`` apart (32 m/s and more: no robot). Rounding to the mm is
 monotone too, and frames of one ID are never reordered on a CAN bus. Tied to the power-up the
 way ``restarts_small`` is: the twist that fell has a small COUNTER (below ``BOOT_POSE_FRAMES``,
-the new firmware's first 80 ms), its CRC holding, whatever its sequence. ``bootticks.boot_ahead``
-takes it as the second evidence beside the summary's broken sequence; the next summary still
-has to continue the boot summary's (``continues_summary``).
+the new firmware's first 80 ms), its CRC holding, whatever its sequence, less than 80 ms from
+the boot summary either side (``bootticks.fell_around``: the twist of its tick comes before it;
+that one lost, the next ones, COUNTER 1..3, after). ``bootticks.boot_ahead`` takes it as the
+second evidence beside the summary's broken sequence; the next summary still has to continue
+the boot summary's (``continues_summary``), and live the fall is read then (all those twists
+heard by a cycle on).
 
-Where no fall shows (the robot had not moved, or the twists were lost too) the reboot stays
-untold as before: the pose the new firmware sends is then no farther from the old reference
-than the distance the old life drove before its last twist heard (at most a tick or two).
+Where no fall shows the reboot stays untold as before: a robot that had not moved (the new pose
+is then no farther from the old reference than the old life drove since its last twist heard,
+a tick or two), or the new firmware's first 4 twists lost too (its first twist heard past the
+window: a false FAIL left, tests/test_first_second_lost_powerup.py's strict xfail).
 
 Kept cheap live: a judge keeps the latest twists heard (bus time, bytes: ``RECENT_TWISTS``)
-and reads them only when a summary waits on its first pose (``fell_within``).
+and reads them only when a summary's first pose needs the fall (``fell_within``).
 """
 
 from __future__ import annotations
