@@ -67,7 +67,8 @@ def _twist_kept(telemetry: RobotTelemetry, can_id: int, route: Route, plan: Plan
     watch, which reads its DISTANCE only when a pose may tell a reboot
     (``host.judge.distfall``: DISTANCE going back tells a new firmware)."""
     sources = telemetry.sources
-    sources.twist_field = distance_field(route.message, e2e_messages(telemetry.db).get(can_id))
+    if sources.twist_field is None:  # once a robot (``forced_plans`` makes them again)
+        sources.twist_field = distance_field(route.message, e2e_messages(telemetry.db).get(can_id))
     keep = sources.twists.append
 
     def twist_plan(t_s: float, data: bytes) -> list[Publication]:
