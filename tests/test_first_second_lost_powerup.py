@@ -153,17 +153,86 @@ def test_the_c_firmware_passes_too(tmp_path: Path) -> None:
     assert [v for v, _ in judges.values()] == ["PASS", "OK", "PASS"]
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "a reset 32 k ticks in (the old pose's last COUNTER 15): the new COUNTER 1, 40 ms after it, "
-    "is what one life sends two frames on, so only the ODOM_STATUS sequence breaks; no second "
-    "evidence is read yet (DISTANCE or the count page going back): the correct firmware FAILs"))
-@pytest.mark.parametrize("reboot_at", [32, 64])
-def test_a_reset_after_the_old_poses_counter_15_is_not_told_yet(
+@pytest.mark.parametrize("reboot_at", [32, 64, 96])
+def test_a_reset_after_the_old_poses_counter_15_passes_the_correct_firmware(
     reboot_at: int, tmp_path: Path
 ) -> None:
-    """Measured: FAIL by 93 mm (tick 32), 0.25 m (64), 0.41 m (96) in every judge."""
+    """A reset 32 k ticks in (the old pose's last COUNTER 15): the new COUNTER 1, 40 ms after
+    it, is what one life sends two frames on, so of the COUNTERs only ODOM_STATUS's breaks; the
+    twist's DISTANCE going back tells it (``host.judge.distfall``). Before: FAIL by 93 mm
+    (tick 32), 0.25 m (64), 0.41 m (96) in every judge."""
     messages = _drive(reboot_at)
     own, judges = _every_judge(_lost(messages, reboot_at, 1, 0), tmp_path / "lap.log",
                                _primed_t(messages, reboot_at))
+    assert own.samples > 100
+    assert own.passed
+    assert [v for v, _ in judges.values()] == ["PASS", "OK", "PASS"]
+    for name, (_, error_m) in judges.items():
+        assert error_m == pytest.approx(own.max_position_error_m, abs=0.1 * POSITION_LSB_M), name
+
+
+@pytest.mark.parametrize("bias_lsb", [1, 3, 10_000])
+@pytest.mark.parametrize("reboot_at", [32, 64, 96])
+def test_a_wrong_firmware_after_a_reset_at_counter_15_fails_every_judge(
+    reboot_at: int, bias_lsb: int, tmp_path: Path
+) -> None:
+    """1 LSB .. 1 m off from the new power-up, the reset told by DISTANCE: FAIL everywhere."""
+    messages = _drive(reboot_at)
+    own, judges = _every_judge(_lost(messages, reboot_at, 1, bias_lsb), tmp_path / "wrong.log",
+                               _primed_t(messages, reboot_at))
+    assert not own.passed
+    assert [v for v, _ in judges.values()] == ["FAIL", "POSE WRONG", "FAIL"]
+    for name, (_, error_m) in judges.items():
+        assert error_m == pytest.approx(own.max_position_error_m, abs=0.1 * POSITION_LSB_M), name
+
+
+def test_the_c_firmware_passes_a_reset_at_counter_15_too(tmp_path: Path) -> None:
+    """The C port's frames, a reset at tick 64 and the same loss."""
+    messages = _drive(64, "c")
+    own, judges = _every_judge(_lost(messages, 64, 1, 0), tmp_path / "c64.log",
+                               _primed_t(messages, 64))
+    assert own.passed
+    assert [v for v, _ in judges.values()] == ["PASS", "OK", "PASS"]
+
+
+def _twists_lost(messages: tuple[can.Message, ...], reboot_at: int, twists: int
+                 ) -> tuple[can.Message, ...]:
+    """The bus loses the new firmware's first ``twists`` ODOM_TWIST frames as well."""
+    out, seen = [], 0
+    for m in messages:
+        if m.arbitration_id == fr.ODOM_TWIST_ID and m.timestamp >= reboot_at * TICK_S:
+            seen += 1
+            if seen <= twists:
+                continue
+        out.append(m)
+    return tuple(out)
+
+
+@pytest.mark.parametrize("twists", [1, 2, 3])
+@pytest.mark.parametrize("reboot_at", [32, 64])
+def test_its_first_twists_lost_too_the_next_twists_distance_tells_it(
+    reboot_at: int, twists: int, tmp_path: Path
+) -> None:
+    """The new firmware's first 1..3 twists lost as well: the first twist heard (COUNTER 1..3,
+    less than 80 ms after the boot summary) still reads DISTANCE below the old life's last
+    (the live judges read it at the next summary). Before the window reached past the first
+    pose: the monitor and the bridge FAILed the correct firmware with 1 twist lost, all four
+    judges with 2 or 3."""
+    messages = _drive(reboot_at)
+    lost = _twists_lost(_lost(messages, reboot_at, 1, 0), reboot_at, twists)
+    own, judges = _every_judge(lost, tmp_path / "twists.log", _primed_t(messages, reboot_at))
+    assert own.passed
+    assert [v for v, _ in judges.values()] == ["PASS", "OK", "PASS"]
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "the new firmware's first 4 twists and first pose pair lost: the first twist heard has COUNTER "
+    "4, past the boot window (80 ms), so no second evidence ties the summary to a power-up; the "
+    "correct firmware FAILs (93 mm at tick 32) where it should be told or left UNJUDGED"))
+def test_its_first_four_twists_lost_too_is_not_told_yet(tmp_path: Path) -> None:
+    """Measured: FAIL by 93 mm in every judge (the checker PASSes)."""
+    messages = _drive(32)
+    lost = _twists_lost(_lost(messages, 32, 1, 0), 32, 4)
+    own, judges = _every_judge(lost, tmp_path / "four.log", _primed_t(messages, 32))
     assert own.passed
     assert [v for v, _ in judges.values()] == ["PASS", "OK", "PASS"]

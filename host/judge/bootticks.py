@@ -58,6 +58,8 @@ sequence), the next summary is that firmware's boot summary, COUNTER 0 (told by 
 live judges hold that verdict until that summary (a cycle), then start the life at the
 looked-ahead summary's encoder frame and withdraw what they judged since; the streamed
 ``analyze`` holds the events after the summary across chunks (``stream_lives``).
+A reset 32 k ticks in whose power-up pose the bus lost breaks no pose COUNTER (the old life's
+last read 15): the twist's DISTANCE going back is its second evidence (``host.judge.distfall``).
 One rule, for every judge: ``SourceWatch.observe`` (the live monitor, the bridge, the streamed
 ``analyze``; ``hear_pose`` and ``told_ahead`` live) and ``boot_ticks`` and ``ahead_ticks`` (the
 whole log's quiet stretches, ``SourceWatch.observe_quiet``).
@@ -71,6 +73,7 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
+from odocan.host.judge.distfall import any_within, fall_times
 from odocan.host.protocol import busfacts
 from odocan.host.protocol.busfacts import ENC_COUNTER_MASK
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
@@ -175,7 +178,7 @@ def ahead_candidate(uptime_s: int, counter: int, t_s: float, summary_before_s: f
 
 
 def boot_ahead(summary_s: float, status_broke: bool, t_s: float, counter: int,
-               before: tuple[float, int] | None) -> bool:
+               before: tuple[float, int] | None, fell: bool = False) -> bool:
     """Whether the first ODOM_POSE_X heard after an ``ahead_candidate`` summary (bus time
     ``summary_s``; ``status_broke``: it broke the ODOM_STATUS sequence) may make that summary a
     power-up tick whose firmware sent no pose in it (the pose at bus time ``t_s``, E2E
@@ -185,12 +188,25 @@ def boot_ahead(summary_s: float, status_broke: bool, t_s: float, counter: int,
     sequence; or, its power-up pose lost on the bus, a small COUNTER restarted
     (``restarts_small``) after a summary that broke the ODOM_STATUS sequence (issue #11: a reset
     10..60 ticks into the firmware's first second, its first pose pair lost, FAILed the correct
-    firmware 9 mm..0.23 m in every judge). The next summary tells (``continues_summary``)."""
+    firmware 9 mm..0.23 m in every judge), or the twist's DISTANCE fell (``fell``: a twist of
+    a small COUNTER below the one before, ``fell_around``) where that COUNTER continues the old
+    life's (a reset 32 k ticks in: the correct firmware FAILed 93 mm..0.41 m). The next
+    summary tells (``continues_summary``)."""
     soon = RULE_HOLDS and 0.0 <= t_s - summary_s < BOOT_WINDOW_S
-    if counter != 0:  # its power-up pose lost: both sequences must break (``restarts_small``)
-        return bool(soon and status_broke and restarts_small(counter, t_s, before))
+    if counter != 0:  # its power-up pose lost: a second message's sequence or DISTANCE broke
+        small = 0 < counter < BOOT_POSE_FRAMES
+        return bool(soon and status_broke and small
+                    and (fell or restarts_small(counter, t_s, before)))
     broke = status_broke or before is None or breaks_sequence(before[1], t_s - before[0])
     return bool(soon and broke)
+
+
+def fell_around(falls_s: npt.NDArray[np.float64], summary_s: float) -> bool:
+    """Whether a twist's DISTANCE fell (``distfall.fall_times``: bus times, in order) less
+    than ``BOOT_WINDOW_S`` from the summary at ``summary_s``, before it (its tick's twist comes
+    before it) or after (that twist lost too: the next, COUNTER 1..3): ``boot_ahead``'s
+    ``fell``. Live, told at the next summary, a cycle on (all those twists heard by then)."""
+    return any_within(falls_s, summary_s - BOOT_WINDOW_S, summary_s + BOOT_WINDOW_S)
 
 
 def restarts_small(counter: int, t_s: float, before: tuple[float, int] | None) -> bool:
@@ -223,6 +239,7 @@ def ahead_ticks(frames: FrameArrays, decoder: BulkDecoder, positions: npt.NDArra
     their CRC holding: UPTIMEs, COUNTERs, bus times; ``statuses``: ``status_before`` of each)
     at once, their first pose after them in ``frames`` (before the next summary)."""
     where, t_pose, counter = pose_rows(frames, decoder)
+    falls_s = fall_times(frames, decoder, BOOT_POSE_FRAMES)[0]
     found = np.zeros(len(positions), dtype=bool)
     if len(where) == 0 or len(positions) == 0:
         return found
@@ -236,7 +253,8 @@ def ahead_ticks(frames: FrameArrays, decoder: BulkDecoder, positions: npt.NDArra
         broke = ahead_candidate(0, 0, float(t_s[i]), float(t_s[i - 1]) if i else None, status)
         before = None if j == 0 else (float(t_pose[j - 1]), int(counter[j - 1]))
         found[i] = (broke is not None and i + 1 < n
-                    and boot_ahead(float(t_s[i]), broke, float(t_pose[j]), int(counter[j]), before)
+                    and boot_ahead(float(t_s[i]), broke, float(t_pose[j]), int(counter[j]), before,
+                                   fell_around(falls_s, float(t_s[i])))
                     and continues_summary(float(t_s[i]), float(t_s[i + 1]), int(uptime_s[i + 1]),
                                           int(counters[i + 1])))
     return found

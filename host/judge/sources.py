@@ -12,6 +12,7 @@ offsets differ by less than ``UPTIME_MATCH_S`` look like reboots).
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
@@ -20,6 +21,8 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.judge.bootticks import (
+    BOOT_POSE_FRAMES,
+    BOOT_WINDOW_S,
     POSE_MESSAGE,
     STATUS_MESSAGE,
     ahead_candidate,
@@ -28,6 +31,13 @@ from odocan.host.judge.bootticks import (
     continues_summary,
     next_run,
     pose_heard,
+)
+from odocan.host.judge.distfall import (
+    RECENT_TWISTS,
+    TWIST_MESSAGE,
+    DistanceField,
+    distance_field,
+    fell_within,
 )
 from odocan.host.judge.liveadopted import LATE_REBOOT
 from odocan.host.judge.livegapseen import heard_status
@@ -94,6 +104,10 @@ class SourceWatch:
     first: Any = None  # the live tracker's ``livefirst.FirstStall``: told, at ``take_ahead``,
     ahead_heard: list[float] = field(default_factory=list)  # the frames (bus times) heard since
     # the summary (poses, ODOM_STATUS, any sequence: the E2E check refused them till then)
+    twist_field: DistanceField | None = None  # where ODOM_TWIST says DISTANCE (``distfall``)
+    ahead_fall: bool = False  # ``ahead_posed`` needs the twists' DISTANCE fell (``told_ahead``)
+    twists: deque[tuple[float, bytes]] = field(  # the latest twists heard (bus time, bytes),
+        default_factory=lambda: deque(maxlen=RECENT_TWISTS))  # read only at ``hear_pose``
 
     def on_page(self, page: str, signals: dict[str, Any], tracker: PoseTracker) -> bool:
         """An accepted ODOM_STATUS ``page`` (``"summary"``, ``"e2e_wheel_encoders"``, ...):
@@ -189,8 +203,11 @@ class SourceWatch:
         if self.ahead is not None or self.ahead_posed is not None:
             self.ahead_heard.append(t_s)
         ahead, self.ahead = self.ahead, None
-        if ahead is not None and boot_ahead(ahead[0], ahead[4], t_s, counter, before):
-            self.ahead_posed = ahead[:4]
+        if ahead is None:
+            return
+        sure = boot_ahead(ahead[0], ahead[4], t_s, counter, before)
+        if sure or boot_ahead(ahead[0], ahead[4], t_s, counter, before, fell=True):
+            self.ahead_posed, self.ahead_fall = ahead[:4], not sure  # fell: at ``told_ahead``
 
     def told_ahead(self, t_s: float, uptime_s: int, counter: int
                    ) -> tuple[float, int, str, int | None] | None:
@@ -201,6 +218,10 @@ class SourceWatch:
         posed, self.ahead_posed = self.ahead_posed, None
         if posed is None or not continues_summary(posed[0], t_s, uptime_s, counter):
             return None
+        window = (posed[0] - BOOT_WINDOW_S, posed[0] + BOOT_WINDOW_S)  # (``fell_around``)
+        if self.ahead_fall and not fell_within(self.twist_field, self.twists, *window,
+                                               BOOT_POSE_FRAMES):
+            return None  # its first pose told it only with DISTANCE fallen, which did not
         self.take_ahead(posed[0], posed[1])
         return posed
 
@@ -320,6 +341,10 @@ def pose_frame(watch: SourceWatch, message: Message, data: bytes, e2e: Any, t_s:
                                           tracker.window.rows)
         elif counter is not None:
             watch.hear_status(t_s, counter)
+    elif message.name == TWIST_MESSAGE:  # its DISTANCE, read when a pose may tell a reboot
+        if watch.twist_field is None:
+            watch.twist_field = distance_field(message, e2e)
+        watch.twists.append((t_s, data))
 
 
 def start_new_life(tracker: PoseTracker, e2e: E2EMonitor, db: Database,

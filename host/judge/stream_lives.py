@@ -36,13 +36,16 @@ from odocan.host.judge.bootnamed import (
     powerup_poses,
 )
 from odocan.host.judge.bootticks import (
+    BOOT_POSE_FRAMES,
     BOOT_WINDOW_S,
     boot_ahead,
     continues_summary,
+    fell_around,
     pose_rows,
     poses_before,
     status_before,
 )
+from odocan.host.judge.distfall import fall_times
 from odocan.host.judge.gapseen import crc_holds
 from odocan.host.judge.primed import counted_start
 from odocan.host.judge.reboots import SUMMARY_PAGE, mark_two_sources
@@ -116,6 +119,9 @@ class StreamLives:
     # to the next summary; the chunk's events after it wait with it (``_deferred``)
     _deferred: list[tuple[int, _Boot | tuple[int, int]]] = field(default_factory=list)
     _naming: list[_Boot] = field(default_factory=list)  # reboots whose ``naming`` is not told
+    _ahead_fall: bool = False  # the ``_ahead`` posed needs a twist's DISTANCE fallen
+    _falls: tuple[npt.NDArray[np.float64], tuple[float, int] | None] = field(  # the twists
+        default_factory=lambda: (np.zeros(0), None))  # whose DISTANCE fell, the latest twist's
 
     def feed(self, chunk: FrameArrays, accepted: npt.NDArray[np.bool_]) -> None:
         """Take the next chunk's accepted encoder frames, reboots and count pages."""
@@ -127,6 +133,8 @@ class StreamLives:
         self._enc_t = np.concatenate((self._enc_t, rows["timestamp_s"][keep].astype(np.float64)))
         self._powerups = carried_on(self._powerups,
                                     powerup_poses(chunk, self.decoder, self._offset))
+        falls_s, twist = fall_times(chunk, self.decoder, BOOT_POSE_FRAMES, self._falls[1])
+        self._falls = (np.concatenate((self._falls[0], falls_s)), twist)  # rare: all kept
         events = sorted(self._deferred + self._boot_events(chunk) + self._page_events(chunk),
                         key=lambda event: event[0])
         self._corroborate(chunk)
@@ -363,8 +371,10 @@ class StreamLives:
         self._ahead = None
         before = ((float(t_pose[j - 1]), int(counter[j - 1])) if j > 0 else
                   None if carried is None else (carried[3], carried[1]))
-        if boot_ahead(boot.t_s, broke, float(t_pose[j]), int(counter[j]), before):
+        sure = boot_ahead(boot.t_s, broke, float(t_pose[j]), int(counter[j]), before)
+        if sure or boot_ahead(boot.t_s, broke, float(t_pose[j]), int(counter[j]), before, True):
             self._ahead = (boot, broke, True)  # the next summary tells (``_posed_told``)
+            self._ahead_fall = not sure  # ... its twists' DISTANCE fallen (``distfall``)
 
     def _posed_told(self, t_s: float, uptime_s: int, counter: int
                     ) -> list[tuple[int, _Boot | tuple[int, int]]]:
@@ -374,6 +384,8 @@ class StreamLives:
         ahead, self._ahead = self._ahead, None
         if ahead is None or not ahead[2] or not continues_summary(ahead[0].t_s, t_s, uptime_s,
                                                                   counter):
+            return []
+        if self._ahead_fall and not fell_around(self._falls[0], ahead[0].t_s):
             return []
         self._watch.take_ahead(ahead[0].t_s, ahead[0].uptime_s)
         return [(ahead[0].position, ahead[0])]

@@ -17,7 +17,8 @@ What a plan does not handle itself it gives back to the telemetry as before: a f
 check refuses (``RobotTelemetry._refused``), one cantools could not decode
 (``RobotTelemetry._undecodable``); an ODOM_STATUS page and an ODOM_POSE_X go to the reboot
 watch first (``RobotTelemetry._watch_source``: before E2E, a reboot fails it;
-``host.judge.bootticks``: a power-up tick's COUNTERs).
+``host.judge.bootticks``: a power-up tick's COUNTERs), an ODOM_TWIST is kept for it (its
+DISTANCE going back: ``host.judge.distfall``).
 """
 
 from __future__ import annotations
@@ -27,7 +28,9 @@ from typing import TYPE_CHECKING, Any
 
 from cantools.database.errors import DecodeError
 
+from odocan.host.judge.distfall import TWIST_MESSAGE, distance_field
 from odocan.host.mqtt.liveroutes import Route
+from odocan.host.protocol.e2e import e2e_messages
 
 if TYPE_CHECKING:
     from odocan.host.mqtt.telemetry import RobotTelemetry
@@ -51,6 +54,8 @@ def plan_of(telemetry: RobotTelemetry, can_id: int, route: Route,
     any handled one."""
     plan = (_counted if route.handler is None else _handled)(
         telemetry, can_id, route, check or telemetry.e2e.check)
+    if route.name == TWIST_MESSAGE:
+        return _twist_kept(telemetry, can_id, route, plan)
     if can_id not in telemetry._watched:
         return plan
     watch = telemetry._watch_source
@@ -60,6 +65,22 @@ def plan_of(telemetry: RobotTelemetry, can_id: int, route: Route,
         return plan(t_s, data)
 
     return watched_plan
+
+
+def _twist_kept(telemetry: RobotTelemetry, can_id: int, route: Route, plan: Plan) -> Plan:
+    """ODOM_TWIST's plan, each frame kept first (bus time, bytes: one append) for the reboot
+    watch, which reads its DISTANCE only when a pose may tell a reboot
+    (``host.judge.distfall``: DISTANCE going back tells a new firmware)."""
+    sources = telemetry.sources
+    if sources.twist_field is None:  # once a robot (``forced_plans`` makes them again)
+        sources.twist_field = distance_field(route.message, e2e_messages(telemetry.db).get(can_id))
+    keep = sources.twists.append
+
+    def twist_plan(t_s: float, data: bytes) -> list[Publication]:
+        keep((t_s, data))
+        return plan(t_s, data)
+
+    return twist_plan
 
 
 def _handled(telemetry: RobotTelemetry, can_id: int, route: Route, check: Check) -> Plan:
