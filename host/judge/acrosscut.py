@@ -36,6 +36,7 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
+from odocan.host.judge.cutreprime import Backlog
 from odocan.host.judge.nearthreshold import AFTER_PERIODS, SUMMARY_PAGE, Resets
 from odocan.host.judge.reboots import Life
 from odocan.host.judge.samples import FloatArray, IntArray, Poses, contract_cycle_s
@@ -178,3 +179,25 @@ def backlog_in(window: FrameArrays, db: DatabaseSpec, start: int) -> bool:
                                                              evidence.alive_s)))
     life = Life(np.arange(start, len(window), dtype=np.int64), False, set_pose=True)
     return backlog_first(evidence, life)
+
+
+def backlog_of(evidence: CutEvidence | None, lives: list[Life], k: int) -> Backlog | None:
+    """``cutreprime.Backlog`` of life ``k`` when ``acrosscut.backlog_first`` says so, else None."""
+    if not backlog_first(evidence, lives[k]):
+        return None
+    return Backlog(earlier_word(evidence, lives, k))
+
+
+def earlier_word(evidence: CutEvidence | None, lives: list[Life], k: int) -> Word | None:
+    """The summaries the same firmware sent before life ``k``'s first frame, back to its
+    firmware life's start (a reboot's life, or the log's first: another firmware before it);
+    None when none was."""
+    if evidence is None or k == 0 or len(lives[k].index) == 0:
+        return None
+    j = k - 1
+    while j > 0 and (lives[j].set_pose is not None or lives[j].config is not None):
+        j -= 1
+    lo = int(lives[j].index[0]) if len(lives[j].index) else 0
+    at, sent_s, mask = evidence.summaries
+    before = (at >= lo) & (at < int(lives[k].index[0]))
+    return (sent_s[before], mask[before]) if before.any() else None

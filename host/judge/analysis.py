@@ -110,7 +110,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from odocan.host.io.logs import FrameArrays
-from odocan.host.judge import acrosscut
+from odocan.host.judge import acrosscut, cutreprime
 from odocan.host.judge.compare import (
     check_twist,
     error_summary,
@@ -119,7 +119,7 @@ from odocan.host.judge.compare import (
     rebased_at_start,
     versus_truth,
 )
-from odocan.host.judge.configs import config_cuts, cut_configs, in_force
+from odocan.host.judge.configs import config_cuts, cut_configs, first_integrator, in_force
 from odocan.host.judge.distance import DistanceJudge, check_distance, twin_paths
 from odocan.host.judge.evidencechoice import chosen_seen
 from odocan.host.judge.finalstate import firmware_fields, latched_per_firmware
@@ -143,7 +143,12 @@ from odocan.host.judge.reboots import (
     two_sources,
 )
 from odocan.host.judge.reference import PROFILE_SPEED, Geometry, SpeedBound
-from odocan.host.judge.reference_path import build_reference, firmware_steps, restart_detail
+from odocan.host.judge.reference_path import (
+    Reference,
+    build_reference,
+    firmware_steps,
+    restart_detail,
+)
 from odocan.host.judge.reportfacts import covered_s, frame_counts, realtime, robot_dict
 from odocan.host.judge.reprimecount import power_up_lost
 from odocan.host.judge.resent import worst_sent
@@ -256,7 +261,7 @@ def analyze(
     silent: list[Life] = []
     kept: dict[int, Kept] = {}  # per set-pose's life: what it kept (setposekept)
     for k, (life, (life_robot, life_integrator, bound)) in enumerate(zip(
-            lives, in_force(lives, robot, _first_integrator(frames, lives, decoder, integrator,
+            lives, in_force(lives, robot, first_integrator(frames, lives, decoder, integrator,
                                                             source), max_wheel_speed_mm_s),
             strict=True)):
         part = frames.select(life.index)
@@ -267,7 +272,7 @@ def analyze(
                                    max_wheel_speed_mm_s=bound,
                                    start_pose=life.set_pose and life.set_pose.start_pose(),
                                    later=acrosscut.later_word(across, lives, k, frames.timestamp_s),
-                                   backlog=acrosscut.backlog_first(across, life))
+                                   backlog=acrosscut.backlog_of(across, lives, k))
         except AnalysisError as exc:  # a life without on-board samples: reported, not compared
             failure = failure or exc
             silent.append(life)
@@ -302,20 +307,6 @@ def analyze(
     return Analysis(report=report, series=series, passed=report["passed"])
 
 
-def _first_integrator(frames: FrameArrays, lives: list[Life], decoder: BulkDecoder,
-                      integrator: str, source: str) -> str:
-    """The integrator ODOM_STATUS reports before the first applied config (a config may
-    change it: ``pick_integrator`` tells the last); ``integrator`` when given or no config."""
-    cut = next((life.config for life in lives if life.config is not None), None)
-    if cut is None or source != "ODOM_STATUS":
-        return integrator
-    head = frames.select(np.arange(cut.apply_position))
-    try:
-        return pick_integrator(head, check_frames(head, decoder.db)[1], decoder, None)[0]
-    except AnalysisError:  # no summary before it: the last one reported
-        return integrator
-
-
 @each_prime  # a stall at power-up's unproven start: judged from each frame it may have primed on
 def _analyze_life(
     frames: FrameArrays,
@@ -333,7 +324,7 @@ def _analyze_life(
     max_wheel_speed_mm_s: SpeedBound = PROFILE_SPEED,
     start_pose: tuple[float, float, float] | None = None,
     later: acrosscut.Word | None = None,
-    backlog: bool = False,
+    backlog: cutreprime.Backlog | None = None,
 ) -> Analysis:
     """``analyze`` of one firmware life (``host.judge.reboots``); ``boot``: the frames start at
     a reboot, the firmware's pose 0 at their first encoder frame; ``rebase``: the frames are a
@@ -361,7 +352,7 @@ def _analyze_life(
     else:  # the log's first life: a stall at power-up vetoes the page's tick bound
         power_up, unproven = log_power_up(frames, accepted, decoder, onboard, enc,
                                           (sent_s, alive_s), (robot, integrator))
-    ref_all = build_reference(enc, onboard, robot, integrator, power_up=power_up,
+    ref_all = build_reference(enc, onboard, robot, integrator, power_up=power_up, cut=backlog,
                          max_wheel_speed_mm_s=max_wheel_speed_mm_s, breaks=stalls,
                          slack_m=tolerance.position_m, start_pose=start_pose,
                          reprime_lost=power_up_lost(frames, accepted, decoder, enc, stalls),
@@ -390,7 +381,7 @@ def _analyze_life(
                                 np.array([last + 1 for _, last, _ in losses], dtype=np.int64),
                                 onboard.enc, placed)
     twin_allowed = twin_allowance_of(enc, robot, integrator, ref_all, onboard.enc)
-    distance = _distance(frames, accepted, decoder, enc, robot, ref_all.start,
+    distance = _distance(frames, accepted, decoder, enc, robot, ref_all,
                          DistanceJudge(robot, max_wheel_speed_mm_s, power_up and not start_pose,
                                        [b for b in stalls.tolist() if b > ref_all.start],
                                        [(a, z) for a, z, _ in losses],
@@ -490,11 +481,14 @@ def _analyze_life(
 
 
 def _distance(frames: FrameArrays, accepted: np.ndarray, decoder: BulkDecoder, enc: Encoders,
-              robot: RobotProfile, e0: int, judge: DistanceJudge, seen: Seen,
+              robot: RobotProfile, ref: Reference, judge: DistanceJudge, seen: Seen,
               alive_s: np.ndarray) -> dict[str, Any]:
-    """``distance.check_distance`` over the firmware's steps from ``e0`` (``seen``: the
-    reference's evidence, ``holetaken``, ``nearthreshold``)."""
+    """``distance.check_distance`` over the firmware's steps from the reference's start
+    (``seen``: its evidence, ``holetaken``, ``nearthreshold``; those a re-prime after a set-pose
+    left out zeroed: ``cutreprime``)."""
+    e0 = ref.start
     steps = firmware_steps(enc, e0, Geometry.of(robot), min(robot.counter_bits, WIRE_COUNTER_BITS),
                            judge.max_wheel_speed_mm_s, through=seen.through, resets=seen.resets)
+    cutreprime.cut_left_out(steps.d_left, steps.d_right, ref.stall_reprimes)
     return check_distance(frames, accepted, decoder, enc, (steps.d_left, steps.d_right), e0,
                           judge, alive_s)

@@ -36,10 +36,12 @@ from odocan.host.judge.liveconfig import INTEGRATORS, PARAMS, ConfigFollower
 from odocan.host.judge.profilepage import RunningProfile, profile_mismatch, running_profile
 from odocan.host.judge.reboots import Life
 from odocan.host.judge.reference import PROFILE_SPEED, SpeedBound
+from odocan.host.judge.samples import AnalysisError, pick_integrator
 from odocan.host.judge.setposes import followed_rows
 from odocan.host.protocol import busfacts
 from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
+from odocan.host.protocol.e2e import check_frames
 from odocan.sim.robot import MM_PER_M, RobotProfile
 
 APPLY_PARAM = busfacts.APPLY_PARAM  # ODOM_CONFIG PARAM / ODOM_ACK REQUEST_FIELD of APPLY
@@ -217,3 +219,16 @@ def later_mismatches(frames: FrameArrays, robot: RobotProfile, integrator: str) 
             said.append(f"after the config applied at {cut.t_s:.3f} s: {text}")
     return said
 
+
+def first_integrator(frames: FrameArrays, lives: list[Life], decoder: BulkDecoder,
+                      integrator: str, source: str) -> str:
+    """The integrator ODOM_STATUS reports before the first applied config (a config may
+    change it: ``pick_integrator`` tells the last); ``integrator`` when given or no config."""
+    cut = next((life.config for life in lives if life.config is not None), None)
+    if cut is None or source != "ODOM_STATUS":
+        return integrator
+    head = frames.select(np.arange(cut.apply_position))
+    try:
+        return pick_integrator(head, check_frames(head, decoder.db)[1], decoder, None)[0]
+    except AnalysisError:  # no summary before it: the last one reported
+        return integrator

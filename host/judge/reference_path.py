@@ -23,6 +23,7 @@ from odocan.host.judge.ctrlrestart import (
     successors,
     young_counts,
 )
+from odocan.host.judge.cutreprime import Backlog, cut_reprime
 from odocan.host.judge.gapfill import gap_allowance_at
 from odocan.host.judge.gapseen import NOTHING, Seen
 from odocan.host.judge.lossgate import beyond_width
@@ -86,6 +87,7 @@ def build_reference(
     start_pose: tuple[float, float, float] | None = None,
     seen: Seen = NOTHING,
     reprime_lost: dict[int, int] | None = None,
+    cut: Backlog | None = None,
 ) -> Reference:
     """Integrate the encoder deltas from the first on-board sample on; the position placed
     again after gaps and after the stalls' ``breaks`` (within ``breaks.bound_offsets``' bound,
@@ -94,7 +96,8 @@ def build_reference(
     set-pose's, ``host.judge.setposes``), as at power-up. ``seen``: what the firmware's E2E pages
     prove it took (``host.judge.gapseen``): a gap it missed too, a stall over which it took
     exactly the log's frames, is placed with no allowance. ``reprime_lost``: the re-primes'
-    ENC_E2E_LOST by break (``reprimecount.power_up_lost``)."""
+    ENC_E2E_LOST by break (``reprimecount.power_up_lost``); ``cut``: a set-pose's life whose
+    first sample names a backlog frame (``cutreprime``: its re-prime may come after the APPLY)."""
     bits = min(robot.counter_bits, WIRE_COUNTER_BITS)
     exact_at_first = power_up or start_pose is not None
     e0 = 0 if exact_at_first else int(onboard.enc[0])  # at power-up: pose 0 at the first frame
@@ -107,9 +110,12 @@ def build_reference(
     rel_x, rel_y = np.concatenate((zero, rel.x_m)), np.concatenate((zero, rel.y_m))
     rel_h = np.concatenate((zero, rel.heading_rad))
     at = onboard.enc - e0
-    reprimes = stall_reprimes(declared_stalls(breaks, enc, e0, seen.resets, least_of(
-        geometry, bits, max_wheel_speed_mm_s)), onboard, e0, (rel_x, rel_y, rel_h), start_pose or (
+    least = least_of(geometry, bits, max_wheel_speed_mm_s)
+    reprimes = stall_reprimes(declared_stalls(breaks, enc, e0, seen.resets, least), onboard, e0,
+                              (rel_x, rel_y, rel_h), start_pose or (
         (0.0, 0.0, 0.0) if power_up else None), reprime_lost)  # stallreprime: as it said
+    reprimes |= cut_reprime(cut, start_pose, enc, onboard, seen.resets, least,
+                            (rel_x, rel_y, rel_h))  # re-primed after the APPLY: cutreprime
     if reprimes:
         left_out(d_left, d_right, reprimes)
         rel = integrate(d_left, d_right, geometry, integrator)
