@@ -103,12 +103,18 @@ def test_the_count_pins_the_frame_it_primed_on(scenario: str, halted: int,
     for f in range(6):  # from frame 0: the pairs (f, f + resumed - 2) the count allows
         pos_m, turn_rad = _off(messages, 0, f, f + resumed - 2)
         assert pos_m > 2 * POSITION_LSB_M or turn_rad > 2 * HEADING_LSB_RAD
-    assert analyze(read_log(_written(messages, tmp_path / "right.log")), PMIR, "exact").passed
+    analysis = analyze(read_log(_written(messages, tmp_path / "right.log")), PMIR, "exact")
+    assert analysis.passed
+    assert [(e["kind"], e["encoder_frame"]) for e in analysis.report["events"]
+            if e["kind"] in ("power_up_primed_on", "stall_reprime")] == [
+        ("power_up_primed_on", 1), ("stall_reprime", resumed)]
     monitor, bridge, end_s = _live(messages)
     assert monitor.health(end_s)["state"] != "POSE WRONG"
     assert _end_verdicts(bridge) == ("PASS", "PASS")
     for tracker in (monitor.tracker, bridge.tracker):
-        assert _primed_on(tracker) == [1]
+        assert _primed_on(tracker) == [1]  # as analyze names it, and its re-prime's frame:
+        assert all(f"re-primed on {resumed}," in e["detail"] for e in tracker.restarts.events
+                   if e["kind"] == "power_up_primed_on")
         assert tracker.wrongs.as_dict()["episodes"] == 0
 
 
