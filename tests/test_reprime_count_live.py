@@ -137,13 +137,26 @@ def test_a_wrong_firmware_fails_live(scenario: str, halted: int, bias_lsb: int,
 @pytest.mark.parametrize("late_s", [0.015, 0.05])
 def test_a_late_recorder_makes_no_false_fail(scenario: str, halted: int, late_s: float,
                                              tmp_path: Path) -> None:
-    """ODOM_STATUS stamped ``late_s`` late: the count it carries is the same, the correct
-    firmware is not FAILed live nor by ``analyze``."""
+    """ODOM_STATUS stamped ``late_s`` late: the count page no longer proves the power-up (its
+    tick bound moved past frames it counted) but the count it carries is the same: the replay
+    it pins proves it (``livereprime.ReprimeHold._pinned``; before, the first pose adopted
+    unbounded, UNJUDGED); the correct firmware PASSes live, as ``analyze`` PASSes it."""
     messages = _status_late(drive(scenario, halted), late_s)
     assert analyze(read_log(_written(messages, tmp_path / "late.log")), PMIR, "exact").passed
     monitor, bridge, end_s = _live(messages)
     assert monitor.health(end_s)["state"] != "POSE WRONG"
-    assert "FAIL" not in _end_verdicts(bridge)
+    assert _end_verdicts(bridge) == ("PASS", "PASS")
+    assert _primed_on(bridge.tracker) == [1]
+
+
+@pytest.mark.parametrize("bias_lsb", [3, -3, 100])
+def test_a_late_recorder_never_passes_a_wrong_firmware(bias_lsb: int) -> None:
+    """The same late recorder (50 ms), X ``bias_lsb`` off from the first pose after the
+    re-prime on: no pair the count allows fits, the power-up stays unproven: never a PASS."""
+    messages = _status_late(_wrong(drive("circle", 600), AT["circle"], bias_lsb, 1), 0.05)
+    _monitor, bridge, _end_s = _live(messages)
+    assert "PASS" not in _end_verdicts(bridge)
+    assert _primed_on(bridge.tracker) == []
 
 
 def _count_moved(messages: tuple[can.Message, ...], by: int) -> tuple[can.Message, ...]:

@@ -110,7 +110,7 @@ class ReprimeHold:
     def on_status(self, signals: dict[str, Any], t_s: float) -> None:
         """An accepted ODOM_STATUS (raw signals) at bus time ``t_s``: a summary decides the
         hold when made after it; the watch's first count page (``PowerUpCount``)."""
-        self.count.on_status(signals)
+        self.count.on_status(signals, self._tracker.enc_seq + 1)
         if int(signals.get("PAGE", -1)) != SUMMARY_PAGE or "ERROR_MASK" not in signals:
             return
         self._mask = int(signals["ERROR_MASK"])
@@ -224,27 +224,11 @@ class ReprimeHold:
         held, self._held, self._from_s, self._word = self._held, [], math.inf, False
         samples, self._samples = self._samples, {}
         tracker = self._tracker
-        origin, said = self._origin(), detail(self._stall_s)
-        if declared and held and origin is not None:
-            counted = self._replay(held)
-            replay = counted.replay
-            if replay is None:  # the frames not held: the speed bound's (said)
-                reach_m = self._reach_m(held[0][0])
-                self.wide, self.wide_m = self.wide + 1, max(self.wide_m, reach_m)
-                said += _wide(reach_m)
-                declared = self._within_reach(held[0][0], origin, reach_m)
-            elif not replay.within:  # the frames put it elsewhere: judged as before
-                declared = False
-                self.refused += 1
-                tracker.restarts.events.append({
-                    "t_s": self._from_s_told(held), "kind": "stall_reprime_refused",
-                    "encoder_frame": held[0][0].seq, "detail": f"{said}; but {replay.said()}"})
-                if self._power_up:  # no reference yet: from where the re-prime put it
-                    self._start_at(replay.pose)
-            else:
-                self._counted(counted, said, held)
-        elif declared and self._power_up:  # its first pose adopted, no bound: never a PASS
-            self.unbounded += 1
+        said = detail(self._stall_s)
+        if declared and held:
+            declared, said = self._bounded(held, said)
+        elif declared:  # nothing held: its first pose adopted, no bound, at a power-up
+            self.unbounded += int(self._power_up)
         if declared:
             self.declared += 1
             first = held[0][0].seq if held else self._first + 1
@@ -258,6 +242,33 @@ class ReprimeHold:
             sample = samples.get(pose.seq)
             if sample is not None and ref is not None:
                 tracker.settled.append(sample._replace(reference=ref))
+
+    def _bounded(self, held: list[tuple[FramePose, Half, bool]], said: str) -> tuple[bool, str]:
+        """A declared re-prime's first pose held to where the frames put it (module docstring):
+        whether it stays declared, and the event's words (``said`` and more)."""
+        tracker, origin = self._tracker, self._origin()
+        pinned = self._pinned(held) if origin is None else None
+        if pinned is not None:  # the count's replay proves the power-up (``_pinned``)
+            origin = (0.0, 0.0)
+        if origin is None:
+            self.unbounded += int(self._power_up)  # its first pose adopted, no bound: never a PASS
+            return True, said
+        counted = pinned or self._replay(held)
+        replay = counted.replay
+        if replay is None:  # the frames not held: the speed bound's (said)
+            reach_m = self._reach_m(held[0][0])
+            self.wide, self.wide_m = self.wide + 1, max(self.wide_m, reach_m)
+            return self._within_reach(held[0][0], origin, reach_m), said + _wide(reach_m)
+        if not replay.within:  # the frames put it elsewhere: judged as before
+            self.refused += 1
+            tracker.restarts.events.append({
+                "t_s": self._from_s_told(held), "kind": "stall_reprime_refused",
+                "encoder_frame": held[0][0].seq, "detail": f"{said}; but {replay.said()}"})
+            if self._power_up:  # no reference yet: from where the re-prime put it
+                self._start_at(replay.pose)
+            return False, said
+        self._counted(counted, said, held)
+        return True, said
 
     def _replay(self, held: list[tuple[FramePose, Half, bool]]) -> CountedReplay:
         """The re-primed path that best meets the samples ``held`` (``reprimereplay``) of the
@@ -274,6 +285,19 @@ class ReprimeHold:
         anchors = [FramePose(p, 0.0, 0.0, 0.0) for p in PRIMES] if self._power_up else [anchor]
         return counted_replay(odometry, anchors, self._frozen, recent, samples,
                               self._power_up or self._primed, self.count.lost)
+
+    def _pinned(self, held: list[tuple[FramePose, Half, bool]]) -> CountedReplay | None:
+        """At a power-up its count page did not prove (a recorder stamping ODOM_STATUS late
+        moves the page past the frames it counted), the count's replay (``_replay``) when it
+        pins the frame the firmware primed on: its first pose after the re-prime is where a
+        power-up on that frame puts it (within two LSBs), which proves the power-up as the
+        page would have; None else (its first pose adopted unbounded, as before)."""
+        if not self._power_up or self.count.lost is None:
+            return None
+        counted = self._replay(held)
+        replay = counted.replay
+        ok = replay is not None and replay.within and counted.primed is not None
+        return counted if ok else None
 
     def _counted(self, counted: CountedReplay, said: str,
                  held: list[tuple[FramePose, Half, bool]]) -> None:

@@ -15,9 +15,9 @@ from each priming frame: the samples then tell the frame.
 
 ``PowerUpCount`` takes the page's value under ``analyze``'s preconditions only (its
 ``power_up_lost``): the watch starts at the firmware's power-up (its first ODOM_STATUS of its
-first cycle, its first summary UPTIME 0, no reboot since), one stall before the page (the one
-the hold replays) and no hole of the encoder frames' sequence up to it. ``counted_replay`` then
-filters the replay's pairs by it, a hard filter:
+first cycle, its first summary UPTIME 0, no reboot since; its ENC_E2E_OK no more than the frames
+heard), one stall before the page (the one the hold replays) and no hole of the encoder frames'
+sequence up to it. ``counted_replay`` then filters the replay's pairs by it, a hard filter:
 
 - pairs it allows fit the samples (``Replayed.within``): the best of them is judged (from the
   priming frame they name, ``CountedReplay.primed``, when they name one: the first pose judged,
@@ -26,6 +26,11 @@ filters the replay's pairs by it, a hard filter:
   have moved the count), never a PASS either (``CountedReplay.doubt``: the end verdicts say
   UNJUDGED and why);
 - no pair fits: the best of all, refused as before (POSE WRONG, FAIL).
+
+A power-up its count page did not prove (a recorder stamping ODOM_STATUS 15-50 ms late moves the
+page's tick bound past frames it counted; the count itself unmoved) is proven by that replay
+when it pins the priming frame (``livereprime.ReprimeHold._pinned``); else its first pose stays
+adopted unbounded, UNJUDGED, as before.
 """
 
 from __future__ import annotations
@@ -61,8 +66,10 @@ class PowerUpCount:
         self.over = False  # the first count page heard, or a reboot: nothing more to take
         self.lost: int | None = None
 
-    def on_status(self, signals: dict[str, Any]) -> None:
-        """An accepted ODOM_STATUS (raw signals)."""
+    def on_status(self, signals: dict[str, Any], heard: int) -> None:
+        """An accepted ODOM_STATUS (raw signals), ``heard`` encoder frames heard before it: a
+        count page whose ENC_E2E_OK counts more was made by a firmware that took frames the
+        log lacks (not powered up at its start: no count taken)."""
         if self.over:
             return
         if self.first_cycle is None:
@@ -72,7 +79,8 @@ class PowerUpCount:
             self.uptime_zero = _int(signals.get("UPTIME")) == 0
         elif page == ENC_E2E_PAGE and "ENC_E2E_LOST" in signals:
             self.over = True
-            if self.first_cycle and self.uptime_zero and not self.holed and self.stalls == 1:
+            if self.first_cycle and self.uptime_zero and not self.holed and self.stalls == 1 \
+                    and _int(signals.get("ENC_E2E_OK")) in range(heard + 1):
                 self.lost = int(signals["ENC_E2E_LOST"])
 
     def reboot(self) -> None:
