@@ -1,5 +1,5 @@
 """A firmware powered up while the robot moves, halted long enough to re-prime (issue #11: "a
-FAIL must never blame a correct firmware"; ``host.judge.reprimereplay.replayed_at_power_up``).
+FAIL must never blame a correct firmware"; ``host.judge.livereprimecount``).
 
 The case: pmir on the circle (``tests.fault_rig.FaultRig``), its odometry MCU powered up at tick
 ``AT`` (a reset with its receive FIFO drained: INIT at UPTIME 0, COUNTER 0) while the robot

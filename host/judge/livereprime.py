@@ -33,11 +33,14 @@ explains within the two LSBs (the pairs' choice).
 
 A stall before a life's first pose, the reference not started (a power-up's: its first summary
 is the last before the stall), takes the same hold and the same replay from the power-up pose
-(0, 0, 0) on frame 0 once the power-up is proven (its first count page, made after the stall:
-``sources.heard_before_live``; the word waits for it, ``counted``); a first pose the frames do
-not explain starts the reference where they put it (``_start_at``: the samples judged from
-there; with the wide bound, at the nearest point it reaches). Not proven, the first pose is
-adopted unbounded: the end verdicts say UNJUDGED rather than PASS (``unbounded_why``).
+(0, 0, 0) on frame 0 or 1 once the power-up is proven (its first count page, made after the
+stall: ``sources.heard_before_live``; the word waits for it, ``counted``). That page's
+ENC_E2E_LOST, taken under ``analyze``'s preconditions, keeps the pairs it allows and names the
+frame the power-up primed on when one fits (``livereprimecount``: the start no longer unknown;
+the word waits for the page while it may come with it); a first pose the frames do not explain
+starts the reference where they put it (``_start_at``: the samples judged from there; with the
+wide bound, at the nearest point it reaches). Not proven, the first pose is adopted unbounded:
+the end verdicts say UNJUDGED rather than PASS (``unbounded_why``).
 """
 
 from __future__ import annotations
@@ -47,16 +50,18 @@ import math
 from typing import TYPE_CHECKING, Any
 
 from odocan.host.judge.livepose import FramePose
+from odocan.host.judge.livereprimecount import (
+    PRIMES,
+    CountedReplay,
+    PowerUpCount,
+    counted_replay,
+    primed_detail,
+)
 from odocan.host.judge.livestart import start_reference
 from odocan.host.judge.livewindow import CYCLE_S, window_counts
 from odocan.host.judge.nearthreshold import AFTER_PERIODS, COUNTER_RESET_BIT, SUMMARY_PAGE
-from odocan.host.judge.reprimereplay import (
-    Odometry,
-    QuietFrames,
-    Replayed,
-    replayed,
-    replayed_at_power_up,
-)
+from odocan.host.judge.primedon import PRIMED_KIND
+from odocan.host.judge.reprimereplay import Odometry, QuietFrames
 from odocan.host.judge.samples import POSITION_LSB_M
 from odocan.host.judge.stallreprime import FIFO_SPAN, R_SPAN, detail, possible
 
@@ -99,25 +104,29 @@ class ReprimeHold:
         self.wide = 0  # ... bounded by the speed bound alone: the frames replayed not held
         self.wide_m = 0.0  # ... the widest of those bounds (m)
         self.refused = 0  # declared, but the frames put its first pose elsewhere: judged
+        self.count = PowerUpCount()  # the first count page's ENC_E2E_LOST (livereprimecount)
+        self.doubts: list[str] = []  # ... which no pair it allows fits: never a PASS
 
     def on_status(self, signals: dict[str, Any], t_s: float) -> None:
         """An accepted ODOM_STATUS (raw signals) at bus time ``t_s``: a summary decides the
-        hold when made after it."""
+        hold when made after it; the watch's first count page (``PowerUpCount``)."""
+        self.count.on_status(signals, self._tracker.enc_seq + 1)
         if int(signals.get("PAGE", -1)) != SUMMARY_PAGE or "ERROR_MASK" not in signals:
             return
         self._mask = int(signals["ERROR_MASK"])
         if t_s >= self._from_s + AFTER_PERIODS * CYCLE_S:
             said = self._before >= 0 and not self._before & COUNTER_RESET_BIT
             word = said and bool(self._mask & COUNTER_RESET_BIT)
-            if word and self._power_up and not self._tracker.lives.power_up_proven:
-                self._word = True  # its power-up's proof, the page after: ``counted``
+            if word and ((self._power_up and not self._tracker.lives.power_up_proven)
+                         or self.count.awaited):
+                self._word = True  # its power-up's proof, its count: the page, ``counted``
                 return
             self.release(word)
 
     def counted(self) -> None:
         """A count page was heard (after ``livestart.Lives.on_counts`` took its proof, and its
-        start from frame 0 while the window holds it): a re-prime declared at a power-up is
-        released."""
+        start from frame 0 while the window holds it; ``on_status`` its ENC_E2E_LOST): a
+        re-prime declared at a power-up, or waiting for the count, is released."""
         if self._word:
             self.release(True)
 
@@ -136,6 +145,7 @@ class ReprimeHold:
         the stall was long enough."""
         if talked is None or self._from_s != math.inf:
             return
+        self.count.stalls += 1  # (one before the count page: ``PowerUpCount``)
         if possible(t_s - talked[0], CYCLE_S, least) and self._mask >= 0:
             self._from_s, self._before, self._stall_s = t_s, self._mask, t_s - talked[0]
             self._first, self._anchor_pose = seq, self._anchored()
@@ -214,24 +224,11 @@ class ReprimeHold:
         held, self._held, self._from_s, self._word = self._held, [], math.inf, False
         samples, self._samples = self._samples, {}
         tracker = self._tracker
-        origin, said = self._origin(), detail(self._stall_s)
-        if declared and held and origin is not None:
-            replay = self._replay(held)
-            if replay is None:  # the frames not held: the speed bound's (said)
-                reach_m = self._reach_m(held[0][0])
-                self.wide, self.wide_m = self.wide + 1, max(self.wide_m, reach_m)
-                said += _wide(reach_m)
-                declared = self._within_reach(held[0][0], origin, reach_m)
-            elif not replay.within:  # the frames put it elsewhere: judged as before
-                declared = False
-                self.refused += 1
-                tracker.restarts.events.append({
-                    "t_s": self._from_s_told(held), "kind": "stall_reprime_refused",
-                    "encoder_frame": held[0][0].seq, "detail": f"{said}; but {replay.said()}"})
-                if self._power_up:  # no reference yet: from where the re-prime put it
-                    self._start_at(replay.pose)
-        elif declared and self._power_up:  # its first pose adopted, no bound: never a PASS
-            self.unbounded += 1
+        said = detail(self._stall_s)
+        if declared and held:
+            declared, said = self._bounded(held, said)
+        elif declared:  # nothing held: its first pose adopted, no bound, at a power-up
+            self.unbounded += int(self._power_up)
         if declared:
             self.declared += 1
             first = held[0][0].seq if held else self._first + 1
@@ -246,20 +243,76 @@ class ReprimeHold:
             if sample is not None and ref is not None:
                 tracker.settled.append(sample._replace(reference=ref))
 
-    def _replay(self, held: list[tuple[FramePose, Half, bool]]) -> Replayed | None:
-        """The re-primed path that best meets the samples ``held`` (``reprimereplay``), from
-        the anchor (a power-up's: (0, 0, 0) on frame 0, proven) over the frames kept when the
-        firmware fell silent and the window's; None when they are not held."""
+    def _bounded(self, held: list[tuple[FramePose, Half, bool]], said: str) -> tuple[bool, str]:
+        """A declared re-prime's first pose held to where the frames put it (module docstring):
+        whether it stays declared, and the event's words (``said`` and more)."""
+        tracker, origin = self._tracker, self._origin()
+        pinned = self._pinned(held) if origin is None else None
+        if pinned is not None:  # the count's replay proves the power-up (``_pinned``)
+            origin = (0.0, 0.0)
+        if origin is None:
+            self.unbounded += int(self._power_up)  # its first pose adopted, no bound: never a PASS
+            return True, said
+        counted = pinned or self._replay(held)
+        replay = counted.replay
+        if replay is None:  # the frames not held: the speed bound's (said)
+            reach_m = self._reach_m(held[0][0])
+            self.wide, self.wide_m = self.wide + 1, max(self.wide_m, reach_m)
+            return self._within_reach(held[0][0], origin, reach_m), said + _wide(reach_m)
+        if not replay.within:  # the frames put it elsewhere: judged as before
+            self.refused += 1
+            tracker.restarts.events.append({
+                "t_s": self._from_s_told(held), "kind": "stall_reprime_refused",
+                "encoder_frame": held[0][0].seq, "detail": f"{said}; but {replay.said()}"})
+            if self._power_up:  # no reference yet: from where the re-prime put it
+                self._start_at(replay.pose)
+            return False, said
+        self._counted(counted, said, held)
+        return True, said
+
+    def _replay(self, held: list[tuple[FramePose, Half, bool]]) -> CountedReplay:
+        """The re-primed path that best meets the samples ``held`` (``reprimereplay``) of the
+        pairs the count page allows (``livereprimecount``), from the anchor (a power-up's:
+        (0, 0, 0) on frame 0 or 1, proven) over the frames kept when the firmware fell silent
+        and the window's; its replay None when they are not held."""
         tracker = self._tracker
         anchor = FramePose(0, 0.0, 0.0, 0.0) if self._power_up else self._anchor_pose
         if anchor is None or anchor.seq < 0 or tracker.integrator is None:
-            return None
+            return CountedReplay(None)
         samples = [pose for pose, _, _ in held]
         odometry = Odometry(tracker.geometry, tracker.integrator, tracker.counter_bits)
         recent = window_counts(tracker.window, samples[0].seq - R_SPAN)
-        if self._power_up:  # primed on frame 0 or 1 (``replayed_at_power_up``)
-            return replayed_at_power_up(odometry, self._frozen, recent, samples)
-        return replayed(odometry, anchor, self._frozen, recent, samples, self._primed)
+        anchors = [FramePose(p, 0.0, 0.0, 0.0) for p in PRIMES] if self._power_up else [anchor]
+        return counted_replay(odometry, anchors, self._frozen, recent, samples,
+                              self._power_up or self._primed, self.count.lost)
+
+    def _pinned(self, held: list[tuple[FramePose, Half, bool]]) -> CountedReplay | None:
+        """At a power-up its count page did not prove (a recorder stamping ODOM_STATUS late
+        moves the page past the frames it counted), the count's replay (``_replay``) when it
+        pins the frame the firmware primed on: its first pose after the re-prime is where a
+        power-up on that frame puts it (within two LSBs), which proves the power-up as the
+        page would have; None else (its first pose adopted unbounded, as before)."""
+        if not self._power_up or self.count.lost is None:
+            return None
+        counted = self._replay(held)
+        replay = counted.replay
+        ok = replay is not None and replay.within and counted.primed is not None
+        return counted if ok else None
+
+    def _counted(self, counted: CountedReplay, said: str,
+                 held: list[tuple[FramePose, Half, bool]]) -> None:
+        """A replay that fits: its priming frame pinned by the count page, the first life's
+        start known after all (``livefirst``: no longer unproven), told; or a fit only by a
+        pair the count does not allow, said (the end verdicts UNJUDGED)."""
+        tracker = self._tracker
+        if counted.doubt is not None:
+            self.doubts.append(f"{said}; but {counted.doubt}")
+        elif counted.primed is not None:
+            tracker.first.proven_after_all(tracker)
+            tracker.restarts.events.append({
+                "t_s": self._from_s_told(held), "kind": PRIMED_KIND,
+                "encoder_frame": counted.primed,
+                "detail": primed_detail(counted, self.count.lost)})
 
     def _within_reach(self, pose: FramePose, origin: tuple[float, float], reach_m: float
                       ) -> bool:
@@ -298,7 +351,7 @@ def unbounded_why(tracker: PoseTracker) -> str | None:
     docstring); None else."""
     reprime = tracker.reprime
     count, wide = reprime.unbounded, reprime.wide
-    said = []
+    said = list(reprime.doubts)
     if count:
         said.append(f"{count} re-prime{'' if count == 1 else 's'} declared after a stall before "
                     "the first pose, the power-up not proven (or its frame not heard): the "

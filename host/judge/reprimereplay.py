@@ -119,6 +119,22 @@ def replayed(odometry: Odometry, anchor: FramePose, frozen: Iterable[tuple[float
     rows (``QuietFrames``) and the ``recent`` frames (the window's from the earliest ``r``
     on), met with the first ``COMPARED`` ``samples`` held; None when the frames it needs are
     not held."""
+    paths = replays(odometry, anchor, frozen, recent, samples, primed)
+    return None if not paths else min(paths, key=score)
+
+
+def score(replay: Replayed) -> float:
+    """How far a replay's path lies from the samples: the worst sample's position and heading
+    offsets in LSBs (``stallreprime._chosen``'s score)."""
+    return replay.position_m / POSITION_LSB_M + replay.heading_rad / HEADING_LSB_RAD
+
+
+def replays(odometry: Odometry, anchor: FramePose, frozen: Iterable[tuple[float, ...]],
+            recent: list[Counted], samples: list[FramePose], primed: bool = False
+            ) -> list[Replayed] | None:
+    """Every pair's path (``replayed``'s arguments): ``replayed`` takes the best, the count
+    page's rule (``livereprimecount``) the ones its ENC_E2E_LOST allows; None when the frames
+    it needs are not held."""
     samples = samples[:COMPARED]
     first, last = samples[0].seq, samples[-1].seq
     kept: Counts = {int(row[0]): (int(row[4]), int(row[5]), int(row[6])) for row in frozen}
@@ -133,35 +149,14 @@ def replayed(odometry: Odometry, anchor: FramePose, frozen: Iterable[tuple[float
         return None
     samples = [s for s in samples if s.seq in heard]  # the later ones: judged as they come
     last = samples[-1].seq
-    best: tuple[float, Replayed] | None = None
+    out: list[Replayed] = []
     for f, at_f in before.items():
         for r in range(max(f + 1, r_lo), first + 1):
             path = odometry.walk(at_f, after, range(r, last + 1))
             worst = _worst(path, samples)
-            if worst is None:
-                continue
-            score = worst[0] / POSITION_LSB_M + worst[1] / HEADING_LSB_RAD
-            if best is None or score < best[0]:
-                best = (score, Replayed(path[first], f, r, *worst))
-    return None if best is None else best[1]
-
-
-POWER_UP_PRIMES = (0, 1)  # frames a power-up may have primed on (``stallpowerup``'s 0 .. lo)
-
-
-def replayed_at_power_up(odometry: Odometry, frozen: Iterable[tuple[float, ...]],
-                         recent: list[Counted], samples: list[FramePose]) -> Replayed | None:
-    """``replayed`` from the power-up pose (0, 0, 0) on each frame the firmware may have primed
-    on (``POWER_UP_PRIMES``: frame 0 was on the bus in its first tick, before or after its read;
-    a FIFO drained there, it primed on frame 1), the one whose path best meets the samples.
-    Before, frame 0 alone: a robot moving at power-up (frame 0 to 1 4.7 mm on pmir's circle)
-    put the correct firmware's first pose 0.99 mm from the replay, POSE WRONG live while
-    ``analyze`` (``primedon``: judged from each) PASSed it. None when none is held."""
-    tries = [replayed(odometry, FramePose(p, 0.0, 0.0, 0.0), frozen, recent, samples, True)
-             for p in POWER_UP_PRIMES]
-    held = [t for t in tries if t is not None]
-    return min(held, key=lambda t: t.position_m / POSITION_LSB_M + t.heading_rad
-               / HEADING_LSB_RAD) if held else None
+            if worst is not None:
+                out.append(Replayed(path[first], f, r, *worst))
+    return out
 
 
 def _worst(path: dict[int, FramePose], samples: list[FramePose]) -> tuple[float, float] | None:

@@ -157,10 +157,8 @@ class PoseTracker:
         if self.choice.pending is not None and prev is not None:  # a hole: the choice first
             self.choice.ahead(counter, t_s, prev)
         if self.placer.on_encoders(self.enc_seq, (counter, left, right, t_s), prev,
-                                   self.counter_bits) and self.raw.odometry is not None:
-            self.stall.place_at_next = True  # a gap: placed again, bounded (liveplace)
-            if self.placer.lapped:  # its lap the stamps' alone: the samples wait (livelaphold)
-                self.laps.lapped(self.enc_seq, t_s, self.placer.periods)
+                                   self.counter_bits):
+            self._gap(t_s)
         row = (self.enc_seq, self._pos, counter, t_s, left, right, self.placer.periods, uptime)
         self.window.append(*row)
         self.reprime.quiet.heard(self.window.rows)  # kept when the firmware fell silent
@@ -182,6 +180,16 @@ class PoseTracker:
                 self.laps.heard()
         elif self.lives.pending is not None:
             self.lives.heard(counted(row))
+
+    def _gap(self, t_s: float) -> None:
+        """A gap of the sender's sequence before the latest encoder frame (at ``t_s``): the
+        reference placed again, bounded (``liveplace``); no count of a re-prime taken
+        (``livereprimecount``)."""
+        self.reprime.count.holed = True
+        if self.raw.odometry is not None:
+            self.stall.place_at_next = True
+            if self.placer.lapped:  # its lap the stamps' alone: the samples wait (livelaphold)
+                self.laps.lapped(self.enc_seq, t_s, self.placer.periods)
 
     def _forget(self, before: int) -> None:
         """Drop what is kept of the encoder frames before ``before`` (seq): bounded state."""
@@ -396,6 +404,7 @@ class PoseTracker:
         the truth is compared in the new life's frame, its origin taken at the life's first
         truth sample (``compare.life_origin``, as ``analyze``)."""
         self.restart_reference()
+        self.reprime.count.reboot()  # the watch no longer from its power-up (livereprimecount)
         # the new firmware's first tick sends its pose frames before its summary: the truth
         # sample of the frame it primed on may have come before the reboot was told
         self.life_truth.new_life()
