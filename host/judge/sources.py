@@ -31,6 +31,7 @@ from odocan.host.judge.bootticks import (
     continues_summary,
     next_run,
     pose_heard,
+    told_run_s,
 )
 from odocan.host.judge.distfall import (
     RECENT_TWISTS,
@@ -188,6 +189,9 @@ class SourceWatch:
             self.life_from_s = t_s
             self.offset_s, self.other_s = offset, self.offset_s
             self.changed_at_s = t_s
+        if kind == "reboot" and not booted and counter is not None and (
+                run_s := told_run_s(uptime_s, counter, t_s, self.pose)) is not None:
+            self.life_from_s = min(self.life_from_s, run_s)  # its poses heard before its summary
         self.last_uptime_s, self.last_state = uptime_s, state
         self.page_pending = self.page_pending and kind != "reboot"
         return kind

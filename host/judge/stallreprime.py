@@ -23,7 +23,9 @@ halt: up to ``FIFO_SPAN`` after the last sample's) nor ``r`` exactly (the first 
 a stall is left out: ``stalls.after_stalls``; ``r`` is at most ``R_SPAN`` frames before the
 next one): of those pairs the one whose re-primed path best meets the first samples after the
 stall is taken (``_chosen``), then judged as every step is. The event is reported (``detail``)
-and the firmware's own DEGRADED state stands (``finalstate``).
+and the firmware's own DEGRADED state stands (``finalstate``). The summaries around the stall
+are read by their gap, not by where a recorder's stamps put them (``around``: ODOM_STATUS
+stamped up to ``LATE_S`` late).
 
 A firmware that re-primes without saying so, or whose word was latched before the stall (it
 says nothing new), keeps the exact rule: its heading FAILs. What a wrong firmware can hide: a
@@ -61,6 +63,7 @@ SLACK_PERIODS = 3 * COUNTER_VALUES
 FIFO_SPAN = HW_RX_FIFO_FRAMES + 1  # frames after the last sample's the firmware may have taken
 R_SPAN = SILENCE_CYCLES  # frames before the first kept sample's the re-prime may lie on
 COMPARED = 10  # samples after the stall the pairs are compared on
+LATE_S = 0.05  # a recorder's stamps of ODOM_STATUS this late (half its period) still read
 
 
 @dataclass(frozen=True)
@@ -112,15 +115,34 @@ def declared_stalls(breaks: IntArray | None, enc: Encoders, e0: int, resets: Res
     for b in breaks.tolist():
         if not e0 < b < len(enc.timestamp_s):
             continue
-        b_s = float(enc.timestamp_s[b])
-        i = int(np.searchsorted(resets.sent_s, b_s, side="left")) - 1
-        j = int(np.searchsorted(resets.sent_s, b_s, side="right"))
-        if i < 0 or j >= len(resets.sent_s):
+        i = around(resets.sent_s, float(enc.timestamp_s[b]))
+        if i is None:
             continue
-        stall_s = float(resets.sent_s[j] - resets.sent_s[i])
-        if possible(stall_s, enc.cycle_s, least) and resets.told(b_s):
+        stall_s = float(resets.sent_s[i + 1] - resets.sent_s[i])
+        if possible(stall_s, enc.cycle_s, least) and said_reset(resets.mask, i):
             out[b - e0] = stall_s
     return out
+
+
+def around(sent_s: FloatArray, b_s: float) -> int | None:
+    """The summaries around the stall the reference restarts after at bus time ``b_s``: ``i``
+    and ``i + 1``, consecutive, the widest gap of those whose first is stamped before
+    ``b_s + LATE_S`` and whose second after ``b_s`` (None: no such pair). A stalled firmware
+    sends nothing, so a summary stamped in that window is its last tick's, stamped late by a
+    recorder (issue #11: the summary sent 0.1 ms after the last pose, stamped 10 ms late, fell
+    after ``b_s``, and the stall read as its 0.1 s gap: the re-prime went unseen and a correct
+    firmware FAILed by 3.1 m); a firmware that talked on has no gap to offer."""
+    lo = max(int(np.searchsorted(sent_s, b_s, side="left")) - 1, 0)
+    hi = min(int(np.searchsorted(sent_s, b_s + LATE_S, side="left")), len(sent_s) - 1)
+    if hi <= lo or sent_s[hi] <= b_s:
+        return None
+    return lo + int(np.argmax(np.diff(sent_s[lo : hi + 1])))
+
+
+def said_reset(mask: IntArray, i: int) -> bool:
+    """The firmware's word across summaries ``i`` and ``i + 1``: COUNTER_RESET clear on the
+    first, set on the second (``nearthreshold.Resets.told``'s reading for a stall)."""
+    return not mask[i] & COUNTER_RESET_BIT and bool(mask[i + 1] & COUNTER_RESET_BIT)
 
 
 def stall_reprimes(declared: dict[int, float], onboard: Poses, e0: int,
