@@ -107,6 +107,11 @@ class ReprimeHold:
         self.count = PowerUpCount()  # the first count page's ENC_E2E_LOST (livereprimecount)
         self.doubts: list[str] = []  # ... which no pair it allows fits: never a PASS
 
+    @property
+    def pending(self) -> bool:
+        """A hold after a long stall waits for the firmware's word (``livecutreprime``)."""
+        return self._from_s != math.inf
+
     def on_status(self, signals: dict[str, Any], t_s: float) -> None:
         """An accepted ODOM_STATUS (raw signals) at bus time ``t_s``: a summary decides the
         hold when made after it; the watch's first count page (``PowerUpCount``)."""
@@ -362,6 +367,10 @@ def unbounded_why(tracker: PoseTracker) -> str | None:
                     f"speed bound (up to {reprime.wide_m * 1e3:.0f} mm): the frames the firmware "
                     "took before re-priming were not heard, so its first pose after it was not "
                     "replayed (an offset within that bound not judged)")
+    if unchosen := tracker.cut.unchosen:  # (livecutreprime)
+        said.append(f"{unchosen} staged APPLY{'' if unchosen == 1 else 's'} just after a long "
+                    "stall whose re-prime frame was not chosen (its frames not heard): the "
+                    "heading there not judged")
     return "; ".join(said) or None
 
 

@@ -23,6 +23,7 @@ from odocan.host.judge.liveadopted import (
     AdoptedStarts,
 )
 from odocan.host.judge.livechoice import LiveChoice
+from odocan.host.judge.livecutreprime import CutHold
 from odocan.host.judge.livedark import NO_FRAME_S
 from odocan.host.judge.livefirst import FIRST_FRAMES, FirstStall, left_out_first
 from odocan.host.judge.livefit import LiveFit
@@ -99,6 +100,7 @@ class PoseTracker:
         self.restarts.choose = self.choice.open
         self.newstart = NewStartHold(self)  # a new start's samples wait for its fit
         self.reprime = ReprimeHold(self)  # a long stall's wait for the firmware's word
+        self.cut = CutHold(self)  # ... a staged APPLY just after it (livecutreprime)
         self.adopted = AdoptedStarts()  # starts at the firmware's own pose, said (liveadopted)
         self.laps = LapHold(self)  # samples after a lap of the stamps wait for its evidence
         self.stall = StallRule(self.placer, self.window, self.pairs.halves["y"])  # livestall
@@ -260,6 +262,7 @@ class PoseTracker:
             self.lives.held[seq] = sample
         self.newstart.sampled(sample)  # ... or held after an unseen restart (livenewstart)
         self.reprime.sampled(sample)  # ... or after a long stall (livereprime)
+        self.cut.sampled(sample)  # ... or a staged APPLY just after it (livecutreprime)
 
     def compare(self, pose: FramePose, y: Half, queued: bool) -> FramePose | None:
         """Judge one on-board sample (its ODOM_POSE_Y half ``y``, whether it ``queued``) by the
@@ -267,6 +270,8 @@ class PoseTracker:
         encoder frame, None when unknown or held (``livelaphold`` compares a held one when its
         hold ends)."""
         if self.laps.holds((pose, y, queued)):  # compared once its lap is numbered
+            return None
+        if self.cut.pending is not None and self.cut.holds(pose, y, queued):  # its re-prime
             return None
         if self.reprime.holds(pose, y, queued):  # the firmware's word after a long stall
             return None
