@@ -36,9 +36,8 @@ from odocan.host.cli.app import main
 from odocan.host.io.logs import read_log
 from odocan.host.judge.analysis import analyze
 from odocan.sim.board import TICK_S
-from tests import host_frames as hf
 from tests.independent_checker import Robot, _Odometry
-from tests.test_first_second_reboot import DB, _decoded, _written
+from tests.test_first_second_reboot import _decoded, _reencoded, _written
 from tests.test_stall_before_first_pose_after_reboot import _live
 from tests.test_stall_mid_drive_losses import HALTED, PMIR, RESUMED_AT, STALL, drive
 
@@ -72,10 +71,7 @@ def _shifted(shift_mm: int) -> tuple[can.Message, ...]:
         if m.arbitration_id == fr.ODOM_TWIST_ID and m.timestamp >= SINCE_S:
             signals = _decoded(m)
             signals["DISTANCE"] = (signals["DISTANCE"] + shift_mm) % 65536
-            data = bytearray(DB.encode_message(m.arbitration_id, signals, scaling=False))
-            hf.p02_protect(data, int(signals["COUNTER"]), fr.ODOM_TWIST_DATA_IDS)
-            m = can.Message(arbitration_id=m.arbitration_id, data=bytes(data),
-                            is_extended_id=False, timestamp=m.timestamp)
+            m = _reencoded(m, signals, fr.ODOM_TWIST_DATA_IDS)
         out.append(m)
     return tuple(out)
 

@@ -34,10 +34,17 @@ from odocan.host.judge.stream_analysis import analyze_file
 from odocan.host.mqtt.endverdict import end_verdict
 from odocan.sim.board import TICK_S
 from odocan.sim.scenarios import get_scenario
-from tests import host_frames as hf
 from tests import independent_checker as ic
 from tests.fault_rig import FaultRig
-from tests.test_first_second_reboot import DB, PMIR, POSE_IDS, _decoded, _live, _robot, _written
+from tests.test_first_second_reboot import (
+    PMIR,
+    POSE_IDS,
+    _decoded,
+    _live,
+    _reencoded,
+    _robot,
+    _written,
+)
 
 RUN_S = 3.0
 
@@ -77,10 +84,7 @@ def _lost(messages: tuple[can.Message, ...], reboot_at: int, pairs: int,
             if bias_lsb and m.arbitration_id == fr.ODOM_POSE_X_ID:
                 signals = _decoded(m)
                 signals["X"] += bias_lsb
-                data = bytearray(DB.encode_message(m.arbitration_id, signals, scaling=False))
-                hf.p02_protect(data, int(signals["COUNTER"]), fr.ODOM_POSE_X_DATA_IDS)
-                m = can.Message(arbitration_id=m.arbitration_id, data=bytes(data),
-                                is_extended_id=False, timestamp=m.timestamp)
+                m = _reencoded(m, signals, fr.ODOM_POSE_X_DATA_IDS)
         out.append(m)
     return tuple(out)
 

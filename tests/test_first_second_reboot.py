@@ -93,6 +93,15 @@ def _decoded(msg: can.Message) -> dict[str, Any]:
     return signals
 
 
+def _reencoded(msg: can.Message, signals: dict[str, Any], data_ids: tuple[int, ...]) -> can.Message:
+    """``msg`` with ``signals`` (raw, as ``_decoded`` gives them) encoded by cantools and its
+    Profile 2 CRC made anew: a frame a recorder or a tamperer could have written."""
+    data = bytearray(DB.encode_message(msg.arbitration_id, signals, scaling=False))
+    hf.p02_protect(data, int(signals["COUNTER"]), data_ids)
+    return can.Message(arbitration_id=msg.arbitration_id, data=bytes(data),
+                       is_extended_id=False, timestamp=msg.timestamp)
+
+
 def _reset_seen(messages: tuple[can.Message, ...], reboot_at: int) -> float:
     """cantools: the first ODOM_POSE_X of the reset's tick reads X 0 (the power-up pose) after
     poses away from it; returns the bus time of the encoder frame the new firmware primed on
@@ -126,10 +135,7 @@ def _wrong(messages: tuple[can.Message, ...], reboot_at: int, bias_lsb: int = X_
             if seen >= from_pose:
                 signals = _decoded(m)
                 signals["X"] += bias_lsb
-                data = bytearray(DB.encode_message(m.arbitration_id, signals, scaling=False))
-                hf.p02_protect(data, int(signals["COUNTER"]), fr.ODOM_POSE_X_DATA_IDS)
-                m = can.Message(arbitration_id=m.arbitration_id, data=bytes(data),
-                                is_extended_id=False, timestamp=m.timestamp)
+                m = _reencoded(m, signals, fr.ODOM_POSE_X_DATA_IDS)
             seen += 1
         out.append(m)
     return tuple(out)

@@ -33,9 +33,8 @@ from odocan.host.judge.analysis import HEADING_LSB_RAD, POSITION_LSB_M, analyze
 from odocan.host.mqtt.endverdict import end_verdict
 from odocan.sim.board import TICK_S
 from odocan.sim.scenarios import get_scenario
-from tests import host_frames as hf
 from tests.fault_rig import FaultRig
-from tests.test_first_second_reboot import DB, _decoded, _written, _wrong
+from tests.test_first_second_reboot import _decoded, _reencoded, _written, _wrong
 from tests.test_stall_before_first_pose import _odometry
 from tests.test_stall_before_first_pose_after_reboot import _live, _poses
 from tests.test_stall_beyond_window import PMIR, _end_verdicts
@@ -166,10 +165,7 @@ def _count_moved(messages: tuple[can.Message, ...], by: int) -> tuple[can.Messag
         signals = _decoded(m) if m.arbitration_id == fr.ODOM_STATUS_ID else {}
         if "ENC_E2E_LOST" in signals and not moved:
             moved, signals["ENC_E2E_LOST"] = True, (int(signals["ENC_E2E_LOST"]) + by) % 16
-            data = bytearray(DB.encode_message(m.arbitration_id, signals, scaling=False))
-            hf.p02_protect(data, int(signals["COUNTER"]), fr.ODOM_STATUS_DATA_IDS)
-            m = can.Message(arbitration_id=m.arbitration_id, data=bytes(data),
-                            is_extended_id=False, timestamp=m.timestamp)
+            m = _reencoded(m, signals, fr.ODOM_STATUS_DATA_IDS)
         out.append(m)
     return tuple(out)
 

@@ -48,9 +48,8 @@ from odocan.host.mqtt.telemetry import RobotTelemetry
 from odocan.sim.board import TICK_S
 from odocan.sim.robot import load
 from odocan.sim.scenarios import get_scenario
-from tests import host_frames as hf
 from tests.fault_rig import FaultRig
-from tests.test_first_second_reboot import DB, _decoded, _written, _wrong
+from tests.test_first_second_reboot import _decoded, _reencoded, _written, _wrong
 from tests.test_stall_before_first_pose import _odometry
 from tests.test_stall_before_first_pose_after_reboot import _live, _poses
 
@@ -173,10 +172,7 @@ def frame_zero_moved(messages: tuple[can.Message, ...]) -> tuple[can.Message, ..
         if not done and m.arbitration_id == fr.WHEEL_ENCODERS_ID:
             signals = _decoded(m)
             signals["LEFT_COUNT"] = (int(signals["LEFT_COUNT"]) - 5) % (1 << 24)
-            data = bytearray(DB.encode_message(m.arbitration_id, signals, scaling=False))
-            hf.p02_protect(data, int(signals["COUNTER"]), fr.WHEEL_ENCODERS_DATA_IDS)
-            m = can.Message(arbitration_id=m.arbitration_id, data=bytes(data),
-                            is_extended_id=False, timestamp=m.timestamp)
+            m = _reencoded(m, signals, fr.WHEEL_ENCODERS_DATA_IDS)
             done = True
         out.append(m)
     return tuple(out)
@@ -192,10 +188,7 @@ def _unproven(messages: tuple[can.Message, ...]) -> tuple[can.Message, ...]:
         if not done and m.arbitration_id == fr.ODOM_STATUS_ID and int(_decoded(m)["PAGE"]) == 2:
             signals = _decoded(m)
             signals["ENC_E2E_OK"] = (int(signals["ENC_E2E_OK"]) + 1000) & 0xFFFF
-            data = bytearray(DB.encode_message(m.arbitration_id, signals, scaling=False))
-            hf.p02_protect(data, int(signals["COUNTER"]), fr.ODOM_STATUS_DATA_IDS)
-            m = can.Message(arbitration_id=m.arbitration_id, data=bytes(data),
-                            is_extended_id=False, timestamp=m.timestamp)
+            m = _reencoded(m, signals, fr.ODOM_STATUS_DATA_IDS)
             done = True
         out.append(m)
     return tuple(out)
@@ -239,10 +232,7 @@ def _undeclared(messages: tuple[can.Message, ...]) -> tuple[can.Message, ...]:
         if m.arbitration_id == fr.ODOM_STATUS_ID and int(_decoded(m)["PAGE"]) == 0:
             signals = _decoded(m)
             signals["ERROR_MASK"] = int(signals["ERROR_MASK"]) & ~COUNTER_RESET_BIT
-            data = bytearray(DB.encode_message(m.arbitration_id, signals, scaling=False))
-            hf.p02_protect(data, int(signals["COUNTER"]), fr.ODOM_STATUS_DATA_IDS)
-            m = can.Message(arbitration_id=m.arbitration_id, data=bytes(data),
-                            is_extended_id=False, timestamp=m.timestamp)
+            m = _reencoded(m, signals, fr.ODOM_STATUS_DATA_IDS)
         out.append(m)
     return tuple(out)
 
