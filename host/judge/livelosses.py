@@ -23,16 +23,27 @@ frames and is withdrawn. The same after a stall or hold mid-life (``livestall``:
 placed again at the next sample compared, bounded from the last one compared before it): told by
 ``stalled_at``, the frames between are the placement's (``analyze``'s ``losses.life_placements``)
 at every page after it was told. A page that came before (the firmware's first ODOM_STATUS after
-the stall sent before its first pose) keeps its span whole: looser, never tighter."""
+the stall sent before its first pose) keeps its span whole: looser, never tighter.
+
+A reboot told late (``Tracker.withdraw_from``) takes back the samples from its life's start: they
+were the new firmware's poses against the old life's reference, settled when that reference
+ended (issue #11: a correct firmware's 1.78 m beyond its allowance FAILed the fleet's verdict).
+The largest settled error is marked only where it grew (bus time of the sample that raised it,
+before, after: ``MARKS_KEPT`` of them), not per sample: the bridge's per-frame path stays as it
+was. Going back to before the first raise withdrawn is exact while the raises were settled in
+bus time order; beyond the marks kept it keeps the larger value (a FAIL kept, never a wrong pose
+hidden)."""
 
 from __future__ import annotations
 
 import math
 from collections import deque
+from collections.abc import Iterable
 from itertools import pairwise
 
 import numpy as np
 
+from odocan.host.judge.livepose import MARKS_KEPT
 from odocan.host.judge.livewindow import ENC_WINDOW, Columns, window_encoders
 from odocan.host.judge.losses import (
     OneSteps,
@@ -50,9 +61,11 @@ class LiveAllowance:
     def __init__(self) -> None:
         self.lost_page: tuple[int, int] | None = None  # ENC_E2E_LOST, latest frame then
         self.spans: list[tuple[int, float]] = []  # (first frame, m) per lossy span or twin
-        self._revisable: deque[tuple[int, float]] = deque()  # (frame, m) of samples since
+        self._revisable: deque[tuple[int, float, float]] = deque()  # (frame, m, t s) since
         self._in_order = True  # ``_revisable`` by frame (then settled from its head)
         self._beyond_settled_m = 0.0  # largest error beyond its allowance of the other samples
+        # where it grew: (the raising sample's bus time s, m before, m after), ``withdraw_from``
+        self._raises: deque[tuple[float, float, float]] = deque(maxlen=MARKS_KEPT)
         self.wrongs = PoseWrongs()  # the samples beyond the limit, latched once settled
         # the latest samples' errors (frame, dx, dy m, dheading rad, t s): ``rejudge``
         self._errors: deque[tuple[int, float, float, float, float]] = deque(maxlen=ENC_WINDOW)
@@ -73,7 +86,7 @@ class LiveAllowance:
         revisable = self._revisable
         if revisable and seq < revisable[-1][0]:
             self._in_order = False
-        revisable.append((seq, dpos_m))
+        revisable.append((seq, dpos_m, t_s))
         if revisable[0][0] < seq - ENC_WINDOW:  # beyond any span's reach
             self.settle(seq - ENC_WINDOW, fast)
 
@@ -122,14 +135,46 @@ class LiveAllowance:
             while revisable and revisable[0][0] <= upto:
                 settled.append(revisable.popleft())
         else:
-            settled = [(f, e) for f, e in revisable if f <= upto]
-            self._revisable = deque((f, e) for f, e in revisable if f > upto)
-            frames = [f for f, _ in self._revisable]
-            self._in_order = frames == sorted(frames)
+            settled = [s for s in revisable if s[0] <= upto]
+            self._kept_revisable(s for s in revisable if s[0] > upto)
         if settled:
-            beyond = [(f, e - self.at_m(f)) for f, e in settled]
-            self._beyond_settled_m = max([self._beyond_settled_m, *(b for _, b in beyond)])
+            beyond = [(f, e - self.at_m(f)) for f, e, _ in settled]
+            if max(b for _, b in beyond) > self._beyond_settled_m:  # rare: marked
+                self._raised(settled, beyond)
             self.wrongs.judged(beyond)
+
+    def _kept_revisable(self, kept: Iterable[tuple[int, float, float]]) -> None:
+        self._revisable = deque(kept)
+        frames = [f for f, _, _ in self._revisable]
+        self._in_order = frames == sorted(frames)
+
+    def _raised(self, settled: list[tuple[int, float, float]],
+                beyond: list[tuple[int, float]]) -> None:
+        """The largest settled error grew: each sample that raised it marked (module
+        docstring)."""
+        for (_, _, t_s), (_, beyond_m) in zip(settled, beyond, strict=True):
+            if beyond_m > self._beyond_settled_m:
+                self._raises.append((t_s, self._beyond_settled_m, beyond_m))
+                self._beyond_settled_m = beyond_m
+
+    def withdraw_from(self, t_s: float) -> None:
+        """The samples compared from bus time ``t_s`` on were not this reference's (a reboot
+        told late: ``Tracker.withdraw_from``): their errors are taken back, settled or not
+        (module docstring); ``wrongs`` are the tracker's to withdraw."""
+        if any(s[2] >= t_s for s in self._revisable):
+            self._kept_revisable(s for s in self._revisable if s[2] < t_s)
+        self._errors = deque((e for e in self._errors if e[4] < t_s), maxlen=ENC_WINDOW)
+        raises = list(self._raises)
+        first = next((i for i, r in enumerate(raises) if r[0] >= t_s), None)
+        if first is None:
+            return
+        kept, top_m = raises[:first], raises[first][1]
+        for raised_s, _, after_m in raises[first + 1:]:  # settled out of bus time order
+            if raised_s < t_s and after_m > top_m:
+                kept.append((raised_s, top_m, after_m))
+                top_m = after_m
+        self._raises = deque(kept, maxlen=MARKS_KEPT)
+        self._beyond_settled_m = top_m
 
     def restart(self, upto: int, fast: bool) -> None:
         """A new reference: the samples so far are settled, no span reaches past it."""
@@ -154,7 +199,7 @@ class LiveAllowance:
 
     def max_beyond_m(self) -> float:
         """The largest position error beyond its allowance (m) of every sample recorded."""
-        recent = (e - self.at_m(f) for f, e in self._revisable)
+        recent = (e - self.at_m(f) for f, e, _ in self._revisable)
         return max([self._beyond_settled_m, *recent])
 
     def on_page(self, lost: int, upto: int, window: Columns | None, sampled: set[int],

@@ -400,9 +400,11 @@ class PoseTracker:
         ``bootticks``): the samples compared from bus time ``t_s`` on were the new firmware's
         against the old life's reference; their errors and the wrong episodes they latched are
         taken back (issue #11: a reset 30 ticks in, its first pose pair lost, its next poses
-        latched an 84 mm episode that FAILed the correct firmware at the bridge's end)."""
+        latched an 84 mm episode that FAILed the correct firmware at the bridge's end; the largest
+        error beyond the loss allowance with them, which the fleet's verdict reads)."""
         self.vs_reference.withdraw_from(t_s)
         self.wrongs.withdraw_from(t_s)
+        self.losses.withdraw_from(t_s)
 
     def new_life(self) -> None:
         """A new firmware life (a reboot): the reference starts again at the next pose, and
