@@ -62,6 +62,7 @@ from odocan.host.judge.replay_compare import (
     starts_mid_drive,
     versus_log,
 )
+from odocan.host.judge.replay_lives import judge_lives, plan_lives
 from odocan.host.judge.replay_track import EncoderTrack
 from odocan.host.outputs import OutputError
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
@@ -154,15 +155,27 @@ class LockstepReplay:
         self.loop = TickLoop(self._work, host_bus, listeners, self.clock)
         self.stopped: Stopped | None = None  # by a signal, before the log's end
         self.fed = 0  # encoder frames fed to the firmware
+        self.halted: set[int] = set()  # ticks the board runs none (``replay_lives``)
+        self.resets: dict[int, bool] = {}  # encoder frame number -> reset after it is sent
 
     @property
     def ticks(self) -> int:
         """Firmware ticks run so far."""
         return self.loop.ticks
 
-    def _work(self, _k: int) -> None:
-        """The nodes' work in a tick: the firmware's board alone (the log is the rest)."""
-        self.board.run_tick()
+    def _work(self, k: int) -> None:
+        """The nodes' work in a tick: the firmware's board alone (the log is the rest), none
+        while the log shows its firmware halted or not yet powered up (``replay_lives``)."""
+        if k not in self.halted:
+            self.board.run_tick()
+
+    def _reset(self, which: int, after: bool) -> None:
+        """A fresh firmware where the log's powered up (``replay_lives.LifePlan.resets``): the
+        board reset and its receive FIFO cleared with it."""
+        if self.resets.get(which) is after:
+            self.board.reboot()
+            while self.board.bus.recv(0) is not None:
+                pass
 
     def run(self, frames: FrameArrays, feed: ReplayInput, phase_ticks: int = 0,
             stop: StopRequest | None = None) -> None:
@@ -193,9 +206,12 @@ class LockstepReplay:
                         self.clock.advance_to(self.loop.start_s + tick * TICK_S)
                         due = tick
                         self.fed += 1
+                        self._reset(which, False)
                     message = to_message(frames, position)
                     message.timestamp += float(shift_s[position])
                     self._log_bus.send(message)
+                    if which >= 0:
+                        self._reset(which, True)
                 else:
                     if due is not None:
                         self.loop.run_to(due + 1)
@@ -351,9 +367,13 @@ def replay_and_analyze(
         try:  # mid-drive the replay starts from (0, 0, 0), the log's truth elsewhere: left out
             truth_compared = not starts_mid_drive(
                 frames, feed.accepted, onboard_by_tick(frames, feed.accepted), feed.encoders)
+            plan = plan_lives(frames, feed.accepted, feed.encoders)
+            phase = 0 if plan.powered else pose_phase_ticks(frames, feed.accepted)
+            replay.halted = {t + phase for t in plan.halted_ticks(feed.encoders)}
+            replay.resets = plan.resets
             if not stop.stop_requested:
                 replay.run(frames, feed if truth_compared else replace(feed, truth=feed.truth[:0]),
-                           pose_phase_ticks(frames, feed.accepted), stop)
+                           phase, stop)
         finally:
             try:
                 replay.close()
@@ -376,6 +396,10 @@ def replay_and_analyze(
         "interrupted": replay.stopped is not None,
         "onboard_vs_log": versus_log(frames, feed.accepted, replayed),
     }
+    if not plan.trivial:
+        _, replayed_accepted = check_frames(replayed)
+        analysis.report["replay"]["lives"] = judge_lives(
+            frames, feed.accepted, replayed, replayed_accepted, feed.encoders, plan, tolerance)
     if replay.stopped is not None:
         analysis.report["stopped"] = replay.stopped.as_dict()
     return analysis
