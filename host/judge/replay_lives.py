@@ -37,10 +37,10 @@ from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.analysis import Tolerance
 from odocan.host.judge.gapseen import crc_holds
 from odocan.host.judge.reboots import (
-    _counted_start,
-    _encoder_count_pages,
-    _life_start,
+    encoder_count_pages,
+    page_counted_start,
     split_lives,
+    summary_start,
 )
 from odocan.host.judge.replay_compare import departures, versus_log
 from odocan.host.judge.replay_track import EncoderTrack
@@ -121,9 +121,9 @@ def first_power_up(frames: FrameArrays, decoder: BulkDecoder,
     choices = dict(message.get_signal_by_name("STATE").choices or {})
     state = str(choices.get(int(page["STATE"][row]), ""))
     position = int(good[0])
-    start = _life_start(position, 0, state, track.index)
-    counted = _counted_start(position, len(frames), (track.index, track.counter),
-                             _encoder_count_pages(frames, decoder))
+    start = summary_start(position, 0, state, track.index)
+    counted = page_counted_start(position, len(frames), (track.index, track.counter),
+                                 encoder_count_pages(frames, decoder))
     if counted is not None and counted > start:
         start = counted
     return (start, position) if start > int(track.index[0]) else None
