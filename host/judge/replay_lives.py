@@ -164,16 +164,19 @@ def judge_lives(log: FrameArrays, accepted: npt.NDArray[np.bool_], replayed: Fra
     for k, (first, end) in enumerate(itertools.pairwise(bounds)):
         span = _span(track, fed, first, end, len(log), len(replayed))
         stalls = [(a, b) for a, b in plan.halts if track.tick[first] < a < track.tick[end - 1]]
-        vs = versus_log(log.select(span[0]), accepted[span[0]], replayed.select(span[1]))
+        rebooted = k > 0  # its start found by ``split_lives``: compared from (0, 0, 0) there
+        vs = versus_log(log.select(span[0]), accepted[span[0]], replayed.select(span[1]),
+                        rebooted)
         life: dict[str, Any] = {
             "life": k, "t_s": round(float(log.timestamp_s[track.index[first]]) - t0, 3),
-            "from_power_up": k > 0 or plan.powered,
+            "from_power_up": rebooted or plan.powered,
             "stalls": [{"t_s": _tick_s(track, a, t0), "ticks": b - a} for a, b in stalls],
             "onboard_vs_log": vs, "unjudged": None}
         if stalls and departures(vs, tolerance):
             cut = int(np.searchsorted(track.tick, stalls[0][0]))
             pre = _span(track, fed, first, cut, len(log), len(replayed))
-            before = versus_log(log.select(pre[0]), accepted[pre[0]], replayed.select(pre[1]))
+            before = versus_log(log.select(pre[0]), accepted[pre[0]], replayed.select(pre[1]),
+                                rebooted)
             if not departures(before, tolerance):
                 life["onboard_vs_log_before_stall"] = before
                 life["unjudged"] = _stalled_reason(k, life)
