@@ -10,7 +10,9 @@ and the two agree frame for frame: PASS, exit 0.
 
 A wrong firmware still FAILs (exit 1, a FAIL line naming the departure, never UNJUDGED): one
 pose of the log tampered (X +10 mm or +1 m, re-encoded with cantools, its E2E CRC fixed with
-the frame's own COUNTER), in a log without reboots and in the life after the reboot.
+the frame's own COUNTER), in a log without reboots and in the life after the reboot; and every
+pose of the life after the reboot 10 mm off (a life compared as a log cut mid-drive, re-anchored
+on its first poses, absorbed that and PASSed).
 """
 
 from __future__ import annotations
@@ -24,7 +26,15 @@ from odocan.firmware import frames as fr
 from odocan.host.cli.app import main
 from tests import host_frames as hf
 from tests import independent_checker as ic
-from tests.test_first_second_reboot import DB, _decoded, _reset_seen, _robot, _written, drive
+from tests.test_first_second_reboot import (
+    DB,
+    _decoded,
+    _reset_seen,
+    _robot,
+    _written,
+    _wrong,
+    drive,
+)
 
 REBOOT_TICK = 300  # 3.00 s: mid-drive
 NO_REBOOT = 10**6  # past the drive's end: one life
@@ -97,3 +107,15 @@ def test_one_wrong_pose_fails_the_replay(
     assert said, lines
     if reboot_tick == REBOOT_TICK:
         assert all(line.startswith("  - life 1 (from t=3.00 s)") for line in said), lines
+
+
+def test_every_pose_of_the_life_after_the_reboot_off_fails_the_replay(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    wrong = _written(_wrong(drive(REBOOT_TICK), REBOOT_TICK, round(0.010 * LSB_PER_M)),
+                     tmp_path / "wrong.log")
+    code, lines = _replayed(capsys, wrong)
+    assert code == 1, lines
+    assert "FAIL: the replayed firmware departs from the log's" in lines, lines
+    assert any(line.startswith("  - life 1 (from t=3.00 s): its position differs from the log's"
+                               " by up to 10.0000 mm") for line in lines), lines
