@@ -13,10 +13,19 @@ pose of the log tampered (X +10 mm or +1 m, re-encoded with cantools, its E2E CR
 the frame's own COUNTER), in a log without reboots and in the life after the reboot; and every
 pose of the life after the reboot 10 mm off (a life compared as a log cut mid-drive, re-anchored
 on its first poses, absorbed that and PASSed).
+
+A log whose recorder started 0.5 s before the MCU's power-up, every ODOM_STATUS stamped 50 ms
+late (a gateway: ``tests.test_powerup_primed_late``): the status frames put the priming frame 5
+frames late, where the replay, comparing nothing (UNJUDGED), or re-anchored, PASSed a firmware
+1 m off (before 0a4f51d5). The first life is now tried from a few frames before too
+(``replay_lives.fit_first_prime``): the correct firmware is identical from the frame it primed
+on (its FIFO drained at its first tick, 1.00 s, it primes on the next frame: 0.51 s into the
+log); one 10 mm or 1 m off FAILs.
 """
 
 from __future__ import annotations
 
+import functools
 from pathlib import Path
 
 import can
@@ -24,8 +33,11 @@ import pytest
 
 from odocan.firmware import frames as fr
 from odocan.host.cli.app import main
+from odocan.sim.board import TICK_S
+from odocan.sim.scenarios import get_scenario
 from tests import host_frames as hf
 from tests import independent_checker as ic
+from tests.fault_rig import FaultRig
 from tests.test_first_second_reboot import (
     DB,
     _decoded,
@@ -35,10 +47,14 @@ from tests.test_first_second_reboot import (
     _wrong,
     drive,
 )
+from tests.test_powerup_primed_late import _status_late
+from tests.test_stall_beyond_window import PMIR
 
 REBOOT_TICK = 300  # 3.00 s: mid-drive
 NO_REBOOT = 10**6  # past the drive's end: one life
 LSB_PER_M = 10_000  # ODOM_POSE_X: 0.1 mm
+POWER_UP_TICK = 100  # the MCU's first tick; the recorder starts 50 ticks before
+STATUS_LATE_S = 0.05
 
 
 def _one_pose_off(messages: tuple[can.Message, ...], after_s: float,
@@ -119,3 +135,44 @@ def test_every_pose_of_the_life_after_the_reboot_off_fails_the_replay(
     assert "FAIL: the replayed firmware departs from the log's" in lines, lines
     assert any(line.startswith("  - life 1 (from t=3.00 s): its position differs from the log's"
                                " by up to 10.0000 mm") for line in lines), lines
+
+
+@functools.cache
+def powered_up_in_the_log() -> tuple[can.Message, ...]:
+    """pmir on the circle, the MCU halted for its first second, its FIFO drained at its first
+    tick (it primes on the next frame); the frames from 0.5 s before that tick on, 3 s, every
+    ODOM_STATUS ``STATUS_LATE_S`` late."""
+    heard: list[can.Message] = []
+    with FaultRig(scenario=get_scenario("circle", PMIR, duration_s=60.0)) as rig:
+        def drain(k: int) -> None:
+            if k == POWER_UP_TICK:
+                while rig.fw_bus.recv(0) is not None:
+                    pass
+        rig.observers.append(
+            lambda k, got: heard.extend(got) if k >= POWER_UP_TICK - 50 else None)
+        rig.before_board.append(drain)
+        rig.halted = lambda k: k < POWER_UP_TICK
+        rig.run(POWER_UP_TICK * TICK_S + 3.0)
+    return _status_late(tuple(heard), STATUS_LATE_S)
+
+
+@pytest.mark.parametrize("bias_m", [0.0, 0.010, 1.0])
+def test_a_power_up_in_the_log_is_replayed_from_the_frame_it_primed_on(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], bias_m: float
+) -> None:
+    messages = powered_up_in_the_log()
+    if bias_m:
+        messages = _wrong(messages, 0, round(bias_m * LSB_PER_M))
+    code, lines = _replayed(capsys, _written(messages, tmp_path / "powerup.log"))
+    if not bias_m:
+        assert code == 0, lines
+        assert any(line.startswith("replay: life 0 from t=0.51 s (a fresh firmware)") and
+                   line.endswith("identical, max difference 0.0000 mm, 0.0000 mrad")
+                   for line in lines), lines
+        assert not any(line.startswith(("FAIL", "UNJUDGED")) for line in lines), lines
+        return
+    assert code == 1, lines
+    assert "FAIL: the replayed firmware departs from the log's" in lines, lines
+    assert not any(line.startswith("UNJUDGED") for line in lines), lines
+    assert any(line.startswith("  - life 0 (from t=") and
+               "its position differs from the log's" in line for line in lines), lines

@@ -62,7 +62,7 @@ from odocan.host.judge.replay_compare import (
     starts_mid_drive,
     versus_log,
 )
-from odocan.host.judge.replay_lives import judge_lives, plan_lives
+from odocan.host.judge.replay_lives import LifePlan, fit_first_prime, judge_lives, plan_lives
 from odocan.host.judge.replay_track import EncoderTrack
 from odocan.host.outputs import OutputError
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
@@ -341,6 +341,23 @@ def unreplayable(report: dict[str, Any]) -> list[str]:
     return causes
 
 
+def _replayed_head(frames: FrameArrays, profile: RobotProfile, integrator: str,
+                   plan: LifePlan) -> FrameArrays:
+    """The replayed bus of ``frames``, a prefix of a log whose firmware powered up in it, under
+    ``plan`` (unrecorded, no truth): a candidate of ``replay_lives.fit_first_prime``."""
+    collector = FrameCollector()
+    feed = ReplayInput.from_log(frames)
+    replay = LockstepReplay(firmware_params(profile, integrator), [collector],
+                            f"odocan-replay-{next(_REPLAY_CHANNELS)}")
+    try:
+        replay.halted = plan.halted_ticks(feed.encoders)
+        replay.resets = plan.resets
+        replay.run(frames, replace(feed, truth=feed.truth[:0]))
+    finally:
+        replay.close()
+    return collector.arrays()
+
+
 def replay_and_analyze(
     frames: FrameArrays, feed: ReplayInput, profile: RobotProfile, integrator: str, *,
     tolerance: Tolerance, log: Path, log_out: Path | None = None,
@@ -367,7 +384,10 @@ def replay_and_analyze(
         try:  # mid-drive the replay starts from (0, 0, 0), the log's truth elsewhere: left out
             truth_compared = not starts_mid_drive(
                 frames, feed.accepted, onboard_by_tick(frames, feed.accepted), feed.encoders)
-            plan = plan_lives(frames, feed.accepted, feed.encoders)
+            plan = fit_first_prime(
+                frames, feed.accepted, feed.encoders, plan_lives(frames, feed.accepted,
+                                                                 feed.encoders), tolerance,
+                lambda head, tried: _replayed_head(head, profile, integrator, tried))
             phase = 0 if plan.powered else pose_phase_ticks(frames, feed.accepted)
             replay.halted = {t + phase for t in plan.halted_ticks(feed.encoders)}
             replay.resets = plan.resets

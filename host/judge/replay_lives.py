@@ -26,7 +26,8 @@ than a log can tell. A life that departs before any stall FAILs.
 from __future__ import annotations
 
 import itertools
-from dataclasses import dataclass, field
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -35,6 +36,7 @@ import numpy.typing as npt
 from odocan.firmware.clock import LOST_TIME_PERIODS
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.analysis import Tolerance
+from odocan.host.judge.bootnamed import named_start, pose_enc_rows, powerup_poses
 from odocan.host.judge.gapseen import crc_holds
 from odocan.host.judge.reboots import (
     encoder_count_pages,
@@ -45,10 +47,12 @@ from odocan.host.judge.reboots import (
 from odocan.host.judge.replay_compare import departures, versus_log
 from odocan.host.judge.replay_track import EncoderTrack
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
+from odocan.host.protocol.e2e import check_frames
 from odocan.sim import contract
 
 IntArray = npt.NDArray[np.int64]
 FIRMWARE_NODE = "ODOM_MCU"  # the DBC's sender name of the firmware's frames
+PRIME_CANDIDATES = 8  # frames before the first power-up's priming frame the fit tries too
 
 
 @dataclass(frozen=True)
@@ -63,11 +67,23 @@ class LifePlan:
     # with it: the firmware booted in INIT a tick before the frame it primed on, the summary
     # before that frame), False: before (it primed in its first tick)
     resets: dict[int, bool] = field(default_factory=dict)
+    # the first life's priming frame is known (``fit_first_prime``): compared from (0, 0, 0)
+    # there, not re-anchored as a log cut mid-drive
+    primed_known: bool = False
 
     @property
     def trivial(self) -> bool:
         """One firmware from the log's first frame, never halted: the replay as it always ran."""
         return len(self.starts) == 1 and not self.powered and not self.halts
+
+    def primed_on(self, frame: int) -> LifePlan:
+        """This plan with its first life (a power-up in the log) primed on encoder frame
+        ``frame`` instead, known."""
+        first = min(self.resets)
+        after = self.resets[first] and frame > 0
+        resets = {k: v for k, v in self.resets.items() if k != first}
+        resets[frame - 1 if after else frame] = after
+        return LifePlan([frame, *self.starts[1:]], self.powered, self.halts, resets, True)
 
     def halted_ticks(self, track: EncoderTrack) -> set[int]:
         """The ticks the board runs none (before the first power-up, and each stall)."""
@@ -124,8 +140,12 @@ def first_power_up(frames: FrameArrays, decoder: BulkDecoder,
     start = summary_start(position, 0, state, track.index)
     counted = page_counted_start(position, len(frames), (track.index, track.counter),
                                  encoder_count_pages(frames, decoder))
-    if counted is not None and counted > start:
-        start = counted
+    said = named_start(powerup_poses(frames, decoder),
+                       (track.index.astype(np.int64), track.counter.astype(np.int64)), position,
+                       float(frames.timestamp_s[position]), pose_enc_rows(frames, decoder))
+    for found in (counted, None if said is None else said[0]):  # the pose's word last
+        if found is not None and found > start:
+            start = found
     return (start, position) if start > int(track.index[0]) else None
 
 
@@ -164,7 +184,7 @@ def judge_lives(log: FrameArrays, accepted: npt.NDArray[np.bool_], replayed: Fra
     for k, (first, end) in enumerate(itertools.pairwise(bounds)):
         span = _span(track, fed, first, end, len(log), len(replayed))
         stalls = [(a, b) for a, b in plan.halts if track.tick[first] < a < track.tick[end - 1]]
-        rebooted = k > 0  # its start found by ``split_lives``: compared from (0, 0, 0) there
+        rebooted = k > 0 or plan.primed_known  # its start known: from (0, 0, 0) there
         vs = versus_log(log.select(span[0]), accepted[span[0]], replayed.select(span[1]),
                         rebooted)
         life: dict[str, Any] = {
@@ -206,3 +226,47 @@ def _stalled_reason(k: int, life: dict[str, Any]) -> str:
             f"t={stall['t_s']:.2f} s ({stall['ticks']} ticks): the replayed firmware, halted "
             "there as the log shows, departs from the log's after it while it agreed before "
             "(which frames the recording board's receive FIFO kept is more than the log tells)")
+
+
+def fit_first_prime(frames: FrameArrays, accepted: npt.NDArray[np.bool_], track: EncoderTrack,
+                    plan: LifePlan, tolerance: Tolerance,
+                    replay: Callable[[FrameArrays, LifePlan], FrameArrays]) -> LifePlan:
+    """The plan with the log's first power-up primed on the frame whose replay agrees with the
+    log (``replay``: the replayed bus of a prefix of the log under a plan), known.
+
+    ``first_power_up`` reads the frame from ODOM_STATUS stamps and its count page, which a
+    recorder may have delayed: only ever too late (``primedrange``: the trial's mon.log, 4
+    frames). So, like ``primedrange``, the life is tried from each of ``PRIME_CANDIDATES``
+    frames before it too, the latest first, on the log up to its first stall or the next life:
+    a correct firmware agrees from the frame it primed on, a wrong one from none (a frame's
+    shift moves the pose by the robot's motion in it, unless it stood still, when no shift
+    matters). From none: the latest whose poses pair with the log's, known, so the life FAILs
+    (re-anchored it would absorb an offset: a firmware 1 m off from its power-up PASSed); the
+    plan as it was only when none pairs (a stall before the first pose: no word on it)."""
+    if not plan.powered:
+        return plan
+    cut = _first_life_end(track, plan, len(frames))
+    head, head_accepted = frames.select(slice(0, cut)), accepted[:cut]
+    head_track = EncoderTrack.of(head, head_accepted, BulkDecoder(contract.database()))
+    start, paired = plan.starts[0], None
+    for frame in range(start, max(start - PRIME_CANDIDATES, 0) - 1, -1):
+        tried = plan.primed_on(frame)
+        if frame >= len(head_track.index):
+            continue
+        replayed = replay(head, tried)
+        _, replayed_accepted = check_frames(replayed)
+        vs = judge_lives(head, head_accepted, replayed, replayed_accepted, head_track,
+                         replace(tried, starts=[frame]), tolerance)[0]["onboard_vs_log"]
+        if vs["samples"] and not departures(vs, tolerance):
+            return tried
+        paired = paired or (tried if vs["samples"] else None)
+    return plan if paired is None else paired
+
+
+def _first_life_end(track: EncoderTrack, plan: LifePlan, n_log: int) -> int:
+    """The log position where the first life's fit stops: its first stall or the next life."""
+    ends = [n_log] + [int(track.index[k]) for k in plan.starts[1:2]]
+    if plan.halts:
+        at = int(np.searchsorted(track.tick, plan.halts[0][0]))
+        ends.append(int(track.index[at]) if at < len(track.index) else n_log)
+    return min(ends)
