@@ -22,7 +22,7 @@ frame (``Life.boot``), with E2E sequences starting afresh (a reboot is not frame
 * whatever the summary says, when the new firmware's first page of WHEEL_ENCODERS E2E counts
   (ENC_E2E_OK: encoder frames accepted since its boot; ENC_E2E_LOST: lost) follows, it names
   the frame it primed on: ENC_E2E_OK + ENC_E2E_LOST - 1 COUNTER steps back from the page's
-  latest encoder frame (``_counted_start``: the earliest the counts allow). That holds when the
+  latest encoder frame (``page_counted_start``: the earliest the counts allow). That holds when the
   log missed the boot summary (UPTIME counts whole seconds: the summaries of the first second
   all say 0) and is checked again on the life (``host.judge.powerup.saw_only_the_log``);
 * above both, when the summary (UPTIME 0) follows the new firmware's power-up pose within 80 ms,
@@ -95,14 +95,14 @@ def split_lives(frames: FrameArrays, decoder: BulkDecoder) -> list[Life]:
     rows = decoder.decode(frames, "WHEEL_ENCODERS")
     keep = accepted[rows["index"]]
     encoders, counters = rows["index"][keep], rows["COUNTER"][keep].astype(np.int64)
-    pages = _encoder_count_pages(frames, decoder)
+    pages = encoder_count_pages(frames, decoder)
     poses, after = powerup_poses(frames, decoder), pose_enc_rows(frames, decoder)
     starts: list[int] = []
     limits = [b[0] for b in boots[1:]] + [len(frames)]
     for (position, uptime_s, state, _), limit in zip(boots, limits, strict=True):
-        start = _life_start(position, uptime_s, state, encoders)
+        start = summary_start(position, uptime_s, state, encoders)
         counted = (None if stalled_first(frames, decoder, encoders, position, limit)
-                   else _counted_start(position, limit, (encoders, counters), pages))
+                   else page_counted_start(position, limit, (encoders, counters), pages))
         said = (named_start(poses, (encoders.astype(np.int64), counters), position,
                             float(frames.timestamp_s[position]), after) if uptime_s == 0 else None)
         named = None if said is None else said[0]
@@ -137,7 +137,7 @@ def stalled_first(frames: FrameArrays, decoder: BulkDecoder, encoders: npt.NDArr
                           contract_cycle_s(decoder, "WHEEL_ENCODERS"), alive_s)
 
 
-def _life_start(position: int, uptime_s: int, state: str, encoders: npt.NDArray[np.intp]) -> int:
+def summary_start(position: int, uptime_s: int, state: str, encoders: npt.NDArray[np.intp]) -> int:
     """Where the life whose boot summary is at ``position`` starts: at the encoder frame it
     primed on in its first tick (UPTIME 0, not INIT: the latest before the summary, which its
     first pose frames precede too), else at the summary."""
@@ -147,7 +147,7 @@ def _life_start(position: int, uptime_s: int, state: str, encoders: npt.NDArray[
     return position
 
 
-def _counted_start(
+def page_counted_start(
     position: int, limit: int, encoders: tuple[npt.NDArray[np.intp], npt.NDArray[np.int64]],
     pages: tuple[npt.NDArray[np.int64], ...],
 ) -> int | None:
@@ -161,7 +161,7 @@ def _counted_start(
     return counted_start(encoders, int(where[after]), int(ok[after]), int(lost[after]))
 
 
-def _encoder_count_pages(
+def encoder_count_pages(
     frames: FrameArrays, decoder: BulkDecoder
 ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64], npt.NDArray[np.int64]]:
     """Positions, ENC_E2E_OK and ENC_E2E_LOST (0 where the DBC has none) of the ODOM_STATUS

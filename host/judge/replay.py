@@ -62,6 +62,7 @@ from odocan.host.judge.replay_compare import (
     starts_mid_drive,
     versus_log,
 )
+from odocan.host.judge.replay_lives import LifePlan, fit_first_prime, judge_lives, plan_lives
 from odocan.host.judge.replay_track import EncoderTrack
 from odocan.host.outputs import OutputError
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
@@ -154,15 +155,27 @@ class LockstepReplay:
         self.loop = TickLoop(self._work, host_bus, listeners, self.clock)
         self.stopped: Stopped | None = None  # by a signal, before the log's end
         self.fed = 0  # encoder frames fed to the firmware
+        self.halted: set[int] = set()  # ticks the board runs none (``replay_lives``)
+        self.resets: dict[int, bool] = {}  # encoder frame number -> reset after it is sent
 
     @property
     def ticks(self) -> int:
         """Firmware ticks run so far."""
         return self.loop.ticks
 
-    def _work(self, _k: int) -> None:
-        """The nodes' work in a tick: the firmware's board alone (the log is the rest)."""
-        self.board.run_tick()
+    def _work(self, k: int) -> None:
+        """The nodes' work in a tick: the firmware's board alone (the log is the rest), none
+        while the log shows its firmware halted or not yet powered up (``replay_lives``)."""
+        if k not in self.halted:
+            self.board.run_tick()
+
+    def _reset(self, which: int, after: bool) -> None:
+        """A fresh firmware where the log's powered up (``replay_lives.LifePlan.resets``): the
+        board reset and its receive FIFO cleared with it."""
+        if self.resets.get(which) is after:
+            self.board.reboot()
+            while self.board.bus.recv(0) is not None:
+                pass
 
     def run(self, frames: FrameArrays, feed: ReplayInput, phase_ticks: int = 0,
             stop: StopRequest | None = None) -> None:
@@ -193,9 +206,12 @@ class LockstepReplay:
                         self.clock.advance_to(self.loop.start_s + tick * TICK_S)
                         due = tick
                         self.fed += 1
+                        self._reset(which, False)
                     message = to_message(frames, position)
                     message.timestamp += float(shift_s[position])
                     self._log_bus.send(message)
+                    if which >= 0:
+                        self._reset(which, True)
                 else:
                     if due is not None:
                         self.loop.run_to(due + 1)
@@ -325,6 +341,23 @@ def unreplayable(report: dict[str, Any]) -> list[str]:
     return causes
 
 
+def _replayed_head(frames: FrameArrays, profile: RobotProfile, integrator: str,
+                   plan: LifePlan) -> FrameArrays:
+    """The replayed bus of ``frames``, a prefix of a log whose firmware powered up in it, under
+    ``plan`` (unrecorded, no truth): a candidate of ``replay_lives.fit_first_prime``."""
+    collector = FrameCollector()
+    feed = ReplayInput.from_log(frames)
+    replay = LockstepReplay(firmware_params(profile, integrator), [collector],
+                            f"odocan-replay-{next(_REPLAY_CHANNELS)}")
+    try:
+        replay.halted = plan.halted_ticks(feed.encoders)
+        replay.resets = plan.resets
+        replay.run(frames, replace(feed, truth=feed.truth[:0]))
+    finally:
+        replay.close()
+    return collector.arrays()
+
+
 def replay_and_analyze(
     frames: FrameArrays, feed: ReplayInput, profile: RobotProfile, integrator: str, *,
     tolerance: Tolerance, log: Path, log_out: Path | None = None,
@@ -351,9 +384,16 @@ def replay_and_analyze(
         try:  # mid-drive the replay starts from (0, 0, 0), the log's truth elsewhere: left out
             truth_compared = not starts_mid_drive(
                 frames, feed.accepted, onboard_by_tick(frames, feed.accepted), feed.encoders)
+            plan = fit_first_prime(
+                frames, feed.accepted, feed.encoders, plan_lives(frames, feed.accepted,
+                                                                 feed.encoders), tolerance,
+                lambda head, tried: _replayed_head(head, profile, integrator, tried))
+            phase = 0 if plan.powered else pose_phase_ticks(frames, feed.accepted)
+            replay.halted = {t + phase for t in plan.halted_ticks(feed.encoders)}
+            replay.resets = plan.resets
             if not stop.stop_requested:
                 replay.run(frames, feed if truth_compared else replace(feed, truth=feed.truth[:0]),
-                           pose_phase_ticks(frames, feed.accepted), stop)
+                           phase, stop)
         finally:
             try:
                 replay.close()
@@ -376,6 +416,10 @@ def replay_and_analyze(
         "interrupted": replay.stopped is not None,
         "onboard_vs_log": versus_log(frames, feed.accepted, replayed),
     }
+    if not plan.trivial:
+        _, replayed_accepted = check_frames(replayed)
+        analysis.report["replay"]["lives"] = judge_lives(
+            frames, feed.accepted, replayed, replayed_accepted, feed.encoders, plan, tolerance)
     if replay.stopped is not None:
         analysis.report["stopped"] = replay.stopped.as_dict()
     return analysis

@@ -61,7 +61,8 @@ def onboard_by_tick(frames: FrameArrays, accepted: npt.NDArray[np.bool_]) -> dic
 
 
 def versus_log(
-    log: FrameArrays, log_accepted: npt.NDArray[np.bool_], replayed: FrameArrays
+    log: FrameArrays, log_accepted: npt.NDArray[np.bool_], replayed: FrameArrays,
+    from_power_up: bool = False,
 ) -> dict[str, Any]:
     """The replayed on-board poses against the logged ones at the same encoder frames (at each,
     the largest difference between any pose sent naming it in the log and in the replay).
@@ -75,13 +76,16 @@ def versus_log(
     by their drift (``drift_between_gaps_m``). ``max_position_diff_m`` is the position figure
     the verdict judges (the larger of the difference up to the first gap and the drift between
     gaps); ``max_position_diff_raw_m`` the raw difference over every pose, holes and all (None
-    for a log cut mid-drive: its positions have no common origin)."""
+    for a log cut mid-drive: its positions have no common origin). ``from_power_up``: the log
+    is known to start at its firmware's power-up, where the replay's does too (a life
+    ``replay_lives`` cut at it), so never mid-drive: its positions are compared as they are,
+    whatever the cut's first poses look like (re-anchoring there would absorb an offset)."""
     _, accepted = check_frames(replayed)
     old, new = onboard_by_tick(log, log_accepted), onboard_by_tick(replayed, accepted)
     common = np.array(sorted(old.keys() & new.keys()), dtype=np.int64)
     decoder = BulkDecoder(contract.database())
     track = EncoderTrack.of(log, log_accepted, decoder)
-    mid = starts_mid_drive(log, log_accepted, old, track)
+    mid = not from_power_up and starts_mid_drive(log, log_accepted, old, track)
     holes = recorder_holes(log)
     logged = int(np.count_nonzero(log_accepted[decoder.select(log, "ODOM_POSE_X")]))
     facts: dict[str, Any] = {"logged": logged, "log_starts_mid_drive": mid, "holes": holes,

@@ -76,7 +76,7 @@ class _Boot:
     uptime_s: int
     t_s: float
     before_s: int
-    start: int  # from the summary (``reboots._life_start``)
+    start: int  # from the summary (``reboots.summary_start``)
     named: int | None = None  # named by its power-up pose (``bootnamed.named_start``)
     naming: tuple[int, int] | None = None  # ... and its ENC_COUNTER, until the first pose after
     # the summary tells whether it counts on from it (``bootnamed.first_after``)

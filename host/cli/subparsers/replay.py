@@ -129,8 +129,7 @@ def _do_replay(args: argparse.Namespace) -> int:
     section = analysis.report["replay"]
     _print_versus_log(section)
     analysis.report["inputs"] = choice.recorded(log_inputs(args.log, profile, integrator, None))
-    reasons = departures(section["onboard_vs_log"], args.tolerance)
-    blind = unjudged(section["onboard_vs_log"])
+    reasons, blind = _judged(section, args.tolerance)
     if reasons:  # the firmware's own word on its profile first, then the poses' fit
         reasons += ([] if said is None else [said]) + diagnose(
             frames, feed.accepted, with_bus_speed(profile, running), integrator, args.tolerance,
@@ -151,6 +150,25 @@ def _do_replay(args: argparse.Namespace) -> int:
     write_checks(args, "replay", analysis_checks(analysis.report), choice.properties())
     stopped = analysis.report.get("stopped")
     return code if stopped is None else stop_code(stopped)
+
+
+def _judged(section: dict[str, Any], tolerance: Any) -> tuple[list[str], str | None]:
+    """The departures that FAIL the replay and why it is UNJUDGED (None: it is not): of the
+    whole log, or life by life where the replay lived the log's power-ups, reboots and stalls
+    (``host.judge.replay_lives``: a life that departs only after a stall is UNJUDGED there)."""
+    lives = section.get("lives")
+    if lives is None:
+        return departures(section["onboard_vs_log"], tolerance), unjudged(section["onboard_vs_log"])
+    reasons, blind = [], []
+    for life in lives:
+        if life["unjudged"] is not None:
+            blind.append(life["unjudged"])
+            continue
+        reasons += [f"life {life['life']} (from t={life['t_s']:.2f} s): {r}"
+                    for r in departures(life["onboard_vs_log"], tolerance)]
+        if (none := unjudged(life["onboard_vs_log"])) is not None:
+            blind.append(f"life {life['life']} (from t={life['t_s']:.2f} s): {none}")
+    return reasons, ("UNJUDGED: " + "; ".join(blind) if blind else None)
 
 
 def _check_options(args: argparse.Namespace) -> None:
@@ -189,6 +207,12 @@ def _print_versus_log(section: dict[str, Any]) -> None:
         soft_wrap=True)
     for line in not_comparable(vs):
         console.print(f"replay: {line}", soft_wrap=True)
+    for life in section.get("lives") or []:
+        own = life["onboard_vs_log"]
+        said = compared(own) if own["samples"] else "nothing compared"
+        console.print(f"replay: life {life['life']} from t={life['t_s']:.2f} s"
+                      f"{' (a fresh firmware)' if life['from_power_up'] else ''}, "
+                      f"{len(life['stalls'])} stalls replayed as halts: {said}", soft_wrap=True)
     if not section["truth_compared"]:
         console.print("replay: the truth is not compared: the replayed firmware starts from "
                       "(0, 0, 0) mid-drive, the log's SIM_TRUTH from where the drive was",

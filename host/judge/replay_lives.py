@@ -1,0 +1,272 @@
+"""The firmware lives and stalls a lockstep replay reproduces (``host.judge.replay``'s plan),
+and its comparison with the log life by life.
+
+A lockstep replay used to run one firmware from the log's first encoder frame, one tick per
+frame: a log whose firmware powered up after the recorder started, rebooted, or stalled (a
+SIGSTOP, a debugger halt: TIME_LOST, MAILBOX_OVERFLOW, a re-prime) then departed from the replay
+although the firmware was right, and the replay FAILed it (issue #11: 2660 mrad on a live log).
+What the log tells, the replay now lives too:
+
+* **a power-up or reboot**: where the judges find each firmware life (``reboots.split_lives``,
+  and for the log's first life a summary at UPTIME 0, ``first_power_up``) the replayed firmware
+  is reset (``FirmwareBoard.reboot``, its receive FIFO cleared) on the frame that life primed
+  on, so each life runs from its own power-up; before the first power-up the board is off;
+* **a stall**: where the firmware sent nothing for ``LOST_TIME_PERIODS`` ticks or more while the
+  encoder frames went on (``firmware_silences``), the replayed firmware runs no tick; its bus
+  keeps the frames and the board's FIFO-locked controller hands it the first few when it
+  resumes and overruns the rest, as the recording board did (``sim.board``).
+
+Each life is then compared with the log's on its own (``versus_log`` on both buses cut at the
+life's first encoder frame). A life that departs only after a stall, the part before it
+identical, is UNJUDGED from that stall (with the reason), not FAILed: which frames a real
+controller's FIFO kept (its acceptance filter, frames of other nodes the log may lack) is more
+than a log can tell. A life that departs before any stall FAILs.
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from odocan.firmware.clock import LOST_TIME_PERIODS
+from odocan.host.io.logs import FrameArrays
+from odocan.host.judge.analysis import Tolerance
+from odocan.host.judge.bootnamed import named_start, pose_enc_rows, powerup_poses
+from odocan.host.judge.gapseen import crc_holds
+from odocan.host.judge.reboots import (
+    encoder_count_pages,
+    page_counted_start,
+    split_lives,
+    summary_start,
+)
+from odocan.host.judge.replay_compare import departures, versus_log
+from odocan.host.judge.replay_track import EncoderTrack
+from odocan.host.protocol.decode import BulkDecoder, DecodeError
+from odocan.host.protocol.e2e import check_frames
+from odocan.sim import contract
+
+IntArray = npt.NDArray[np.int64]
+FIRMWARE_NODE = "ODOM_MCU"  # the DBC's sender name of the firmware's frames
+PRIME_CANDIDATES = 8  # frames before the first power-up's priming frame the fit tries too
+
+
+@dataclass(frozen=True)
+class LifePlan:
+    """What the replay lives besides one frame per tick, in the log's encoder frame numbers
+    (positions in ``EncoderTrack.index``) and ticks (``EncoderTrack.tick``)."""
+
+    starts: list[int]  # encoder frame number each life starts on (the first: 0 or its power-up)
+    powered: bool  # the first life starts at a power-up seen in the log (the board off before)
+    halts: list[tuple[int, int]] = field(default_factory=list)  # [first, end) ticks halted
+    # encoder frame number -> True: the board is reset after it is on the bus (its FIFO cleared
+    # with it: the firmware booted in INIT a tick before the frame it primed on, the summary
+    # before that frame), False: before (it primed in its first tick)
+    resets: dict[int, bool] = field(default_factory=dict)
+    # the first life's priming frame is known (``fit_first_prime``): compared from (0, 0, 0)
+    # there, not re-anchored as a log cut mid-drive
+    primed_known: bool = False
+
+    @property
+    def trivial(self) -> bool:
+        """One firmware from the log's first frame, never halted: the replay as it always ran."""
+        return len(self.starts) == 1 and not self.powered and not self.halts
+
+    def primed_on(self, frame: int) -> LifePlan:
+        """This plan with its first life (a power-up in the log) primed on encoder frame
+        ``frame`` instead, known."""
+        first = min(self.resets)
+        after = self.resets[first] and frame > 0
+        resets = {k: v for k, v in self.resets.items() if k != first}
+        resets[frame - 1 if after else frame] = after
+        return LifePlan([frame, *self.starts[1:]], self.powered, self.halts, resets, True)
+
+    def halted_ticks(self, track: EncoderTrack) -> set[int]:
+        """The ticks the board runs none (before the first power-up, and each stall)."""
+        first = min(self.resets, default=0)
+        ticks = set(range(int(track.tick[first]))) if self.powered else set()
+        for first, end in self.halts:
+            ticks.update(range(first, end))
+        return ticks
+
+
+def plan_lives(frames: FrameArrays, accepted: npt.NDArray[np.bool_],
+               track: EncoderTrack) -> LifePlan:
+    """The log's firmware lives and stalls (module docstring)."""
+    decoder = BulkDecoder(contract.database())
+    lives = split_lives(frames, decoder)
+    said = [(life.index[0], life.t_s) for life in lives[1:]
+            if len(life.index) and life.set_pose is None and life.config is None]
+    first = first_power_up(frames, decoder, track)
+    boots = ([] if first is None else [first]) + [
+        (int(p), int(np.flatnonzero(frames.timestamp_s == t_s)[0])) for p, t_s in said]
+    resets: dict[int, bool] = {}
+    starts = [0]
+    for start, summary in boots:
+        k = min(int(np.searchsorted(track.index, start)), len(track.index) - 1)
+        if k == 0 and first is None:
+            continue
+        starts.append(k)
+        after = summary < int(track.index[k]) and k > 0  # booted before the frame: INIT
+        resets[k - 1 if after else k] = after
+    starts = sorted(set(starts[1:] if first is not None else starts))
+    return LifePlan(starts, first is not None, firmware_silences(frames, decoder, track), resets)
+
+
+def first_power_up(frames: FrameArrays, decoder: BulkDecoder,
+                   track: EncoderTrack) -> tuple[int, int] | None:
+    """The encoder frame (log position) the log's first firmware primed on, and its boot
+    summary's position, when the log holds its power-up (its first summary whose CRC holds says
+    UPTIME 0) after its first encoder frame, by the rules ``reboots.split_lives`` applies to a
+    reboot; else None."""
+    try:
+        page = decoder.decode_page(frames, "ODOM_STATUS", 0)
+        message = decoder.message("ODOM_STATUS")
+    except DecodeError:
+        return None
+    good = page["index"][crc_holds(frames, decoder, page["index"])]
+    if len(good) == 0 or "UPTIME" not in page:
+        return None
+    row = int(np.searchsorted(page["index"], good[0]))
+    if int(page["UPTIME"][row]) != 0:
+        return None
+    choices = dict(message.get_signal_by_name("STATE").choices or {})
+    state = str(choices.get(int(page["STATE"][row]), ""))
+    position = int(good[0])
+    start = summary_start(position, 0, state, track.index)
+    counted = page_counted_start(position, len(frames), (track.index, track.counter),
+                                 encoder_count_pages(frames, decoder))
+    said = named_start(powerup_poses(frames, decoder),
+                       (track.index.astype(np.int64), track.counter.astype(np.int64)), position,
+                       float(frames.timestamp_s[position]), pose_enc_rows(frames, decoder))
+    for found in (counted, None if said is None else said[0]):  # the pose's word last
+        if found is not None and found > start:
+            start = found
+    return (start, position) if start > int(track.index[0]) else None
+
+
+def firmware_silences(frames: FrameArrays, decoder: BulkDecoder,
+                      track: EncoderTrack) -> list[tuple[int, int]]:
+    """[first, end) ticks in which the firmware ran none: between two of its frames more than
+    ``LOST_TIME_PERIODS`` encoder periods apart while the encoder frames went on, from the
+    tick after the one that sent the first to the one that sent the second (its encoder frame
+    the latest before it)."""
+    ids = [m.frame_id for m in contract.database().messages if m.senders == [FIRMWARE_NODE]]
+    sent_s = np.sort(frames.timestamp_s[np.isin(frames.can_id, ids)])
+    period_s = contract.cycle_time_s("WHEEL_ENCODERS")
+    halts = []
+    for at in np.flatnonzero(np.diff(sent_s) > (LOST_TIME_PERIODS + 1) * period_s).tolist():
+        last = int(np.searchsorted(track.timestamp_s, sent_s[at], "right")) - 1
+        resumed = int(np.searchsorted(track.timestamp_s, sent_s[at + 1], "right")) - 1
+        if last < 0 or resumed <= last:
+            continue
+        first, end = int(track.tick[last]) + 1, int(track.tick[resumed])
+        if end - first >= LOST_TIME_PERIODS:
+            halts.append((first, end))
+    return halts
+
+
+def judge_lives(log: FrameArrays, accepted: npt.NDArray[np.bool_], replayed: FrameArrays,
+                replayed_accepted: npt.NDArray[np.bool_], track: EncoderTrack, plan: LifePlan,
+                tolerance: Tolerance) -> list[dict[str, Any]]:
+    """Each life compared with the log's on its own: ``onboard_vs_log`` (``versus_log``), the
+    stalls in it, and ``unjudged`` (why, from which stall: the part before it agrees) or None."""
+    decoder = BulkDecoder(contract.database())
+    fed = decoder.select(replayed, "WHEEL_ENCODERS")
+    fed = fed[replayed_accepted[fed]]
+    t0 = float(log.timestamp_s[0])
+    bounds = [*plan.starts, len(track.index)]
+    result = []
+    for k, (first, end) in enumerate(itertools.pairwise(bounds)):
+        span = _span(track, fed, first, end, len(log), len(replayed))
+        stalls = [(a, b) for a, b in plan.halts if track.tick[first] < a < track.tick[end - 1]]
+        rebooted = k > 0 or plan.primed_known  # its start known: from (0, 0, 0) there
+        vs = versus_log(log.select(span[0]), accepted[span[0]], replayed.select(span[1]),
+                        rebooted)
+        life: dict[str, Any] = {
+            "life": k, "t_s": round(float(log.timestamp_s[track.index[first]]) - t0, 3),
+            "from_power_up": rebooted or plan.powered,
+            "stalls": [{"t_s": _tick_s(track, a, t0), "ticks": b - a} for a, b in stalls],
+            "onboard_vs_log": vs, "unjudged": None}
+        if stalls and departures(vs, tolerance):
+            cut = int(np.searchsorted(track.tick, stalls[0][0]))
+            pre = _span(track, fed, first, cut, len(log), len(replayed))
+            before = versus_log(log.select(pre[0]), accepted[pre[0]], replayed.select(pre[1]),
+                                rebooted)
+            if not departures(before, tolerance):
+                life["onboard_vs_log_before_stall"] = before
+                life["unjudged"] = _stalled_reason(k, life)
+        result.append(life)
+    return result
+
+
+def _span(track: EncoderTrack, fed: IntArray, first: int, end: int, n_log: int,
+          n_replayed: int) -> tuple[slice, slice]:
+    """The log's and the replayed bus's frames from encoder frame ``first`` up to ``end``."""
+    log_end = int(track.index[end]) if end < len(track.index) else n_log
+    replay_end = int(fed[end]) if end < len(fed) else n_replayed
+    return (slice(int(track.index[first]), log_end),
+            slice(int(fed[first]) if first < len(fed) else n_replayed, replay_end))
+
+
+def _tick_s(track: EncoderTrack, tick: int, t0: float) -> float:
+    """The log's time (from its first frame) of the encoder frame at or after ``tick``."""
+    at = min(int(np.searchsorted(track.tick, tick)), len(track.tick) - 1)
+    return round(float(track.timestamp_s[at]) - t0, 3)
+
+
+def _stalled_reason(k: int, life: dict[str, Any]) -> str:
+    """Why life ``k`` is UNJUDGED after its first stall (module docstring)."""
+    stall = life["stalls"][0]
+    return (f"life {k} (from t={life['t_s']:.2f} s) after its firmware's stall at "
+            f"t={stall['t_s']:.2f} s ({stall['ticks']} ticks): the replayed firmware, halted "
+            "there as the log shows, departs from the log's after it while it agreed before "
+            "(which frames the recording board's receive FIFO kept is more than the log tells)")
+
+
+def fit_first_prime(frames: FrameArrays, accepted: npt.NDArray[np.bool_], track: EncoderTrack,
+                    plan: LifePlan, tolerance: Tolerance,
+                    replay: Callable[[FrameArrays, LifePlan], FrameArrays]) -> LifePlan:
+    """The plan with the log's first power-up primed on the frame whose replay agrees with the
+    log (``replay``: the replayed bus of a prefix of the log under a plan), known.
+
+    ``first_power_up`` reads the frame from ODOM_STATUS stamps and its count page, which a
+    recorder may have delayed: only ever too late (``primedrange``: the trial's mon.log, 4
+    frames). So, like ``primedrange``, the life is tried from each of ``PRIME_CANDIDATES``
+    frames before it too, the latest first, on the log up to its first stall or the next life:
+    a correct firmware agrees from the frame it primed on, a wrong one from none (a frame's
+    shift moves the pose by the robot's motion in it, unless it stood still, when no shift
+    matters). From none: the latest whose poses pair with the log's, known, so the life FAILs
+    (re-anchored it would absorb an offset: a firmware 1 m off from its power-up PASSed); the
+    plan as it was only when none pairs (a stall before the first pose: no word on it)."""
+    if not plan.powered:
+        return plan
+    cut = _first_life_end(track, plan, len(frames))
+    head, head_accepted = frames.select(slice(0, cut)), accepted[:cut]
+    head_track = EncoderTrack.of(head, head_accepted, BulkDecoder(contract.database()))
+    start, paired = plan.starts[0], None
+    for frame in range(start, max(start - PRIME_CANDIDATES, 0) - 1, -1):
+        tried = plan.primed_on(frame)
+        if frame >= len(head_track.index):
+            continue
+        replayed = replay(head, tried)
+        _, replayed_accepted = check_frames(replayed)
+        vs = judge_lives(head, head_accepted, replayed, replayed_accepted, head_track,
+                         replace(tried, starts=[frame]), tolerance)[0]["onboard_vs_log"]
+        if vs["samples"] and not departures(vs, tolerance):
+            return tried
+        paired = paired or (tried if vs["samples"] else None)
+    return plan if paired is None else paired
+
+
+def _first_life_end(track: EncoderTrack, plan: LifePlan, n_log: int) -> int:
+    """The log position where the first life's fit stops: its first stall or the next life."""
+    ends = [n_log] + [int(track.index[k]) for k in plan.starts[1:2]]
+    if plan.halts:
+        at = int(np.searchsorted(track.tick, plan.halts[0][0]))
+        ends.append(int(track.index[at]) if at < len(track.index) else n_log)
+    return min(ends)
