@@ -286,13 +286,14 @@ class DistanceJudge:
                                    float(ds_m[k]))
         return extra
 
-    def talked_before(self, first_s: float, alive_s: FloatArray, enc_t_s: FloatArray) -> None:
+    def talked_before(self, first_s: float, alive_s: FloatArray, heard: IntArray) -> None:
         """The firmware's last other frame before its first ODOM_TWIST (``first_s``; ``alive_s``:
-        those frames' bus times, sorted), as if a twist frame: a first one after a silence then
-        names its backlog and is left out, as ``stalls.first_after_stall`` leaves the pose."""
+        those frames' bus times, sorted; ``heard``: the encoder frames logged before each), as
+        if a twist frame: a first one after a silence then names its backlog and is left out,
+        as ``stalls.first_after_stall`` leaves the pose. Once, before the first twist taken."""
         k = int(np.searchsorted(alive_s, first_s, side="left")) - 1
         if k >= 0 and math.isnan(self._last[0]):
-            self._last = (float(alive_s[k]), int(np.searchsorted(enc_t_s, alive_s[k])))
+            self._last = (float(alive_s[k]), int(heard[k]))
 
     def take(self, e: IntArray, raw_mm: IntArray, t_s: FloatArray, heard: IntArray,
              named_t_s: FloatArray | None = None) -> None:
@@ -426,7 +427,8 @@ def check_distance(frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder
                       enc.seq[e0:])
     e, raw_mm, t_s, heard = twist_samples(frames, accepted, decoder, enc)
     if alive_s is not None and len(t_s):
-        judge.talked_before(float(t_s[0]), alive_s, enc.timestamp_s)
+        judge.talked_before(float(t_s[0]), alive_s,
+                            np.searchsorted(enc.timestamp_s, alive_s).astype(np.int64))
     named_t_s = np.where(e >= 0, enc.timestamp_s[np.maximum(e, 0)], np.nan) if len(enc.seq) \
         else None
     judge.take(e, raw_mm, t_s, heard, named_t_s)

@@ -15,6 +15,7 @@ from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.distance import DistanceJudge
 from odocan.host.judge.reference import Geometry
 from odocan.host.judge.samples import WIRE_COUNTER_BITS, FloatArray, IntArray
+from odocan.host.judge.stalls import alive_times
 from odocan.host.judge.stream import StreamE2E, StreamEncoders, StreamReference
 from odocan.host.judge.stream_life import _take
 from odocan.host.judge.stream_twist import StreamTwist
@@ -40,10 +41,16 @@ def stream_distance(frames: Callable[[], Iterable[FrameArrays]], db: DatabaseSpe
                                 judge.max_wheel_speed_mm_s)
     count = 0
     enc_t = np.zeros(0)
+    # the firmware's accepted ODOM_STATUS frames: bus times, encoder frames logged before each;
+    # the latest of the chunks before and this chunk's (``DistanceJudge.talked_before``, as the
+    # whole log's ``check_distance``: a twist resolves in its own chunk)
+    alive: tuple[FloatArray, IntArray] = (np.zeros(0), np.zeros(0, np.int64))
 
     def take(e: IntArray, raw_mm: IntArray, t_s: FloatArray) -> None:  # this chunk's twists
         if len(raw_mm) and raw_mm[0] < 0:  # a DBC without DISTANCE (-1): nothing to judge
             return
+        if len(t_s):
+            judge.talked_before(float(t_s[0]), *alive)
         k = e - (count - len(enc_t))  # the named frame among the latest kept
         kept = (k >= 0) & (k < len(enc_t))
         named_t = (np.where(kept, enc_t[np.clip(k, 0, len(enc_t) - 1)], np.nan) if len(enc_t)
@@ -55,6 +62,10 @@ def stream_distance(frames: Callable[[], Iterable[FrameArrays]], db: DatabaseSpe
         accepted = e2e.feed(chunk)
         enc = numbering.feed(chunk, accepted)
         g = count + np.arange(len(enc.index), dtype=np.int64)
+        status_s = alive_times(chunk, accepted, decoder)
+        alive = (np.concatenate((alive[0][-1:], status_s)),
+                 np.concatenate((alive[1][-1:], count + np.searchsorted(enc.timestamp_s,
+                                                                        status_s))))
         count, enc_t = count + len(g), np.concatenate((enc_t[-KEPT_TIMES:], enc.timestamp_s))
         from_e0 = g >= e0
         if from_e0.any():
