@@ -17,6 +17,7 @@ import pytest
 
 from odocan.firmware import frames as fr
 from odocan.host.io.logs import iter_log, read_log
+from odocan.host.judge.bootticks import tied_to_boot
 from odocan.host.judge.distfall import (
     distance_field,
     fall_times,
@@ -66,11 +67,11 @@ def test_the_log_and_the_live_reading_tell_a_fall_alike(
 ) -> None:
     messages = tuple(_twist(*twist) for twist in pair)
     frames = read_log(_written(messages, tmp_path / "pair.log"))
-    times_s, _ = fall_times(frames, BulkDecoder(DB), SMALL)
-    assert (len(times_s) == 1) is fell
+    found, _ = fall_times(frames, BulkDecoder(DB), SMALL)
+    assert (len(found.times_s) == 1) is fell
     field = distance_field(TWIST, e2e_messages(DB)[TWIST.frame_id])
     heard = [(m.timestamp, bytes(m.data)) for m in messages]
-    assert fell_within(field, heard, 0.0, 2.0, SMALL) is fell
+    assert fell_within(field, heard, lambda t_s, _c: 0.0 <= t_s <= 2.0, SMALL) is fell
 
 
 def test_the_rule_on_raw_values() -> None:
@@ -89,8 +90,8 @@ def test_a_chunked_reading_finds_the_fall_of_a_reboot_once(chunk: int, tmp_path:
     path = _written(messages, tmp_path / "reset.log")
     decoder, carried, found = BulkDecoder(DB), None, []
     for frames in iter_log(path, chunk_frames=chunk):
-        times_s, carried = fall_times(frames, decoder, SMALL, carried)
-        found += times_s.tolist()
+        falls, carried = fall_times(frames, decoder, SMALL, carried)
+        found += falls.times_s.tolist()
     new_first = min(m.timestamp for m in messages if m.arbitration_id == TWIST.frame_id
                     and m.timestamp >= 32 * TICK_S)
     assert found == [new_first]
@@ -102,8 +103,27 @@ def test_a_drive_without_a_reboot_never_falls(seed: int, tmp_path: Path) -> None
     rng = random.Random(seed)
     messages = tuple(m for m in drive(10_000) if rng.random() > 0.2)
     frames = read_log(_written(messages, tmp_path / "quiet.log"))
-    assert len(fall_times(frames, BulkDecoder(DB), SMALL)[0]) == 0
+    assert len(fall_times(frames, BulkDecoder(DB), 16)[0].times_s) == 0  # any COUNTER
     field = distance_field(TWIST, e2e_messages(DB)[TWIST.frame_id])
     heard = [(m.timestamp, bytes(m.data)) for m in messages
              if m.arbitration_id == TWIST.frame_id]
-    assert not fell_within(field, heard, 0.0, 10.0, SMALL)
+    assert not fell_within(field, heard, lambda _t, _c: True, 16)
+
+
+def test_a_fall_ties_to_a_boot_summary_by_the_next_summary() -> None:
+    """``bootticks.tied_to_boot`` on the boot summary at 0.321 s (a reset at tick 32): the
+    power-up tick's twist (COUNTER 0) before it, COUNTER 1..3 within 80 ms after it, COUNTER 4
+    and 5 heard by the next summary (80, 100 ms on); not a COUNTER more than the time since
+    allows, nor a twist after the next summary (the DBC's cycles: 20 ms twist and pose, 100 ms
+    summary)."""
+    assert DB.get_message_by_name("ODOM_TWIST").cycle_time == 20
+    assert DB.get_message_by_name("ODOM_POSE_X").cycle_time == 20
+    assert DB.get_message_by_name("ODOM_STATUS").cycle_time == 100
+    assert tied_to_boot(0.321, 0, 0.321)
+    assert tied_to_boot(0.301, 0, 0.321)
+    assert tied_to_boot(0.341, 1, 0.321)
+    assert tied_to_boot(0.401, 4, 0.321)
+    assert tied_to_boot(0.421, 5, 0.321)
+    assert not tied_to_boot(0.341, 4, 0.321)  # 4 twists counted in 20 ms: an older life's
+    assert not tied_to_boot(0.441, 6, 0.321)  # after the next summary
+    assert not tied_to_boot(0.221, 0, 0.321)  # 100 ms before it

@@ -73,7 +73,7 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
-from odocan.host.judge.distfall import any_within, fall_times
+from odocan.host.judge.distfall import Falls, fall_times
 from odocan.host.protocol import busfacts
 from odocan.host.protocol.busfacts import ENC_COUNTER_MASK
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
@@ -108,6 +108,10 @@ POSE_PERIOD_S = POSE_CYCLE_MS / POSE_FRAMES_PER_CYCLE / 1000  # one pose frame t
 # a pose of COUNTER 0 this much sooner than one life's next COUNTER 0 could come breaks the
 # sequence (stamps of one life's poses taken to be this exact: a quarter of a pose cycle)
 SEQUENCE_SLACK_S = POSE_CYCLE_MS / 4000
+STATUS_CYCLE_S = STATUS_CYCLE_MS / 1000  # one summary to the next: 100 ms
+# a fall this long after a summary at most may tie to it (``tied_to_boot``: by the next summary)
+FALL_AFTER_S = max(BOOT_WINDOW_S, STATUS_CYCLE_S + SEQUENCE_SLACK_S)
+TWIST_COUNTERS = POSE_COUNTER_LAP  # the falls read at any COUNTER: ``tied_to_boot`` picks
 
 
 def breaks_sequence(counter_before: int, since_s: float) -> bool:
@@ -216,12 +220,35 @@ def boot_ahead(summary_s: float, status_broke: bool, t_s: float, counter: int,
     return bool(soon and broke)
 
 
-def fell_around(falls_s: npt.NDArray[np.float64], summary_s: float) -> bool:
-    """Whether a twist's DISTANCE fell (``distfall.fall_times``: bus times, in order) less
-    than ``BOOT_WINDOW_S`` from the summary at ``summary_s``, before it (its tick's twist comes
-    before it) or after (that twist lost too: the next, COUNTER 1..3): ``boot_ahead``'s
-    ``fell``. Live, told at the next summary, a cycle on (all those twists heard by then)."""
-    return any_within(falls_s, summary_s - BOOT_WINDOW_S, summary_s + BOOT_WINDOW_S)
+def tied_to_boot(t_s: float, counter: int, summary_s: float) -> bool:
+    """Whether a twist (bus time ``t_s``, E2E ``counter``) whose DISTANCE fell may be the new
+    firmware's of a power-up tick at the summary at ``summary_s`` (``fell_around``): less than
+    ``BOOT_WINDOW_S`` from it either side with a COUNTER below ``BOOT_POSE_FRAMES`` (its tick's
+    twist comes before it, that one lost the next ones, COUNTER 1..3, after); or heard after it
+    by the next summary (``STATUS_CYCLE_S`` on: ``continues_summary`` reads it then, live all
+    those twists heard) with no more twists counted than the time since the summary allows
+    (ODOM_TWIST shares the pose's cycle: COUNTER c comes c ``POSE_PERIOD_S`` after the power-up
+    twist, never sooner). The second holds the new firmware's first 4 or 5 twists lost as well
+    (issue #11: the first heard, COUNTER 4 80 ms on, past the window, the correct firmware
+    FAILed by 93 mm in every judge). The fall itself says a new life began since the twist
+    before it; the summary (UPTIME 0, COUNTER 0, breaking the ODOM_STATUS sequence, its first
+    pose's COUNTER small and soon, the next summary continuing it) says where."""
+    since_s = t_s - summary_s
+    near = abs(since_s) <= BOOT_WINDOW_S and counter < BOOT_POSE_FRAMES
+    after = (0.0 < since_s <= STATUS_CYCLE_S + SEQUENCE_SLACK_S
+             and counter * POSE_PERIOD_S <= since_s + SEQUENCE_SLACK_S)
+    return bool(near or after)
+
+
+def fell_around(falls: Falls, summary_s: float) -> bool:
+    """Whether a twist's DISTANCE fell (``distfall.fall_times``, bus times in order) where it
+    ties to a power-up tick at the summary at ``summary_s`` (``tied_to_boot``):
+    ``boot_ahead``'s ``fell``. Live, told at the next summary, a cycle on."""
+    times_s = falls.times_s
+    first = int(np.searchsorted(times_s, summary_s - BOOT_WINDOW_S))
+    last = int(np.searchsorted(times_s, summary_s + FALL_AFTER_S, side="right"))
+    return any(tied_to_boot(float(times_s[k]), int(falls.counters[k]), summary_s)
+               for k in range(first, last))
 
 
 def restarts_small(counter: int, t_s: float, before: tuple[float, int] | None) -> bool:
@@ -254,7 +281,7 @@ def ahead_ticks(frames: FrameArrays, decoder: BulkDecoder, positions: npt.NDArra
     their CRC holding: UPTIMEs, COUNTERs, bus times; ``statuses``: ``status_before`` of each)
     at once, their first pose after them in ``frames`` (before the next summary)."""
     where, t_pose, counter = pose_rows(frames, decoder)
-    falls_s = fall_times(frames, decoder, BOOT_POSE_FRAMES)[0]
+    falls = fall_times(frames, decoder, TWIST_COUNTERS)[0]
     found = np.zeros(len(positions), dtype=bool)
     if len(where) == 0 or len(positions) == 0:
         return found
@@ -269,7 +296,7 @@ def ahead_ticks(frames: FrameArrays, decoder: BulkDecoder, positions: npt.NDArra
         before = None if j == 0 else (float(t_pose[j - 1]), int(counter[j - 1]))
         found[i] = (broke is not None and i + 1 < n
                     and boot_ahead(float(t_s[i]), broke, float(t_pose[j]), int(counter[j]), before,
-                                   fell_around(falls_s, float(t_s[i])))
+                                   fell_around(falls, float(t_s[i])))
                     and continues_summary(float(t_s[i]), float(t_s[i + 1]), int(uptime_s[i + 1]),
                                           int(counters[i + 1])))
     return found

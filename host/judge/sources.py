@@ -21,16 +21,16 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.judge.bootticks import (
-    BOOT_POSE_FRAMES,
-    BOOT_WINDOW_S,
     POSE_MESSAGE,
     STATUS_MESSAGE,
+    TWIST_COUNTERS,
     ahead_candidate,
     boot_ahead,
     boot_tick,
     continues_summary,
     next_run,
     pose_heard,
+    tied_to_boot,
     told_run_s,
 )
 from odocan.host.judge.distfall import (
@@ -222,9 +222,10 @@ class SourceWatch:
         posed, self.ahead_posed = self.ahead_posed, None
         if posed is None or not continues_summary(posed[0], t_s, uptime_s, counter):
             return None
-        window = (posed[0] - BOOT_WINDOW_S, posed[0] + BOOT_WINDOW_S)  # (``fell_around``)
-        if self.ahead_fall and not fell_within(self.twist_field, self.twists, *window,
-                                               BOOT_POSE_FRAMES):
+        summary_s = posed[0]  # (``fell_around``)
+        if self.ahead_fall and not fell_within(
+                self.twist_field, self.twists,
+                lambda t_s, counter: tied_to_boot(t_s, counter, summary_s), TWIST_COUNTERS):
             return None  # its first pose told it only with DISTANCE fallen, which did not
         self.take_ahead(posed[0], posed[1])
         return posed

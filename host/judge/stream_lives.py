@@ -36,8 +36,8 @@ from odocan.host.judge.bootnamed import (
     powerup_poses,
 )
 from odocan.host.judge.bootticks import (
-    BOOT_POSE_FRAMES,
     BOOT_WINDOW_S,
+    TWIST_COUNTERS,
     boot_ahead,
     continues_summary,
     fell_around,
@@ -45,7 +45,7 @@ from odocan.host.judge.bootticks import (
     poses_before,
     status_before,
 )
-from odocan.host.judge.distfall import fall_times
+from odocan.host.judge.distfall import Falls, fall_times
 from odocan.host.judge.gapseen import crc_holds
 from odocan.host.judge.primed import counted_start
 from odocan.host.judge.reboots import SUMMARY_PAGE, mark_two_sources
@@ -120,8 +120,9 @@ class StreamLives:
     _deferred: list[tuple[int, _Boot | tuple[int, int]]] = field(default_factory=list)
     _naming: list[_Boot] = field(default_factory=list)  # reboots whose ``naming`` is not told
     _ahead_fall: bool = False  # the ``_ahead`` posed needs a twist's DISTANCE fallen
-    _falls: tuple[npt.NDArray[np.float64], tuple[float, int] | None] = field(  # the twists
-        default_factory=lambda: (np.zeros(0), None))  # whose DISTANCE fell, the latest twist's
+    _falls: tuple[Falls, tuple[float, int] | None] = field(  # the twists whose DISTANCE fell
+        default_factory=lambda: (Falls(np.zeros(0), np.zeros(0, np.int64)), None))  # (all
+    # kept), the latest twist's
 
     def feed(self, chunk: FrameArrays, accepted: npt.NDArray[np.bool_]) -> None:
         """Take the next chunk's accepted encoder frames, reboots and count pages."""
@@ -133,8 +134,9 @@ class StreamLives:
         self._enc_t = np.concatenate((self._enc_t, rows["timestamp_s"][keep].astype(np.float64)))
         self._powerups = carried_on(self._powerups,
                                     powerup_poses(chunk, self.decoder, self._offset))
-        falls_s, twist = fall_times(chunk, self.decoder, BOOT_POSE_FRAMES, self._falls[1])
-        self._falls = (np.concatenate((self._falls[0], falls_s)), twist)  # rare: all kept
+        falls, twist = fall_times(chunk, self.decoder, TWIST_COUNTERS, self._falls[1])
+        self._falls = (Falls(np.concatenate((self._falls[0].times_s, falls.times_s)),  # rare:
+                             np.concatenate((self._falls[0].counters, falls.counters))), twist)
         events = sorted(self._deferred + self._boot_events(chunk) + self._page_events(chunk),
                         key=lambda event: event[0])
         self._corroborate(chunk)
