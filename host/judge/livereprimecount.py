@@ -69,7 +69,7 @@ class PowerUpCount:
     __slots__ = ("base", "first_cycle", "holed", "lost", "over", "stalls", "uptime_zero")
 
     def __init__(self, base: int = 0) -> None:
-        self.base = base  # encoder frames heard before the life (its first may be the last)
+        self.base = base  # seq of the latest frame at the life's summary (0: the watch's)
         self.first_cycle: bool | None = None  # the first ODOM_STATUS heard of the first cycle
         self.uptime_zero: bool | None = None  # the first summary said UPTIME 0
         self.holed = False  # a hole of the encoder frames' sequence heard (``PoseTracker``)
