@@ -13,7 +13,8 @@ on is not known") at the 6 and 10 s halts, ``analyze`` PASS. Now the pairs the c
 from frame 0 do not meet its first pose after the re-prime, those from frame 1 do: PASS, the
 frame named (``power_up_primed_on``); wrong firmwares from that pose on still FAIL live; a
 recorder stamping ODOM_STATUS late (the count unmoved) makes no false FAIL; a count no fitting
-pair allows is UNJUDGED, said, never a FAIL.
+pair allows, E2E-valid, is the firmware's claim its poses contradict: FAIL, as ``analyze`` (it was
+UNJUDGED live); the same count altered on the wire (its CRC broken) blames no correct firmware.
 """
 
 from __future__ import annotations
@@ -30,11 +31,10 @@ import pytest
 from odocan.firmware import frames as fr
 from odocan.host.io.logs import read_log
 from odocan.host.judge.analysis import HEADING_LSB_RAD, POSITION_LSB_M, analyze
-from odocan.host.mqtt.endverdict import end_verdict
 from odocan.sim.board import TICK_S
 from odocan.sim.scenarios import get_scenario
 from tests.fault_rig import FaultRig
-from tests.test_first_second_reboot import _decoded, _reencoded, _written, _wrong
+from tests.test_first_second_reboot import DB, _decoded, _reencoded, _written, _wrong
 from tests.test_stall_before_first_pose import _odometry
 from tests.test_stall_before_first_pose_after_reboot import _live, _poses
 from tests.test_stall_beyond_window import PMIR, _end_verdicts
@@ -171,13 +171,52 @@ def _count_moved(messages: tuple[can.Message, ...], by: int) -> tuple[can.Messag
 
 
 @pytest.mark.parametrize(("scenario", "halted"), [("circle", 600), ("random", 600)])
-def test_a_count_no_fitting_pair_allows_is_unjudged(scenario: str, halted: int) -> None:
-    """The page's count 8 off (no pair it allows meets the first pose; others do): the live
-    end verdicts UNJUDGED, saying so; never a FAIL of the poses."""
+def test_a_count_no_fitting_pair_allows_fails(scenario: str, halted: int,
+                                              tmp_path: Path) -> None:
+    """The page's count 8 off, E2E re-protected (no pair it allows meets the first pose; others
+    do): the page passed its E2E check, so the count is the firmware's own claim, and its
+    poses contradict it: a wrong firmware output. ``analyze`` FAILs it (it keeps the pairs the
+    count allows); live, before UNJUDGED, now POSE WRONG and FAIL, the refusal saying why."""
     messages = _count_moved(drive(scenario, halted), 8)
+    assert not analyze(read_log(_written(messages, tmp_path / "moved.log")), PMIR,
+                       "exact").passed
+    monitor, bridge, end_s = _live(messages)
+    assert monitor.health(end_s)["state"] == "POSE WRONG"
+    assert _end_verdicts(bridge) == ("FAIL", "FAIL")
+    for tracker in (monitor.tracker, bridge.tracker):
+        assert [e for e in tracker.restarts.events if e["kind"] == "stall_reprime_refused"
+                and "ENC_E2E_LOST 15 does not allow" in e["detail"]]
+        assert _primed_on(tracker) == []
+
+
+def _count_flipped(messages: tuple[can.Message, ...]) -> tuple[can.Message, ...]:
+    """The first count page's ENC_E2E_LOST 8 more on the wire, its CHECKSUM left as it was (a
+    bus or recorder artefact, which the E2E check refuses)."""
+    out, flipped = [], False
+    for m in messages:
+        signals = _decoded(m) if m.arbitration_id == fr.ODOM_STATUS_ID else {}
+        if "ENC_E2E_LOST" in signals and not flipped:
+            flipped, signals["ENC_E2E_LOST"] = True, (int(signals["ENC_E2E_LOST"]) + 8) % 16
+            m = can.Message(arbitration_id=m.arbitration_id, is_extended_id=False,
+                            data=DB.encode_message(m.arbitration_id, signals, scaling=False),
+                            timestamp=m.timestamp)
+        out.append(m)
+    return tuple(out)
+
+
+@pytest.mark.parametrize(("scenario", "halted"), [("circle", 600), ("random", 600)])
+def test_a_count_altered_on_the_wire_blames_no_correct_firmware(scenario: str, halted: int,
+                                                                tmp_path: Path) -> None:
+    """The first count page's ENC_E2E_LOST altered without its CRC (a bus or recorder
+    artefact): refused by the E2E check, it is no claim of the firmware; the next count page
+    carries the same count. The correct firmware PASSes every judge."""
+    messages = _count_flipped(drive(scenario, halted))
+    assert messages != drive(scenario, halted)
+    assert analyze(read_log(_written(messages, tmp_path / "flipped.log")), PMIR,
+                   "exact").passed
     monitor, bridge, end_s = _live(messages)
     assert monitor.health(end_s)["state"] != "POSE WRONG"
-    verdict = end_verdict(bridge)
-    assert verdict.verdict == "UNJUDGED"
-    assert "ENC_E2E_LOST 15 does not allow" in verdict.reason
-    assert _primed_on(bridge.tracker) == []
+    assert _end_verdicts(bridge) == ("PASS", "PASS")
+    for tracker in (monitor.tracker, bridge.tracker):  # the next page's, the firmware's count
+        assert tracker.reprime.count.lost == _lost(drive(scenario, halted))
+        assert _primed_on(tracker) == [1]

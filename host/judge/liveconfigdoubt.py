@@ -16,7 +16,11 @@ it: the PROFILE_CRC (``profilepage.profile_crc``) of each candidate robot (every
 with this bridge's value or the other's) is compared with the page's. The one that matches is
 the judges' robot from there: when it is not the one taken, the POSE WRONG episodes and pending
 samples since the APPLY are withdrawn (they were judged against a robot the firmware did not
-run) and the reference restarts at the next on-board pose. A page no candidate matches settles
+run), with the largest errors and the loss allowance's maximum they raised
+(``PoseTracker.withdraw_from``: before, the episodes only, and the fleet's end verdict, which
+reads those maxima, FAILed the correct firmware at 3.0 mrad where the bridge's PASSed it; the
+page comes a few samples after the APPLY, within the ``MARKS_KEPT`` taken back exactly), and
+the reference restarts at the next on-board pose. A page no candidate matches settles
 nothing: what was judged stands (a firmware that applied a robot neither tool sent stays
 FAILed; its profile MISMATCH is said), and the DISTANCE and speed judges stay held.
 """
@@ -105,7 +109,7 @@ def settle_config(judges: Judges, doubt: ConfigDoubt, s: dict[str, Any], t_s: fl
             "tool's config: what was judged since the APPLY stands")})
         return
     if found != doubt.taken:
-        judges.tracker.wrongs.withdraw_from(doubt.applied_s)
+        judges.tracker.withdraw_from(doubt.applied_s)  # episodes, largest errors, allowance's
         apply_config(judges.tracker, found)
     geometry = judges.tracker.geometry
     counter_bits = int(found.get("COUNTER_BITS", doubt.before[1]))

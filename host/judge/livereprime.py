@@ -105,7 +105,6 @@ class ReprimeHold:
         self.wide_m = 0.0  # ... the widest of those bounds (m)
         self.refused = 0  # declared, but the frames put its first pose elsewhere: judged
         self.count = PowerUpCount()  # the first count page's ENC_E2E_LOST (livereprimecount)
-        self.doubts: list[str] = []  # ... which no pair it allows fits: never a PASS
 
     @property
     def pending(self) -> bool:
@@ -268,7 +267,8 @@ class ReprimeHold:
             self.refused += 1
             tracker.restarts.events.append({
                 "t_s": self._from_s_told(held), "kind": "stall_reprime_refused",
-                "encoder_frame": held[0][0].seq, "detail": f"{said}; but {replay.said()}"})
+                "encoder_frame": held[0][0].seq,
+                "detail": f"{said}; but {replay.said()}{counted.against or ''}"})
             if self._power_up:  # no reference yet: from where the re-prime put it
                 self._start_at(replay.pose)
             return False, said
@@ -307,12 +307,9 @@ class ReprimeHold:
     def _counted(self, counted: CountedReplay, said: str,
                  held: list[tuple[FramePose, Half, bool]]) -> None:
         """A replay that fits: its priming frame pinned by the count page, the first life's
-        start known after all (``livefirst``: no longer unproven), told; or a fit only by a
-        pair the count does not allow, said (the end verdicts UNJUDGED)."""
+        start known after all (``livefirst``: no longer unproven), told."""
         tracker = self._tracker
-        if counted.doubt is not None:
-            self.doubts.append(f"{said}; but {counted.doubt}")
-        elif counted.primed is not None:
+        if counted.primed is not None:
             tracker.first.proven_after_all(tracker)
             tracker.restarts.events.append({
                 "t_s": self._from_s_told(held), "kind": PRIMED_KIND,
@@ -356,7 +353,7 @@ def unbounded_why(tracker: PoseTracker) -> str | None:
     docstring); None else."""
     reprime = tracker.reprime
     count, wide = reprime.unbounded, reprime.wide
-    said = list(reprime.doubts)
+    said: list[str] = []
     if count:
         said.append(f"{count} re-prime{'' if count == 1 else 's'} declared after a stall before "
                     "the first pose, the power-up not proven (or its frame not heard): the "

@@ -14,18 +14,28 @@ the random drive from rest, halted 6 or 10 s). The pairs the count allows leave 
 from each priming frame: the samples then tell the frame.
 
 ``PowerUpCount`` takes the page's value under ``analyze``'s preconditions only (its
-``power_up_lost``): the watch starts at the firmware's power-up (its first ODOM_STATUS of its
-first cycle, its first summary UPTIME 0, no reboot since; its ENC_E2E_OK no more than the frames
-heard), one stall before the page (the one the hold replays) and no hole of the encoder frames'
-sequence up to it. ``counted_replay`` then filters the replay's pairs by it, a hard filter:
+``power_up_lost``, applied to every life): the life starts at the firmware's power-up (its first
+ODOM_STATUS of its first cycle, its first summary UPTIME 0; its ENC_E2E_OK no more than the
+frames heard since), one stall before the page (the one the hold replays) and no hole of the
+encoder frames' sequence up to it. The watch's first life, and every life after a reboot whose
+boot summary said UPTIME 0 (``PoseTracker.power_up`` takes a fresh count: before, only the first
+life's was taken, and after a reboot every pair stayed open: a firmware whose poses followed a
+pair its own count contradicts PASSed live, FAILed by ``analyze``); not a set-pose's life, nor
+a reboot told past UPTIME 0. ``counted_replay`` then filters the replay's pairs by it, a hard
+filter:
 
 - pairs it allows fit the samples (``Replayed.within``): the best of them is judged (from the
   priming frame they name, ``CountedReplay.primed``, when they name one: the first pose judged,
   the start no longer unknown);
-- none it allows fits but another pair does: not a FAIL (a frame the log does not show may
-  have moved the count), never a PASS either (``CountedReplay.doubt``: the end verdicts say
-  UNJUDGED and why);
-- no pair fits: the best of all, refused as before (POSE WRONG, FAIL).
+- none it allows fits: the best of those it allows, refused (POSE WRONG, FAIL), as ``analyze``
+  keeps the pairs it allows and FAILs the poses they do not meet. Also when another pair
+  would fit (``CountedReplay.against`` says which): the page passed its E2E check, so its count
+  is the firmware's own claim, and the preconditions leave no frame the log lacks that could
+  have moved it (no hole of the encoder frames' sequence, one stall, the page counting no more
+  frames than heard; a recorder stamping late, dropping or delaying frames moves no value
+  under a CRC). A count its own poses contradict is a wrong firmware output, whichever of the
+  two is wrong (before: UNJUDGED, where ``analyze`` FAILed it);
+- it allows none of the pairs tried: the best of all, judged as before.
 
 A power-up its count page did not prove (a recorder stamping ODOM_STATUS 15-50 ms late moves the
 page's tick bound past frames it counted; the count itself unmoved) is proven by that replay
@@ -56,9 +66,10 @@ class PowerUpCount:
     """The watch's first count page's ENC_E2E_LOST when ``analyze``'s preconditions hold
     (module docstring); ``lost`` None when they do not, or before the page."""
 
-    __slots__ = ("first_cycle", "holed", "lost", "over", "stalls", "uptime_zero")
+    __slots__ = ("base", "first_cycle", "holed", "lost", "over", "stalls", "uptime_zero")
 
-    def __init__(self) -> None:
+    def __init__(self, base: int = 0) -> None:
+        self.base = base  # seq of the latest frame at the life's summary (0: the watch's)
         self.first_cycle: bool | None = None  # the first ODOM_STATUS heard of the first cycle
         self.uptime_zero: bool | None = None  # the first summary said UPTIME 0
         self.holed = False  # a hole of the encoder frames' sequence heard (``PoseTracker``)
@@ -80,11 +91,12 @@ class PowerUpCount:
         elif page == ENC_E2E_PAGE and "ENC_E2E_LOST" in signals:
             self.over = True
             if self.first_cycle and self.uptime_zero and not self.holed and self.stalls == 1 \
-                    and _int(signals.get("ENC_E2E_OK")) in range(heard + 1):
+                    and _int(signals.get("ENC_E2E_OK")) in range(heard - self.base + 1):
                 self.lost = int(signals["ENC_E2E_LOST"])
 
     def reboot(self) -> None:
-        """A new firmware life: the watch no longer starts at its power-up (no count taken)."""
+        """A new firmware life: the watch no longer starts at its power-up (no count taken; a
+        reboot at UPTIME 0 takes a fresh one: ``PoseTracker.power_up``)."""
         self.over, self.lost = True, None
 
     @property
@@ -98,11 +110,12 @@ class PowerUpCount:
 @dataclass(frozen=True)
 class CountedReplay:
     """The replay judged (``replay``, None: the frames not held), the frame the power-up primed
-    on that the count pins (``primed``, None: not pinned), and why it cannot PASS (``doubt``)."""
+    on that the count pins (``primed``, None: not pinned), and, refused, the pair that would
+    have fit had the count allowed it (``against``: the words for the refusal's event)."""
 
     replay: Replayed | None
     primed: int | None = None
-    doubt: str | None = None
+    against: str | None = None
 
 
 def counted_replay(odometry: Odometry, anchors: list[FramePose],
@@ -127,12 +140,13 @@ def counted_replay(odometry: Odometry, anchors: list[FramePose],
         chosen = min(fits, key=lambda t: score(t[1]))[1]
         return CountedReplay(chosen, primes.pop() if len(anchors) > 1 and len(primes) == 1
                              else None)
-    if best.within:
-        return CountedReplay(best, doubt=(
-            f"its first pose after it fits the frames it took only by a pair (stepped to frame "
-            f"{best.f}, re-primed on {best.r}) its first count page's ENC_E2E_LOST {lost} does "
-            "not allow (a frame the log does not show?)"))
-    return CountedReplay(min(counted, key=lambda t: score(t[1]))[1] if counted else best)
+    if not counted:
+        return CountedReplay(best)
+    chosen = min(counted, key=lambda t: score(t[1]))[1]
+    return CountedReplay(chosen, against=(
+        f"; it fits only a pair (stepped to frame {best.f}, re-primed on {best.r}) its first "
+        f"count page's ENC_E2E_LOST {lost} does not allow: its count or its pose is wrong"
+    ) if best.within else None)
 
 
 def primed_detail(counted: CountedReplay, lost: int | None) -> str:

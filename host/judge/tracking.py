@@ -36,6 +36,7 @@ from odocan.host.judge.liveplacing import place_reference
 from odocan.host.judge.livepose import ErrorStats, FramePose, RestartLog, Sample, StepGate
 from odocan.host.judge.livereference import RawReference
 from odocan.host.judge.livereprime import ReprimeHold
+from odocan.host.judge.livereprimecount import PowerUpCount
 from odocan.host.judge.livesnapshot import tracker_snapshot
 from odocan.host.judge.livestall import StallRule
 from odocan.host.judge.livestart import Lives
@@ -384,11 +385,12 @@ class PoseTracker:
         ``restart_reference`` (the next pose is adopted)."""
         self.new_life()
         self.losses.lost_page = None  # the new firmware counts from 0
+        latest = self.enc_seq if seq is None else seq
+        self.reprime.count = PowerUpCount(latest)  # its first count page (livereprimecount)
         if self.integrator is None:
             self.adopted.owe(REBOOT_BEFORE_INTEGRATOR)
             return
         named = self.powerup.named_seq(self.now_s)  # its power-up pose's word (bootnamed)
-        latest = self.enc_seq if seq is None else seq
         unnamed = latest if primed_now else latest + 1
         if named is None:
             self.lives.await_boot(unnamed, self.now_s)

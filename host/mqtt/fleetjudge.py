@@ -19,7 +19,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, cast
+from typing import TYPE_CHECKING, Any, cast
 
 from odocan.host.judge.livefirst import unproven_why
 from odocan.host.judge.livefit import pose_wrong
@@ -33,6 +33,9 @@ from odocan.host.mqtt.overload import Halted, after_halts
 from odocan.host.mqtt.telemetry import RobotTelemetry
 from odocan.sim.fleet import Fleet
 from odocan.sim.realtime import DeadlineStats
+
+if TYPE_CHECKING:
+    from odocan.host.judge.tracking import PoseTracker
 
 DEFAULT_MAX_MISS_RATIO = 0.001  # ``odocan fleet --max-miss-ratio``'s default
 
@@ -129,7 +132,9 @@ def watched_verdict(
     telemetry.end_watch()  # frames held judged, then what still waits (host.judge.watchend)
     verdict = judge_robot(tracker.vs_reference, tracker.vs_truth, frames_dropped=frames_dropped,
                           beyond_allowance_m=tracker.max_beyond_allowance_m)
-    if verdict["verdict"] in ("PASS", "FAIL") and halted is not None:
+    if conflict := telemetry.sources.conflict_text():  # two firmwares: FAILed by name
+        verdict = {**verdict, "verdict": "FAIL", "reason": _two_sources(conflict, tracker)}
+    elif verdict["verdict"] in ("PASS", "FAIL") and halted is not None:
         verdict = after_halts(verdict, halted, tracker, telemetry.stretches)
     # a PASS resting on an unbounded start (livereprime) or an unproven one (livefirst)
     unbounded = unbounded_why(tracker) or unproven_why(tracker) or coarse_why(telemetry.kept)
@@ -138,6 +143,15 @@ def watched_verdict(
     # ODOM_TWIST judged live, the samples waiting at the end included (said, not yet verdicts)
     return {**verdict, "distance": telemetry.distance.as_dict(),
             "twist": telemetry.twist.as_dict()}
+
+
+def _two_sources(conflict: str, tracker: PoseTracker) -> str:
+    """The FAIL's reason when two firmwares answered on the robot's node ID (``conflict``:
+    ``SourceWatch.conflict_text``): the wrong pose episodes before it beside it, as the bridge's
+    line says them (``watchverdict.failures``), never the largest errors, which the second
+    firmware's poses against the first's reference raised (before: the reason blamed the pose,
+    1161 mm, where the bridge and the monitor name the two firmwares)."""
+    return conflict + (f"; {tracker.wrongs.summary()}" if tracker.wrongs.count else "")
 
 
 def judge_robot(

@@ -285,10 +285,12 @@ class RobotTelemetry(CommandFollowing):
         if summary is not None and (told := self.sources.told_ahead(
                 t_s, summary[0], data[1] & MASK)) is not None:
             self._new_life(t_s, *told[1:])
-        if summary is None or self.sources.observe(t_s, *summary, data[1] & MASK,
-                                                   seq=self.tracker.enc_seq) != "reboot":
-            return
-        self._new_life(t_s, *summary)
+        kind = None if summary is None else self.sources.observe(
+            t_s, *summary, data[1] & MASK, seq=self.tracker.enc_seq)
+        if kind == "two sources":  # no pose judged from the second's first summary (monitor)
+            self.tracker.wrongs.unjudgeable_from(self.sources.conflict_from_s or t_s)
+        if kind == "reboot" and summary is not None:
+            self._new_life(t_s, *summary)
 
     def _new_life(self, t_s: float, uptime_s: int, state: str, seq: int | None = None) -> None:
         """A reboot told at bus time ``t_s`` (``seq``: the encoder frame latest heard at its
