@@ -122,27 +122,19 @@ def test_a_log_of_the_default_robot_is_judged_quietly(
     assert _chosen(report) == ("pmir", "PROFILE page", ["pmir"])
 
 
-def test_a_custom_robots_log_keeps_the_default_and_its_diagnosis(
-    logs: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+def _refused(log: Path) -> str:
+    return (f"error: {log}: the log's firmware runs a different profile than the default "
+            "robot pmir: give --robot")
+
+
+def test_a_custom_robots_log_is_refused_without_robot(
+    logs: dict[str, Path], capsys: pytest.CaptureFixture[str]
 ) -> None:
-    """A log whose page fits no shipped robot: judged as pmir and diagnosed as before."""
-    report = tmp_path / "r.json"
-    code, out, err = _run(capsys, "analyze", str(logs["odd"]), "--report", str(report))
-    assert code == 1
-    assert err.splitlines() == [_defaulted("analyze", logs["odd"], "its PROFILE page fits no "
-                                           "shipped robot")]  # it said nothing of the page
-    assert _chosen(report) == ("pmir", "default", [])
-    assert json.loads(report.read_text())["inputs"]["robot"]["page_in_head"] is True
-    crc = profile_crc(robot.load(logs["odd.toml"]), "exact")
-    said = (f"profile mismatch: profile hash differs (log 0x{crc:08X}, the default robot pmir "
-            f"0x{profile_crc(robot.load('pmir'), 'exact'):08X})")  # it said "--robot pmir"
-    assert json.loads(report.read_text())["diagnosis"][0] == said
-    assert f"  - {said}" in out.splitlines()
-    code, out, err = _run(capsys, "replay", str(logs["odd"]))
-    assert code == 1
-    assert _defaulted("replay", logs["odd"], "its PROFILE page fits no shipped robot") in \
-        err.splitlines()
-    assert f"warning: {said}" in err.splitlines()
+    """A log whose page fits no shipped robot: refused, one line, exit 2 (trial 22, F4: judged
+    as pmir, it FAILed the correct firmware by 1508 mm for an option the user did not give);
+    with the robot given it PASSes."""
+    for command in ("analyze", "replay"):
+        assert _run(capsys, command, str(logs["odd"])) == (2, "", _refused(logs["odd"]) + "\n")
     assert _run(capsys, "analyze", str(logs["odd"]), "--robot", str(logs["odd.toml"]))[0] == 0
 
 
@@ -161,24 +153,20 @@ def test_an_explicit_robot_wins_and_is_diagnosed(
     assert _chosen(report) == ("pmir", "--robot", [])
 
 
-def test_a_page_several_shipped_robots_fit_keeps_the_default(
-    logs: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str],
-    monkeypatch: pytest.MonkeyPatch,
+def test_a_page_several_shipped_robots_fit_but_not_the_default_is_refused(
+    logs: dict[str, Path], capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    """Two shipped profiles with kobuki's parameters: the page cannot choose; pmir as before."""
-    shipped = tmp_path / "robots"
-    shipped.mkdir()
+    """Two shipped profiles with kobuki's parameters: the page cannot choose, and it is not
+    pmir's: refused, as a page that fits none."""
+    folder = logs["kobuki"].parent / "shipped-twins"
+    folder.mkdir(exist_ok=True)
     for name in ("pmir", "kobuki"):
-        shutil.copy(robot.ROBOTS_DIR / f"{name}.toml", shipped)
+        shutil.copy(robot.ROBOTS_DIR / f"{name}.toml", folder)
     twin = (robot.ROBOTS_DIR / "kobuki.toml").read_text().replace('"kobuki"', '"twin"')
-    (shipped / "twin.toml").write_text(twin)
-    monkeypatch.setattr(robot, "ROBOTS_DIR", shipped)
-    report = tmp_path / "r.json"
-    code, _, err = _run(capsys, "analyze", str(logs["kobuki"]), "--report", str(report))
-    assert code == 1
-    assert err.splitlines() == [_defaulted("analyze", logs["kobuki"], "its PROFILE page fits 2 "
-                                           "shipped robots, 'kobuki', 'twin'")]
-    assert _chosen(report) == ("pmir", "default", ["kobuki", "twin"])
+    (folder / "twin.toml").write_text(twin)
+    monkeypatch.setattr(robot, "ROBOTS_DIR", folder)
+    assert _run(capsys, "analyze", str(logs["kobuki"])) == (
+        2, "", _refused(logs["kobuki"]) + "\n")
 
 
 @pytest.mark.parametrize(("jobs", "stream"), [("1", "never"), ("2", "always")])
@@ -187,8 +175,9 @@ def test_a_batch_chooses_each_logs_robot(
     stream: str,
 ) -> None:
     """kobuki, pmir and odd logs in one folder (worker processes or not, streamed or whole):
-    each is judged with its own page's robot, odd with the default; stderr names the one
-    robot other than the default a page chose (a pmir log is judged as before, quietly)."""
+    each is judged with its own page's robot, odd refused (its page is not the default's);
+    stderr names the one robot other than the default a page chose (a pmir log is judged as
+    before, quietly)."""
     folder = tmp_path / "logs"
     folder.mkdir()
     for name in ("kobuki", "pmir", "odd"):
@@ -196,15 +185,14 @@ def test_a_batch_chooses_each_logs_robot(
     reports = tmp_path / "json"
     code, out, err = _run(capsys, "analyze", str(folder), "--jobs", jobs, "--stream", stream,
                           "--report-dir", str(reports))
-    assert code == 1  # odd, judged as pmir
-    assert out.splitlines()[-1] == "2 PASS, 1 FAIL, 0 unreadable"
+    assert code == 2  # odd refused: not judged as pmir
+    assert out.splitlines()[-1] == "2 PASS, 0 FAIL, 1 unreadable"
     assert [line for line in err.splitlines() if "PROFILE page" in line] == [
-        f"odocan analyze: {folder / 'kobuki.log'}: robot 'kobuki' (from the log's PROFILE page)",
-        _defaulted("analyze", folder / "odd.log", "its PROFILE page fits no shipped robot")]
+        f"odocan analyze: {folder / 'kobuki.log'}: robot 'kobuki' (from the log's PROFILE page)"]
+    assert "the log's firmware runs a different profile than the default robot pmir" in err
     chosen = {path.name: _chosen(path) for path in reports.glob("*.json")}
     assert chosen == {"kobuki.log.json": ("kobuki", "PROFILE page", ["kobuki"]),
-                      "pmir.log.json": ("pmir", "PROFILE page", ["pmir"]),
-                      "odd.log.json": ("pmir", "default", [])}
+                      "pmir.log.json": ("pmir", "PROFILE page", ["pmir"])}
     code, _, err = _run(capsys, "analyze", str(folder), "--jobs", jobs, "--robot", "kobuki",
                         "--report-dir", str(reports))
     assert code == 1

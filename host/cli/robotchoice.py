@@ -19,6 +19,13 @@ nothing said the page fit no robot. The mismatch lines name the robot as it came
 and a log made with other parameters is diagnosed by name as before. With ``--dbc`` (another
 DBC: the page is read with odocan's) the log does not pick, and nothing is said.
 
+A head page that fits no shipped robot, or several but not the default, is refused: one line,
+exit 2 (``the log's firmware runs a different profile than the default robot pmir: give
+--robot``). Judging it as pmir FAILed a correct firmware (a custom 32-bit robot's log: 1508 mm
+off) for an option the user did not give; a robot GIVEN that the page contradicts is still
+judged, the FAIL naming the mismatch (a firmware flashed for another robot). Without a page in
+the head nothing tells, and the default is judged as before (its stderr line says why).
+
 Every report records the choice (``inputs.robot.source``: ``--robot``, ``PROFILE page`` or
 ``default``; ``inputs.robot.page_fits``: the shipped profiles the page fits;
 ``inputs.robot.page_in_head``: whether the log's head holds a PROFILE page, null when it was not
@@ -38,6 +45,7 @@ from odocan.host.judge.robotsource import FROM_PAGE as FROM_PAGE
 from odocan.host.judge.robotsource import GIVEN as GIVEN
 from odocan.host.judge.robotsource import GIVEN_AS as GIVEN_AS
 from odocan.sim import robot
+from odocan.sim.exceptions import ConfigurationError
 from odocan.sim.robot import RobotProfile
 
 
@@ -96,6 +104,9 @@ def choose_robot(given: str | None, log: Path, *, from_log: bool = True) -> Robo
     in_head, fits = head_page_fits(log)
     if len(fits) == 1:
         return RobotChoice(robot.load(fits[0]), FROM_PAGE, fits, in_head)
+    if in_head and DEFAULT_ROBOT not in fits:  # a page, not the default's: refused
+        raise ConfigurationError(f"{log}: the log's firmware runs a different profile than "
+                                 f"the default robot {DEFAULT_ROBOT}: give --robot")
     return RobotChoice(robot.load(DEFAULT_ROBOT), DEFAULT, fits, in_head)
 
 

@@ -170,6 +170,7 @@ from odocan.host.judge.samples import (
 )
 from odocan.host.judge.setposekept import Kept, check_cut
 from odocan.host.judge.setposes import cut_lives, set_pose_cuts
+from odocan.host.judge.silentlives import SilentLife, add_silent, silent_life
 from odocan.host.judge.stallpowerup import log_power_up
 from odocan.host.judge.stallreprime import reprime_events
 from odocan.host.judge.stalls import after_stalls, alive_times, first_placement, primed_first
@@ -259,6 +260,7 @@ def analyze(
     done: list[tuple[Life, Analysis, float]] = []
     failure: AnalysisError | None = None
     silent: list[Life] = []
+    unjudged: list[SilentLife] = []  # their frames counted, their stretch said (silentlives)
     kept: dict[int, Kept] = {}  # per set-pose's life: what it kept (setposekept)
     for k, (life, (life_robot, life_integrator, bound)) in enumerate(zip(
             lives, in_force(lives, robot, first_integrator(frames, lives, decoder, integrator,
@@ -276,6 +278,7 @@ def analyze(
         except AnalysisError as exc:  # a life without on-board samples: reported, not compared
             failure = failure or exc
             silent.append(life)
+            unjudged.append(silent_life(frames, life, life_robot, life_integrator, db, str(exc)))
             continue
         if life.set_pose is not None:
             kept[len(done)] = check_cut(lambda lo, hi: frames.select(np.arange(lo, hi)), (
@@ -287,6 +290,7 @@ def analyze(
         raise failure
     report, series = merge([d[1].report for d in done], [d[1].series for d in done],
                            [d[0] for d in done], [d[2] for d in done], silent=silent)
+    add_silent(report, unjudged)
     if len(lives) != len(firmware_lives):  # a set-pose is no reboot: one latch per firmware
         report.update(latched_per_firmware(frames, firmware_lives, db))
     seconds = covered_s(frames, db)

@@ -147,6 +147,7 @@ class Columns:
         # rows appended, not in ``_data`` yet (the latest ``size``: older ones are never read)
         self._unflushed: deque[tuple[float, ...]] = deque(maxlen=size)
         self.rows: deque[tuple[float, ...]] = deque(maxlen=RECENT)
+        self.last_named: tuple[int, int] = (-1, -1)  # a half's pos and the seq it named
 
     def append(self, *row: float) -> None:
         self.rows.append(row)
@@ -265,7 +266,26 @@ def named_in_window(halves: Columns, w: Columns, pos: int) -> tuple[int, bool]:
                           t_s, own)
     queued = clocked and bool(queued_frames(t_s, CYCLE_S)[k])
     found = int(named[k])
-    return (int(w.col("seq")[found]) if found >= 0 else -1), queued
+    seq = int(w.col("seq")[found]) if found >= 0 else -1
+    if own is not None and k > 0 and not halves.holds_first and _held_from_start(halves, k):
+        prev_pos, prev_seq = halves.last_named  # the run began before the window: carried
+        seq = prev_seq if prev_pos == int(at[k - 1]) else seq
+    halves.last_named = (pos, seq)
+    return seq, queued
+
+
+def _held_from_start(halves: Columns, k: int) -> bool:
+    """Every half of the window up to ``k`` repeats its predecessor's ENC_COUNTER with its own
+    COUNTER + 1 within ``REPEAT_S`` (``samples._held``'s run): the run that half ``k`` holds
+    began before the window's first half, which the window alone would name by the plain rule,
+    a frame 16, 32, ... ahead of the one held (a firmware refusing every frame for 20 s, its
+    pose and twist held on its last: the live twist judge FAILed it, 204 mm/s)."""
+    enc_counter = halves.col("enc_counter")[: k + 1]
+    counter = halves.col("counter")[: k + 1].astype(np.int64)
+    t_s = halves.col("t_s")[: k + 1]
+    return bool(np.all(np.diff(enc_counter) == 0)
+                and np.all((np.diff(counter) & ENC_COUNTER_MASK) == 1)
+                and np.all(np.diff(t_s) < REPEAT_S))
 
 
 def counted(row: Row) -> Counted:

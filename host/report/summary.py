@@ -195,6 +195,8 @@ def kept_unjudged(report: dict[str, Any]) -> list[str]:
         kept = event.get("kept")
         if event.get("kind") == "power_up_unproven":  # its first pose (stallpowerup)
             said.append(f"the first pose at {event['t_s']:.3f} s not judged ({event['detail']})")
+        if event.get("kind") == "unjudged":  # a life without samples (silentlives)
+            said.append(event["detail"].split(": ", 1)[0])
         if event.get("kind") != "set_pose":
             continue
         at = f"what the ODOM_SET_POSE APPLY at {event['t_s']:.3f} s kept"

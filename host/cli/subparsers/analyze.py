@@ -6,7 +6,8 @@ on-board pose compared with the float64 reference computed from the logged encod
 with the ground truth when ``SIM_TRUTH`` frames are present. The integrator defaults to the one
 the firmware reports in ``ODOM_STATUS``; the robot, without ``--robot``, is the shipped one whose
 parameters the log's PROFILE page gives, when exactly one does (said on stderr in one line,
-recorded in the report: ``host.cli.robotchoice``), else pmir.
+recorded in the report: ``host.cli.robotchoice``), else pmir; a page that is not pmir's is
+refused (exit 2: give --robot), never judged as pmir.
 Same ``--report``, ``--plot``, ``--tolerance``, summary and exit codes as ``odocan run``.
 
 A ``--dbc`` that does not match the log (a message the analysis needs is missing, or none of its
