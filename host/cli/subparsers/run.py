@@ -207,7 +207,9 @@ def _do_run(args: argparse.Namespace) -> int:
         except OutputError as exc:
             raise _after_log_error(log_error, exc) from None
     try:
-        write_checks(args, "run", analysis_checks(analysis.report))
+        injected = analysis.report["inputs"].get("faults")  # as the summary's "injected" line
+        write_checks(args, "run", analysis_checks(analysis.report),
+                     {"faults": injected} if injected else None)
         _write_latency_plot(args, analysis.report)
     except OutputError as exc:
         raise _after_log_error(log_error, exc) from None
