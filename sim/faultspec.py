@@ -26,7 +26,9 @@ Every key is optional, comma-separated::
                     receiving into its hardware FIFO, which holds the first frames and
                     overruns the rest (``sim.board``: FIFO-locked, as bxCAN; a halt shorter
                     than ``sim.board.HALT_AFTER_S`` is only a late tick there); then it resumes
-                    with its RAM as it was (the firmware sees the time it lost)
+                    with its RAM as it was (the firmware sees the time it lost); a stall
+                    from the first tick (T < 10 ms) is a late power-up: the firmware never ran
+                    to set its controller up, so it takes none of those frames
     reboot=T[:DUR]  the firmware's MCU reset at T s: RAM lost (a new firmware, INIT, priming on
                     its first encoder frame as at power-up), the NVM cell kept, the frames
                     waiting in its receive FIFO lost; DUR s of boot time (default 0) during

@@ -49,15 +49,25 @@ class McuFaults:
         self.halted = _ticks(spec.stall)
         self.reset_tick = None if spec.reboot is None else tick_at(spec.reboot.at_s)
         self.booting = _ticks(spec.reboot)  # from the reset: no tick, no frame taken
+        # Spans whose frames the controller never takes: the reset and its boot time; and a
+        # stall from the first tick, a late power-up (the firmware never ran to set the
+        # controller up: as the tests' power-up delay, ``FaultRig.halted`` and a drained FIFO;
+        # taken into the FIFO, its whole backlog reached a firmware that never ran, at once).
+        self.dark: list[tuple[int, int]] = []  # (first, last): ticks its FIFO is emptied at
+        if self.reset_tick is not None:
+            self.dark.append((self.reset_tick, self.booting.stop))
+        if self.halted and self.halted.start == 0:
+            self.dark.append((0, self.halted.stop))
         self.frames_lost = 0  # frames the reset and the boot time took from the receive FIFO
 
     def before_nodes(self, board: FirmwareBoard, k: int) -> None:
-        """At the start of tick ``k``: the reset when due (RAM lost), and while the MCU resets
-        or boots, the frames its controller did not take (sent since its last tick) lost."""
-        if self.reset_tick is None or not self.reset_tick <= k <= self.booting.stop:
-            return
+        """At the start of tick ``k``: the reset when due (RAM lost), and while the MCU resets,
+        boots or has not yet powered up, the frames its controller did not take (sent since
+        its last tick) lost."""
         if k == self.reset_tick:
             board.reboot()
+        if not any(first <= k <= last for first, last in self.dark):
+            return
         while board.bus.recv(0) is not None:  # the reset empties the FIFO; booting, none taken
             self.frames_lost += 1
 

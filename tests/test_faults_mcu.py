@@ -256,3 +256,23 @@ def test_a_pose_moved_10_mm_after_the_episode_fails(
         own = ic.check(tampered, _robot(), "exact", lambda _t: (0.0, 0.0, 0.0),
                        reboots_t_s=[primed])
         assert own.max_position_error_m > 9e-3
+
+
+def test_a_stall_from_power_up_is_a_late_power_up(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``stall=0:1``: the MCU never ran to set its CAN controller up, so it takes none of the
+    frames of that second (as the tests' power-up delay). Before, they all reached its first
+    tick at once and the judges FAILed the correct firmware (17.85 mm "lost")."""
+    log = _run(tmp_path, "stall=0:1")
+    capsys.readouterr()
+    with can.LogReader(str(log)) as reader:
+        first = min(m.timestamp for m in reader if m.arbitration_id == fr.ODOM_POSE_X_ID)
+    assert first >= 1.0
+    with can.LogReader(str(log)) as reader:  # the firmware's life: from its first tick on
+        life = _written([m for m in reader if m.timestamp >= 1.0], tmp_path / "life.log")
+    own = ic.check(life, _robot(), "exact", lambda _t: (0.0, 0.0, 0.0))  # primed on 1.0 s
+    assert own.samples > 300, own
+    assert own.passed, own
+    assert analyze_file(log, PMIR, "exact", chunk_frames=97)["passed"]
+    assert main(["replay", str(log)]) == 0
