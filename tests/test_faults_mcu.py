@@ -276,3 +276,18 @@ def test_a_stall_from_power_up_is_a_late_power_up(
     assert own.passed, own
     assert analyze_file(log, PMIR, "exact", chunk_frames=97)["passed"]
     assert main(["replay", str(log)]) == 0
+
+
+@pytest.mark.parametrize("faults", ["reboot=2.005", "reboot=3:0.07"])
+def test_a_reboot_at_an_odd_tick_is_replayed_life_by_life(
+    faults: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The new firmware's poses fall on odd ticks (its 20 ms from an odd reset tick). The
+    replay took its pose phase from the whole log, where the longer second life outvoted the
+    first: none of the first life's poses paired, UNJUDGED, exit 1 for a correct firmware."""
+    log = _run(tmp_path, faults, name="odd")
+    capsys.readouterr()
+    assert main(["replay", str(log)]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    [first] = [line for line in lines if line.startswith("replay: life 0 ")]
+    assert " identical, max difference 0.0000 mm" in first, first
