@@ -37,7 +37,7 @@ from can import BusABC, BusState
 from odocan.sim.babble import Babbler
 from odocan.sim.busoff import DEFAULT_BITRATE, BusOffEpisode, ErrorCounters
 from odocan.sim.exceptions import ConfigurationError
-from odocan.sim.faultspec import FAULT_KINDS, BusOff, FaultSpec, exclusive_edges
+from odocan.sim.faultspec import FAULT_KINDS, BusOff, FaultSpec, exclusive_edges, mcu_refused
 
 LOG = logging.getLogger("odocan.faults")
 
@@ -65,6 +65,8 @@ class FaultInjectingBus(BusABC):
     ) -> None:
         if bitrate <= 0:
             raise ConfigurationError(f"faults: bitrate must be > 0 bit/s, got {bitrate!r}")
+        if spec.mcu_active:  # not silently dropped: a bus handle cannot halt or reset an MCU
+            raise mcu_refused(spec)
         self._bus = bus
         self.spec = spec
         self._clock = clock

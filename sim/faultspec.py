@@ -21,11 +21,27 @@ Every key is optional, comma-separated::
     busoff=T:DUR    at T s the transmitter's error counter climbs past 255 (32 failed attempts,
                     +8 each, through the warning and error-passive limits): bus-off for DUR s,
                     then recovery after 128 occurrences of 11 recessive bits (at ``bitrate``)
+    stall=T:DUR     the firmware's MCU halted (a debugger halt, a hung main loop) from T s for
+                    DUR s: it runs no tick and no receive interrupt; its CAN controller keeps
+                    receiving into its hardware FIFO, which holds the first frames and
+                    overruns the rest (``sim.board``: FIFO-locked, as bxCAN; a halt shorter
+                    than ``sim.board.HALT_AFTER_S`` is only a late tick there); then it resumes
+                    with its RAM as it was (the firmware sees the time it lost); a stall
+                    from the first tick (T < 10 ms) is a late power-up: the firmware never ran
+                    to set its controller up, so it takes none of those frames
+    reboot=T[:DUR]  the firmware's MCU reset at T s: RAM lost (a new firmware, INIT, priming on
+                    its first encoder frame as at power-up), the NVM cell kept, the frames
+                    waiting in its receive FIFO lost; DUR s of boot time (default 0) during
+                    which it runs nothing and its CAN controller, not yet set up, takes no
+                    frame. stall and reboot act on the firmware (the MCU), not on a bus handle:
+                    only the lockstep rig (``odocan run``) injects them (``sim.mcufaults``)
     seed=N          the seed of every random draw (the same seed gives the same faults);
                     without it, the command's ``--seed`` (``parse(text, seed=...)``), else 0
 
 P in [0, 1]; LEN >= 1; MS >= 0; 1 <= BITS <= 64; RATE >= 0 frames/s; 0 <= ID <= 0x1FFFFFFF;
-T, DUR >= 0 s (a bus-off's DUR > 0). A frame
+T, DUR >= 0 s (a bus-off's and a stall's DUR > 0). Each key is given at most once (one bus-off,
+one stall, one reboot); a stall and a reboot may not overlap (the reset's instant and boot time
+within the halt: give them apart). A frame
 suffers at most one of drop, burst, dup, delay, flip: one uniform draw per frame is split into
 intervals of those widths (``exclusive_edges``: each has exactly its probability; their sum must
 be <= 1). ``sim.faults.FaultInjectingBus`` injects what a spec says.
@@ -42,7 +58,8 @@ from odocan.sim.exceptions import ConfigurationError
 MAX_CAN_ID = 0x1FFFFFFF  # the largest 29-bit identifier
 FAULT_KINDS = ("drop", "burst", "dup", "delay", "flip", "babble", "busoff", "refused")
 _EXCLUSIVE = ("drop", "burst", "dup", "delay", "flip")  # at most one of these per frame
-_KEYS = ("drop", "burst", "dup", "delay", "flip", "babble", "busoff", "seed")
+MCU_KEYS = ("stall", "reboot")  # the firmware MCU's own faults, not a bus handle's
+_KEYS = ("drop", "burst", "dup", "delay", "flip", "babble", "busoff", "stall", "reboot", "seed")
 
 
 def _fail(key: str, value: str, why: str) -> ConfigurationError:
@@ -51,8 +68,8 @@ def _fail(key: str, value: str, why: str) -> ConfigurationError:
 
 @dataclass(frozen=True)
 class BusOff:
-    """One episode (bus-off, or a babble window): from ``at_s`` (the sender's time) for
-    ``duration_s``."""
+    """One episode (bus-off, a babble window, a stall, a reboot and its boot time): from
+    ``at_s`` (the sender's time; the rig's simulated time for the MCU's) for ``duration_s``."""
 
     at_s: float
     duration_s: float
@@ -74,6 +91,8 @@ class FaultSpec:
     babble_id: int | None = None  # None: random IDs
     babble_window: BusOff | None = None  # None: from the first frame, for ever
     busoff: BusOff | None = None
+    stall: BusOff | None = None  # the MCU halted from at_s for duration_s
+    reboot: BusOff | None = None  # the MCU reset at at_s, booting for duration_s
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -104,7 +123,27 @@ class FaultSpec:
             if self.busoff.duration_s == 0:  # only the recovery time: no bus-off at all
                 raise _fail("busoff", f"{_num(self.busoff.at_s)}:0",
                             "DUR must be > 0 s (a bus-off of no length; leave busoff out)")
+        self._check_mcu()
         _check_int("seed", self.seed, None, None, "N")
+
+    def _check_mcu(self) -> None:
+        """stall and reboot: finite times >= 0, a stall of some length, no overlap."""
+        for key in MCU_KEYS:
+            episode = getattr(self, key)
+            if episode is not None:
+                _check_float(key, episode.at_s, "T")
+                _check_float(key, episode.duration_s, "DUR")
+        if self.stall is not None and self.stall.duration_s == 0:
+            raise _fail("stall", f"{_num(self.stall.at_s)}:0",
+                        "DUR must be > 0 s (a stall of no length; leave stall out)")
+        if self.stall is not None and self.reboot is not None:
+            stall, reboot = self.stall, self.reboot
+            if (reboot.at_s < stall.at_s + stall.duration_s
+                    and stall.at_s <= reboot.at_s + reboot.duration_s):
+                raise ConfigurationError(
+                    f"faults: stall={_episode_text(stall)} and "
+                    f"reboot={_episode_text(reboot, 'reboot')} "
+                    "overlap (the reset or its boot time within the halt): give them apart")
 
     @classmethod
     def parse(cls, text: str, *, seed: int = 0) -> FaultSpec:
@@ -133,6 +172,16 @@ class FaultSpec:
         """True when anything at all is injected."""
         return self != FaultSpec(seed=self.seed)
 
+    @property
+    def mcu_active(self) -> bool:
+        """True when the firmware's MCU stalls or reboots (``sim.mcufaults``)."""
+        return self.stall is not None or self.reboot is not None
+
+    def bus_part(self) -> FaultSpec:
+        """What a bus handle injects (``FaultInjectingBus``): this spec without the MCU's
+        stall and reboot."""
+        return replace(self, stall=None, reboot=None)
+
     def __str__(self) -> str:
         """The canonical ``--faults`` text (``parse(str(spec)) == spec``)."""
         items = [
@@ -146,8 +195,10 @@ class FaultSpec:
             items.append(f"flip={_num(self.flip)}:{self.flip_bits}")
         if self.babble:
             items.append(f"babble={_babble_text(self)}")
-        if self.busoff is not None:
-            items.append(f"busoff={_num(self.busoff.at_s)}:{_num(self.busoff.duration_s)}")
+        for key in ("busoff", *MCU_KEYS):
+            episode = getattr(self, key)
+            if episode is not None:
+                items.append(f"{key}={_episode_text(episode, key)}")
         items.append(f"seed={self.seed}")
         return ",".join(items)
 
@@ -161,6 +212,13 @@ def _babble_text(spec: FaultSpec) -> str:
             window = spec.babble_window
             text += f":{_num(window.at_s)}:{_num(window.duration_s)}"
     return text
+
+
+def _episode_text(episode: BusOff, key: str = "busoff") -> str:
+    """T:DUR of an episode (a reboot's T alone when it boots in no time)."""
+    if key == "reboot" and not episode.duration_s:
+        return _num(episode.at_s)
+    return f"{_num(episode.at_s)}:{_num(episode.duration_s)}"
 
 
 def _num(value: float) -> str:
@@ -234,8 +292,12 @@ def _parse_value(key: str, value: str) -> dict[str, Any]:
         parts = _fields(key, value, "P[:BITS]", optional_second=True)
         bits = _integer(key, parts[1], "BITS") if len(parts) == 2 else 1
         return {"flip": _number(key, parts[0], "P"), "flip_bits": bits}
-    at, duration = _fields(key, value, "T:DURATION")
-    return {"busoff": BusOff(_number(key, at, "T"), _number(key, duration, "DURATION"))}
+    if key == "reboot":
+        parts = _fields(key, value, "T[:DUR]", optional_second=True)
+        boot_s = _number(key, parts[1], "DUR") if len(parts) == 2 else 0.0
+        return {key: BusOff(_number(key, parts[0], "T"), boot_s)}
+    at, duration = _fields(key, value, "T:DURATION")  # busoff, stall
+    return {key: BusOff(_number(key, at, "T"), _number(key, duration, "DURATION"))}
 
 
 def two_handles(spec: FaultSpec) -> tuple[FaultSpec, FaultSpec]:
@@ -243,9 +305,10 @@ def two_handles(spec: FaultSpec) -> tuple[FaultSpec, FaultSpec]:
     motor controller's and the firmware's sends): the frame faults and bus-off on each (the
     firmware's drawn from ``seed + 1``), the babbling node's RATE split in half between them, so
     that RATE is what reaches the wire, as a CAN tool's interactive generator means it (two
-    Poisson streams of RATE / 2 are one of RATE; halving a float is exact)."""
+    Poisson streams of RATE / 2 are one of RATE; halving a float is exact). The MCU's stall and
+    reboot go with the firmware's (``RigConfig.fw_faults``), not the motor controller's."""
     half = replace(spec, babble=spec.babble / 2)
-    return half, replace(half, seed=spec.seed + 1)
+    return half.bus_part(), replace(half, seed=spec.seed + 1)
 
 
 def exclusive_edges(spec: FaultSpec) -> list[tuple[float, str]]:
@@ -278,6 +341,21 @@ def _parse_babble(value: str) -> dict[str, Any]:
     return fields
 
 
+def mcu_text(spec: FaultSpec, key: str) -> str:
+    """``key=...`` of the MCU episode ``key`` (stall, reboot) of ``spec``, as ``--faults``
+    writes it."""
+    return f"{key}={_episode_text(getattr(spec, key), key)}"
+
+
+def mcu_refused(spec: FaultSpec) -> ConfigurationError:
+    """The one-line refusal of stall or reboot where no rig steps the MCU (a bus handle, a live
+    node's ``--faults``): silently dropped, a CI job would believe it tested a hang."""
+    keys = ", ".join(k for k in MCU_KEYS if getattr(spec, k) is not None)
+    return ConfigurationError(
+        f"faults: {keys}: the firmware MCU's faults, injected by the lockstep rig only (odocan "
+        "run); on a live bus, SIGSTOP/SIGCONT or restart the firmware process")
+
+
 def _check_id_width(value: str, text: str, can_id: int) -> None:
     """An ID above 0x7FF is a 29-bit ID, but written as an 11-bit one (at most 3 hex digits, or
     a decimal under 4096: ``0x900``) it is most likely a typo for one: refused, with how to
@@ -290,4 +368,5 @@ def _check_id_width(value: str, text: str, can_id: int) -> None:
                     f"29-bit ID write its 8 hex digits (0x{can_id:08X})")
 
 
-__all__ = ["FAULT_KINDS", "BusOff", "FaultSpec", "exclusive_edges"]
+__all__ = ["FAULT_KINDS", "MCU_KEYS", "BusOff", "FaultSpec", "exclusive_edges", "mcu_refused",
+           "mcu_text"]

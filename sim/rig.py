@@ -10,7 +10,8 @@ python-can ``Listener``s such as ``can.Logger``). Each 10 ms tick runs, in this 
 2. the scenario driver sends its MOTOR_CMD (every 20 ms, the DBC's cycle time);
 3. the motor controller advances the vehicle to now and sends WHEEL_ENCODERS;
 4. the SIM node sends SIM_TRUTH of the same instant (at its cycle time);
-5. the firmware's board runs its receive ISR and its tick (frames stamped 1 ms later);
+5. the firmware's board runs its receive ISR and its tick (frames stamped 1 ms later), unless
+   ``fw_faults`` halts or resets its MCU (``sim.mcufaults``: a reset comes before step 1);
 6. the host observer drains its bus into the listeners.
 
 Without a scenario (``RigConfig(scenario=None)``) the loop is closed: the host ``send``s NAV_GOAL
@@ -53,6 +54,7 @@ from odocan.sim.faults import (
     release_due,
 )
 from odocan.sim.lookahead import BLOCK_TICKS, PlannedVehicle
+from odocan.sim.mcufaults import mcu_faults
 from odocan.sim.motor_controller import MotorController, ScenarioDriver, SimNode, TruthSender
 from odocan.sim.robot import RobotProfile
 from odocan.sim.scenarios import Scenario, get_scenario
@@ -90,7 +92,8 @@ class RigConfig:
     channel: str = "vcan0"
     quadrature: bool = False
     faults: FaultSpec | None = None  # on the sim's handle: what MOTOR_CTRL and SIM send
-    fw_faults: FaultSpec | None = None  # on the firmware's handle: what ODOM_MCU sends
+    fw_faults: FaultSpec | None = None  # on the firmware's handle: what ODOM_MCU sends; and the
+    # MCU's own stall and reboot (``sim.mcufaults``)
     duration_s: float | None = None  # the run's length (default: the scenario's own)
     truth_phase_ticks: int = 0  # SIM_TRUTH on ticks k = phase (mod its cycle); keep it even
     transport: str = "odocan"  # python-can interface of the rig's buses: one of TRANSPORTS
@@ -139,6 +142,10 @@ class LockstepRig(Closing):
                 f"unknown transport {config.transport!r} (known: {', '.join(TRANSPORTS)})"
             )
         _check_bitrate(config)
+        if config.faults is not None and config.faults.mcu_active:
+            raise ConfigurationError(
+                "faults: stall and reboot are the firmware MCU's: give them in fw_faults "
+                "(RigConfig.faults is the motor controller's handle)")
         make_board = board_maker(config.firmware)
         self.default_duration_s = (
             config.duration_s
@@ -165,8 +172,10 @@ class LockstepRig(Closing):
         """The nodes on the buses just opened: faults, the simulator, the board, the tick loop."""
         bitrate = DEFAULT_BITRATE if config.bitrate is None else config.bitrate
         for index, spec in ((0, config.faults), (1, config.fw_faults)):
-            if spec is not None and spec.active:  # bus-off recovery: 128 x 11 bits at the bitrate
-                self._buses[index] = FaultInjectingBus(self._buses[index], spec, bitrate=bitrate)
+            if spec is not None and spec.bus_part().active:  # bus-off recovery: 128 x 11 bits
+                bus = FaultInjectingBus(self._buses[index], spec.bus_part(), bitrate=bitrate)
+                self._buses[index] = bus
+        self._mcu = mcu_faults(config.fw_faults)  # the firmware's stall and reboot
         sim_bus, fw_bus, self.host_bus = self._buses
         self._faulted = tuple(b for b in self._buses[:2] if isinstance(b, FaultInjectingBus))
         ahead = scenario is not None and config.lookahead
@@ -265,12 +274,16 @@ class LockstepRig(Closing):
         the next tick: the firmware took it a tick later than its time on the log says, and the
         judges, which read the log, counted its E2E window one period wider than the firmware's
         (a right firmware FAILed: seed 703, ``delay=0.1:20``)."""
+        mcu = self._mcu
+        if mcu is not None:  # a reset before the tick's frames (``sim.mcufaults``)
+            mcu.before_nodes(self.board, k)
         if self._faulted:
             catch_up(self._faulted, self.clock.now_s())
         self.sim.tick(k)
         if self._faulted:  # in time order across both handles (``sim.faults.release_due``)
             release_due(self._faulted, self.clock.now_s() + TX_LATENCY_S)
-        self.board.run_tick()
+        if mcu is None or mcu.runs(k):  # a halted or booting MCU runs no tick
+            self.board.run_tick()
 
     def run(
         self, duration_s: float | None = None, progress: Callable[[int, int], None] | None = None

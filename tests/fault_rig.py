@@ -3,7 +3,9 @@ audit against the float64 reference, the catalogue of every protected frame, a b
 
 ``FaultRig`` is ``sim.rig.LockstepRig`` rebuilt from the same classes in the same tick order, with
 a ``FaultInjectingBus`` around the sim handle and/or the firmware handle (the change proposed for
-``RigConfig.faults``). Each tick's host frames go to the rig's observers.
+``RigConfig.faults``), and the firmware MCU's stall and reboot of ``fw_faults`` stepped by
+``sim.mcufaults.McuFaults`` as ``LockstepRig`` steps them (``halted`` and ``before_board`` hooks
+add a test's own). Each tick's host frames go to the rig's observers.
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ from odocan.sim.cboard import board_maker
 from odocan.sim.clock import LockstepClock
 from odocan.sim.contract import database
 from odocan.sim.faults import FaultInjectingBus, FaultSpec, catch_up, release_due
+from odocan.sim.mcufaults import mcu_faults
 from odocan.sim.motor_controller import SimNode
 from odocan.sim.robot import RobotProfile, load
 from odocan.sim.scenarios import RandomScenario, Scenario
@@ -85,7 +88,10 @@ class FaultRig:
         self._raw = [open_virtual(self.channel) for _ in range(3)]
         sim_raw, fw_raw, self.host_bus = self._raw
         self.sim_bus = FaultInjectingBus(sim_raw, sim_faults) if sim_faults else sim_raw
-        self.fw_bus = FaultInjectingBus(fw_raw, fw_faults) if fw_faults else fw_raw
+        bus_faults = None if fw_faults is None else fw_faults.bus_part()
+        wrap = bus_faults is not None and (bus_faults.active or bus_faults == fw_faults)
+        self.fw_bus = FaultInjectingBus(fw_raw, bus_faults) if wrap and bus_faults else fw_raw
+        self.mcu = mcu_faults(fw_faults)  # the MCU's stall and reboot, as LockstepRig's
         self.sim = SimNode(self.sim_bus, self.vehicle, self.clock, scenario or RandomScenario(seed))
         board = board_maker(firmware)  # the C port: the same board around firmware/c
         self.board: FirmwareBoard = board(self.fw_bus, self.params, self.clock)
@@ -120,13 +126,15 @@ class FaultRig:
         """As ``LockstepRig._work``: the faulted handles' babble and held frames go on the bus
         when due, in time order across both (``sim.faults.catch_up``, ``release_due``), not when
         their node next sends (babble then went out after the other node's later frames)."""
+        if self.mcu is not None:  # a reset before the tick's frames (``sim.mcufaults``)
+            self.mcu.before_nodes(self.board, k)
         faulted = [b for b in (self.sim_bus, self.fw_bus) if isinstance(b, FaultInjectingBus)]
         catch_up(faulted, self.clock.now_s())
         self.sim.tick(k)
         release_due(faulted, self.clock.now_s() + TX_LATENCY_S)
         for hook in self.before_board:
             hook(k)
-        if not self.halted(k):
+        if not self.halted(k) and (self.mcu is None or self.mcu.runs(k)):
             self.board.run_tick()
 
     def mute_sim(self, ticks: range) -> None:

@@ -24,6 +24,7 @@ import can
 
 from odocan.sim.exceptions import BusSetupError, ConfigurationError
 from odocan.sim.faults import FaultInjectingBus, FaultSpec
+from odocan.sim.faultspec import mcu_refused
 
 UDP_PORT_BASE, UDP_PORT_SPAN = 20000, 10000  # derived udp_multicast ports: 20000..29999
 UDP_DEFAULT_GROUP = "ff15:7079:7468:6f6e:6465:6d6f:6d63:6173"  # python-can's default channel
@@ -87,20 +88,25 @@ def add_fault_argument(parser: argparse.ArgumentParser) -> None:
         metavar="SPEC",
         help="faults on this node's sends: drop=P,burst=P:LEN,dup=P,delay=P:MS,flip=P,"
         "babble=RATE[:ID[:T:DUR]],busoff=T:DUR,seed=N (babble's RATE: frames/s on the wire; "
-        "seed: default --seed where the command has one, else 0; docs/bus.md, 'Faults on the "
-        "bus')",
+        "seed: default --seed where the command has one, else 0); odocan run only, the "
+        "firmware MCU's own: stall=T:DUR (halted from T s for DUR s), reboot=T[:DUR] (reset "
+        "at T s, DUR s of boot); docs/bus.md, 'Faults on the bus'",
     )
 
 
-def parse_faults(args: argparse.Namespace) -> FaultSpec | None:
+def parse_faults(args: argparse.Namespace, *, mcu: bool = False) -> FaultSpec | None:
     """The ``--faults`` option as a spec (None when absent or empty), within the limits a run
     can honour (``check_fault_limits``); one-line errors. Its seed, unless the text sets one:
-    the command's ``--seed`` (0 for a command without one)."""
+    the command's ``--seed`` (0 for a command without one). ``mcu``: the command can halt and
+    reset the firmware's MCU (``odocan run``); elsewhere stall and reboot are refused before
+    any bus is opened."""
     text = getattr(args, "faults", "") or ""
     if not text:
         return None
     spec = FaultSpec.parse(text, seed=getattr(args, "seed", 0))
     check_fault_limits(spec)
+    if spec.mcu_active and not mcu:
+        raise mcu_refused(spec)
     return spec
 
 
@@ -110,11 +116,11 @@ def check_fault_limits(spec: FaultSpec) -> None:
         ("babble", spec.babble, BABBLE_MAX_PER_S, "RATE frames/s"),
         ("delay", spec.delay_ms, DELAY_MAX_MS, "MS"),
     ]
-    if spec.busoff is not None:
-        limits += [
-            ("busoff", spec.busoff.at_s, BUSOFF_MAX_S, "T s"),
-            ("busoff", spec.busoff.duration_s, BUSOFF_MAX_S, "DUR s"),
-        ]
+    for key in ("busoff", "stall", "reboot"):  # the episodes: a day at most
+        episode = getattr(spec, key)
+        if episode is not None:
+            limits += [(key, episode.at_s, BUSOFF_MAX_S, "T s"),
+                       (key, episode.duration_s, BUSOFF_MAX_S, "DUR s")]
     for key, value, limit, what in limits:
         if not (math.isfinite(value) and value <= limit):
             raise ConfigurationError(

@@ -388,7 +388,8 @@ def replay_and_analyze(
                 frames, feed.accepted, feed.encoders, plan_lives(frames, feed.accepted,
                                                                  feed.encoders), tolerance,
                 lambda head, tried: _replayed_head(head, profile, integrator, tried))
-            phase = 0 if plan.powered else pose_phase_ticks(frames, feed.accepted)
+            second = int(feed.encoders.tick[plan.starts[1]]) if len(plan.starts) > 1 else None
+            phase = 0 if plan.powered else pose_phase_ticks(frames, feed.accepted, second)
             replay.halted = {t + phase for t in plan.halted_ticks(feed.encoders)}
             replay.resets = plan.resets
             if not stop.stop_requested:

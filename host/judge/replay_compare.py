@@ -276,13 +276,19 @@ def departures(vs_log: dict[str, Any], tolerance: Tolerance) -> list[str]:
     return reasons
 
 
-def pose_phase_ticks(frames: FrameArrays, accepted: npt.NDArray[np.bool_]) -> int:
+def pose_phase_ticks(frames: FrameArrays, accepted: npt.NDArray[np.bool_],
+                     until_tick: int | None = None) -> int:
     """The ticks the replay runs its firmware before the log's first encoder frame so that its
     poses name the encoder frames the log's name: the log's pose ticks (from its first encoder
     frame) mod the pose period, the most common (0 for a log from power-up; a log cut at an odd
-    frame has its poses on odd ticks, and a replay out of phase has no frame in common)."""
+    frame has its poses on odd ticks, and a replay out of phase has no frame in common). Only
+    those before ``until_tick`` when given (the first life's: a firmware reset at an odd tick
+    sends its poses on odd ticks from there, and a longer second life outvoted the first, whose
+    poses the replay then named none of: UNJUDGED, exit 1, for a correct firmware)."""
     period = round(contract.cycle_time_s("ODOM_POSE_X") / contract.cycle_time_s("WHEEL_ENCODERS"))
     ticks = np.array(sorted(onboard_by_tick(frames, accepted)), dtype=np.int64)
+    if until_tick is not None and (ticks < until_tick).any():
+        ticks = ticks[ticks < until_tick]
     if period < 2 or len(ticks) == 0:
         return 0
     return int(np.bincount(ticks % period, minlength=period).argmax())

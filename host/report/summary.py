@@ -289,6 +289,12 @@ def _facts(report: dict[str, Any]) -> list[tuple[str, str]]:
         facts.append(("reboots", f"{len(reboots)}: the firmware restarted at "
                       + ", ".join(f"{r['t_s']:.2f} s ({r['reference_start']})" for r in reboots)
                       + "; the reference restarted with it"))
+    stalls = [e for e in report.get("events") or [] if e.get("kind") == "firmware_stall"]
+    if stalls:  # the reference placed again after each (host.judge.analysis, reference_breaks)
+        facts.append(("stalls", f"{len(stalls)}: the firmware went silent or held its pose from "
+                      + ", ".join(f"{e['t_s']:.2f} s" for e in stalls[:5])
+                      + (", ..." if len(stalls) > 5 else "")
+                      + "; the reference placed again after each, within its merge bound"))
     reprimed = [e for e in report.get("events") or [] if e.get("kind") == "counter_restart"]
     if reprimed:  # the truth row is off by the motion there (reference_path, ambiguity)
         facts.append(("re-primed", f"{len(reprimed)}: the reference re-primed where the firmware "

@@ -27,6 +27,7 @@ from odocan.sim.board import TICK_S
 from odocan.sim.clock import RealTimeClock
 from odocan.sim.exceptions import BusSetupError
 from odocan.sim.faults import FaultInjectingBus
+from odocan.sim.faultspec import mcu_refused
 from odocan.sim.motor_controller import SimNode
 from odocan.sim.realtime import PeriodicLoop, ReleaseClock, paced_sim_tick
 from odocan.sim.rig import LockstepRig, RigConfig
@@ -188,12 +189,14 @@ class ExternalBackend:
     ack_timeout_s = _EXTERNAL_ACK_TIMEOUT_S
 
     def __init__(self, options: RigOptions, bus_kwargs: dict[str, Any]) -> None:
+        spec = fault_spec(options.faults, options.seed)
+        if spec is not None and spec.mcu_active:  # no rig steps an external MCU: before a bus
+            raise mcu_refused(spec)
         self.clock = RealTimeClock()
         self.recorder = Recorder(contract.database(), restamp=self.clock.now_s)
         self._buses: list[can.BusABC] = [open_bus(bus_kwargs)]
         self._buses.append(open_bus(bus_kwargs))
         host_bus, sim_bus = self._buses
-        spec = fault_spec(options.faults, options.seed)
         if spec is not None:
             sim_bus = FaultInjectingBus(sim_bus, spec, clock=self.clock.now_s)
         self._host_bus = host_bus

@@ -75,9 +75,10 @@ from odocan.sim.e2efacts import require_firmware_follows
 from odocan.sim.exceptions import ConfigurationError
 from odocan.sim.faults import FaultSpec
 from odocan.sim.faultspec import two_handles
+from odocan.sim.mcufaults import check_within
 from odocan.sim.realtime import StopRequest, stop_on_signals
 from odocan.sim.rig import TRANSPORTS, LockstepRig, RigConfig, firmware_params
-from odocan.sim.scenarios import SCENARIOS
+from odocan.sim.scenarios import SCENARIOS, get_scenario
 
 TRUTH_TRACE_MAX = 100_000  # poses kept for the plot's truth (17 simulated minutes at 100 Hz)
 
@@ -152,7 +153,7 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
 
 
 def _do_run(args: argparse.Namespace) -> int:
-    faults = parse_faults(args)
+    faults = parse_faults(args, mcu=True)
     profile = robot.load(args.robot)
     secoc_key = None
     if args.secoc_key is not None:  # cryptography (AES-CMAC) only for a SecOC run
@@ -177,6 +178,8 @@ def _do_run(args: argparse.Namespace) -> int:
         # flat out: the drive may run ahead (not when frames are paced onto a live bus)
         lookahead=args.interface is None and args.channel is None,
     )
+    check_within(faults, args.duration if args.duration is not None  # the rig's own length
+                 else get_scenario(args.scenario, profile, args.seed).default_duration_s)
     with read_as(default_plan()):  # the firmware speaks the DBC the sim and judges read
         require_firmware_follows()
     check_log_path(args.log)
@@ -204,7 +207,9 @@ def _do_run(args: argparse.Namespace) -> int:
         except OutputError as exc:
             raise _after_log_error(log_error, exc) from None
     try:
-        write_checks(args, "run", analysis_checks(analysis.report))
+        injected = analysis.report["inputs"].get("faults")  # as the summary's "injected" line
+        write_checks(args, "run", analysis_checks(analysis.report),
+                     {"faults": injected} if injected else None)
         _write_latency_plot(args, analysis.report)
     except OutputError as exc:
         raise _after_log_error(log_error, exc) from None
