@@ -36,8 +36,10 @@ robots' publication phases) and at the end; a young GC pass after each tick as b
 robot's judge sees its own frames in the same order (the digest differs only by the order of
 the robots' publications); its state stays hot over K ticks of frames instead of one.
 
-``ODOCAN_ACCEL=1`` runs the per-frame path compiled by mypyc (``host.accel``; the first run
-builds it, minutes); the line says how many modules were compiled. Issue #13, 50 robots,
+``frames`` on the line is the sha-256 of the recording: the fleet's step (``--firmware``: its
+boards', python or c) compiled must send the same frames. ``ODOCAN_ACCEL=1`` runs the per-frame
+path and the step compiled by mypyc (``host.accel``; the first run builds it, minutes); the line
+says how many modules were compiled. Issue #13, 50 robots,
 ``--batch-ticks 10``, least of 6 alternating at load 3.5-5: pure 83.2 us, compiled 46.8 us per
 robot-tick (1.8x), digest 5c38e3fdc759fa9e both.
 """
@@ -45,6 +47,7 @@ robot-tick (1.8x), digest 5c38e3fdc759fa9e both.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import gc
 import hashlib
 import os
@@ -70,9 +73,12 @@ FEED = getattr(RobotTelemetry, "feed_fields", None) or getattr(RobotTelemetry, "
 Recording = tuple[int, list[list[tuple[int, tuple[float, int, bytes]]]]]  # robots, batches
 
 
-def record(robots: int, ticks: int) -> Recording:
+def record(robots: int, ticks: int, firmware: str = "python") -> Recording:
     """The frames a lockstep fleet of ``robots`` hands its bridge over ``ticks`` ticks."""
-    fleet = Fleet(FleetConfig(robots=robots, robot=robot.load("pmir")))
+    config = FleetConfig(robots=robots, robot=robot.load("pmir"))
+    if firmware != "python":  # the trees before FleetConfig.firmware: python only
+        config = dataclasses.replace(config, firmware=firmware)
+    fleet = Fleet(config)
     batches = []
     try:
         for k in range(ticks):
@@ -170,6 +176,8 @@ def main() -> int:
                         help="the robots fed N at a time over every tick (0: all, by tick)")
     parser.add_argument("--batch-ticks", type=int, default=1, metavar="K",
                         help="each robot fed its frames K ticks at a time, flushes spread")
+    parser.add_argument("--firmware", default="python",
+                        help="the recording fleet's boards' firmware (python, c)")
     parser.add_argument("--by-message", action="store_true",
                         help="CPU per frame of each message (the clock read per frame)")
     args = parser.parse_args()
@@ -177,7 +185,8 @@ def main() -> int:
     if args.frames:
         recording = pickle.loads(Path(args.frames).read_bytes())
     else:
-        recording = record(args.robots, args.ticks)
+        recording = record(args.robots, args.ticks, args.firmware)
+    frames_digest = hashlib.sha256(pickle.dumps(recording)).hexdigest()[:16]
     if args.record:
         Path(args.record).write_bytes(pickle.dumps(recording))
         return 0
@@ -198,6 +207,7 @@ def main() -> int:
         cpu_s, digest, published = run_once(recording, by_message, frames)
         print(f"{robots} robots, {len(batches)} ticks{how}: {cpu_s / robot_ticks * 1e6:.1f} us CPU "
               f"per robot-tick, {published} publications, digest {digest}, "
+              f"frames {frames_digest}, "
               f"load {os.getloadavg()[0]:.2f}", flush=True)
         for name, spent_s in (by_message or Counter[str]()).most_common():
             print(f"  {name:16s} {frames[name] / robot_ticks:5.2f} a robot-tick, "

@@ -1,8 +1,9 @@
 """The bridge's per-frame path compiled with mypyc, opt-in (issue #13: a fleet worker's CPU).
 
-``ODOCAN_ACCEL=1`` in the environment: ``odocan.host`` (imported before any of its modules, in
-every process, spawned fleet workers included) calls ``install``, which loads the modules named
-in ``MODULES`` from a mypyc build in a cache directory instead of their ``.py``. The build is
+``ODOCAN_ACCEL=1`` in the environment (``0``: off; anything else exits 2), or ``odocan fleet
+--accel`` (``for_children``: its workers): ``odocan.host`` (imported before any of its modules,
+in every process, spawned fleet workers included) calls ``install``, which loads the modules
+named in ``MODULES`` from a mypyc build in a cache directory instead of their ``.py``. The build is
 keyed by a hash of every ``.py`` of the package (a compiled module inlines other modules'
 constants and class layouts, so any edit anywhere makes a new build), the interpreter and mypy
 versions: it is used only when it matches the sources exactly, never stale. A missing build is
@@ -18,13 +19,14 @@ it and prints its directory.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import importlib.abc
 import importlib.machinery
 import importlib.util
 import os
 import sys
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from types import ModuleType
 
@@ -46,6 +48,11 @@ MODULES = (
     *(f"host.mqtt.{name}" for name in ("telemetry", "liveplan", "livedecode", "topics",
                                        "errorbatch", "liveroutes", "livecommands")),
     *(f"host.protocol.{name}" for name in ("e2e_live", "e2e_evidence", "e2e", "e2e_crc", "pose")),
+    # Not the fleet's step (sim.*): compiled (node, tickloop, motor_controller, board, cboard,
+    # simplan, drivetrain, transport, canbits) it ran more instructions, not fewer: 128.7k ->
+    # 148.8k per robot-tick, C firmware, callgrind (issue #13). Its objects are mostly pure
+    # (python-can's, the drives', ctypes'), which compiled code reaches by generic attribute
+    # look-ups where 3.11's interpreter has specialised inline caches.
 )
 
 
@@ -118,23 +125,54 @@ def install(*, build: bool = True) -> bool:
     early = sorted(f"odocan.{m}" for m in MODULES if f"odocan.{m}" in sys.modules)
     if early:  # a compiled module must not meet a pure copy of another one
         return _note(f"{early[0]} was imported before the accelerator was installed")
+    modules, why = find_build(build=build)
+    if not modules:
+        return _note(why)
+    sys.meta_path.insert(0, _Finder(modules))
+    return True
+
+
+def find_build(*, build: bool = True) -> tuple[dict[str, Path], str]:
+    """This version of the sources' build (made first if ``build`` and needed): its modules,
+    or {} and why there is none."""
     try:
         key = sources_key()
     except Exception as exc:  # no mypy (importlib.metadata), an unreadable source
-        return _note(f"no build key ({type(exc).__name__}: {exc})")
+        return {}, f"no build key ({type(exc).__name__}: {exc})"
     target = cache_root() / key
     modules = built(target)
     if not modules and build:
         from odocan.host.accelbuild import build_locked
 
         failure = build_locked(target, PACKAGE, list(MODULES))
-        modules = {} if failure else built(target)
         if failure:
-            return _note(failure)
+            return {}, failure
+        modules = built(target)
+    return modules, "" if modules else f"no build at {target} (python -m odocan.host.accel)"
+
+
+@contextlib.contextmanager
+def for_children() -> Iterator[bool]:
+    """The compiled path for the processes spawned inside (a fleet's workers: ``odocan fleet
+    --accel``), whose modules this process imported pure already: the build made here first
+    (once: minutes), then ``ODOCAN_ACCEL=1`` in the environment they inherit, as it was after.
+    Yields whether they get it (False: one line on stderr, pure Python)."""
+    if active():  # this process runs compiled: ODOCAN_ACCEL=1 is already set
+        yield True
+        return
+    modules, why = find_build()
     if not modules:
-        return _note(f"no build at {target} (python -m odocan.host.accel builds it)")
-    sys.meta_path.insert(0, _Finder(modules))
-    return True
+        yield _note(why)
+        return
+    before = os.environ.get(ENV)
+    os.environ[ENV] = "1"
+    try:
+        yield True
+    finally:
+        if before is None:
+            del os.environ[ENV]
+        else:
+            os.environ[ENV] = before
 
 
 def _note(why: str) -> bool:

@@ -29,6 +29,7 @@ import os
 import shutil
 import subprocess
 from collections.abc import Callable
+from importlib import resources
 from pathlib import Path
 from typing import Protocol, TypeVar
 
@@ -47,7 +48,9 @@ ABI_VERSION = 3  # ODOCAN_FW_ABI_VERSION of firmware/c/odocan_fw.h
 ABI_VERSIONS = (1, 2, 3)
 SECOC_ABI = 2
 SPEED_ABI = 3  # odocan_fw_init's seventh parameter, max_wheel_speed_mm_s
-FIRMWARE_C_DIR = Path(__file__).resolve().parent.parent / "firmware" / "c"
+# from the package, not ``__file__``: a copy of this module loaded from elsewhere (compiled by
+# ``host.accel``, in its cache) still finds the sources
+FIRMWARE_C_DIR = Path(str(resources.files("odocan").joinpath("firmware", "c"))).resolve()
 
 
 def _build_dir() -> Path:

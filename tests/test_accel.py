@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import importlib.machinery
 import importlib.util
+import json
 import os
 import re
 import shutil
@@ -52,11 +53,13 @@ def test_without_a_build_pure_python_with_one_line(tmp_path: Path) -> None:
     assert "pure Python (no build at" in done.stderr
 
 
-def _bench(env: dict[str, str]) -> str:
-    """The bench's digest line (publications and digest) for a small fleet."""
-    done = subprocess.run([sys.executable, str(BENCH), "--robots", "3", "--ticks", "300"],
+def _bench(env: dict[str, str], firmware: str) -> str:
+    """The bench's digest line (publications, their digest, the frames' digest) for a small
+    fleet whose boards run ``firmware``."""
+    done = subprocess.run([sys.executable, str(BENCH), "--robots", "3", "--ticks", "300",
+                           "--firmware", firmware],
                           capture_output=True, text=True, env=env, check=True, timeout=3600)
-    found = re.search(r"(\d+ publications, digest \w+)", done.stdout)
+    found = re.search(r"(\d+ publications, digest \w+, frames \w+)", done.stdout)
     assert found, done.stdout + done.stderr
     return found.group(1)
 
@@ -86,4 +89,20 @@ def test_compiled_publishes_the_same_bytes() -> None:
     path, count = done.stdout.split()
     assert path.endswith(importlib.machinery.EXTENSION_SUFFIXES[0]), done.stderr
     assert int(count) >= len(accel.MODULES)
-    assert _bench(env) == _bench(_env())
+    for firmware in ("python", "c"):  # the same frames and publications, either board
+        assert _bench(env, firmware) == _bench(_env(), firmware), firmware
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(_why_not_compiled() is not None, reason=str(_why_not_compiled()))
+def test_fleet_accel_runs_its_worker_compiled(tmp_path: Path) -> None:
+    """``odocan fleet --accel`` with one worker: the worker is spawned (its modules imported
+    afresh, compiled), its verdicts as pure Python's, and the start line says so."""
+    report = tmp_path / "fleet.json"
+    done = subprocess.run([sys.executable, "-m", "odocan", "fleet", "-n", "2", "--duration", "1",
+                           "--accel", "--max-miss-ratio", "1", "--report", str(report)],
+                          capture_output=True, text=True, env=_env(), timeout=3600, check=False)
+    assert done.returncode == 0, done.stderr
+    assert "compiled per-frame path (mypyc)" in done.stderr
+    assert "pure Python" not in done.stderr
+    assert len(json.loads(report.read_text())["workers"]) == 1  # spawned, not in process

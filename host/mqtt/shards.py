@@ -177,19 +177,20 @@ def embedded_broker(port: int | None) -> Iterator[BrokerURL]:
 
 def run_sharded(
     run: FleetRun, workers: int, *, on_start: StartHook | None = None,
-    on_progress: Progress | None = None, debug: bool = False,
+    on_progress: Progress | None = None, debug: bool = False, spawn: bool = False,
 ) -> dict[str, Any]:
-    """Run ``run.fleet`` over ``workers`` processes (1: in this one); the aggregated report.
-    Bridged without a broker: one ``BrokerProcess`` for all of them, for the run."""
+    """Run ``run.fleet`` over ``workers`` processes (1: in this one, unless ``spawn``: a worker
+    that imports its modules afresh, compiled by ``host.accel.for_children``); the aggregated
+    report. Bridged without a broker: one ``BrokerProcess`` for all of them, for the run."""
     if not 1 <= workers <= run.fleet.robots:
         raise ConfigurationError(
             f"--workers {workers}: must be in [1, {run.fleet.robots}] (the robots to run)")
     if run.bridge and run.broker is None:
         with embedded_broker(None) as url:
             report = run_sharded(replace(run, broker=url), workers, on_start=on_start,
-                                 on_progress=on_progress, debug=debug)
+                                 on_progress=on_progress, debug=debug, spawn=spawn)
         return {**report, "embedded_broker": True}
-    if workers == 1:
+    if workers == 1 and not spawn:
         return asyncio.run(run_fleet(
             run, on_start=on_start,
             on_progress=None if on_progress is None else

@@ -29,6 +29,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from odocan.host import accel
 from odocan.host.cli.firmware_choice import AUTO_FIRMWARE, FIRMWARE_CHOICES, resolve_firmware
 from odocan.host.cli.options import SEED_LIMIT, add_seed_argument, float_in, int_in
 from odocan.host.io.export import FOXGLOVE_PORT
@@ -161,6 +162,13 @@ def _add_arguments(parser: argparse.ArgumentParser) -> None:
         "robot's firmware verifies its commands with its own key derived from it, which its "
         "bridge signs with (docs/secoc.md) (default: no SecOC)",
     )
+    parser.add_argument(
+        "--accel", action="store_true",
+        help="the workers' per-frame path (the bridge's judges) compiled with mypyc (needs "
+        "mypy and a C compiler; built once per version of the sources into "
+        "~/.cache/odocan/accel: minutes; one line on stderr and pure Python when it cannot be; "
+        "ODOCAN_ACCEL=1 does the same for any command) (default: pure Python)",
+    )
     add_mqtt_arguments(parser)
     _add_foxglove_argument(parser)
 
@@ -210,13 +218,16 @@ def _do_fleet(args: argparse.Namespace) -> int:
     debug = getattr(args, "debug", False)
     configure_logging(debug)
     names = [robot_name(fleet.first + i) for i in range(fleet.robots)]
-    if broker is None:
-        with embedded_broker(args.port) as url, _foxglove(args, url, names):
-            report = _run(replace(run, broker=url), args.workers, debug, choice.said)
-        report["embedded_broker"] = True
-    else:
-        with _foxglove(args, broker, names):
-            report = _run(run, args.workers, debug, choice.said)
+    with _accelerated(args.accel) as compiled:
+        said = choice.said + ("; compiled per-frame path (mypyc)" if compiled else "")
+        spawn = compiled and not accel.active()  # one worker too: its own, compiled, imports
+        if broker is None:
+            with embedded_broker(args.port) as url, _foxglove(args, url, names):
+                report = _run(replace(run, broker=url), args.workers, debug, said, spawn)
+            report["embedded_broker"] = True
+        else:
+            with _foxglove(args, broker, names):
+                report = _run(run, args.workers, debug, said, spawn)
     broken = failures(report, args.max_miss_ratio)
     report.update(passed=not broken and not report.get("stopped"), failures=broken)
     _print_summary(report, broken)
@@ -248,7 +259,16 @@ def _foxglove(
     return serve_fleet_foxglove(args, broker, robots)
 
 
-def _run(run: FleetRun, workers: int, debug: bool, firmware: str = "") -> dict[str, Any]:
+def _accelerated(asked: bool) -> contextlib.AbstractContextManager[bool]:
+    """``--accel``: ``host.accel.for_children`` (the workers compiled); else pure Python, or
+    compiled already (``ODOCAN_ACCEL=1``: this process and its workers)."""
+    if asked:
+        return accel.for_children()
+    return contextlib.nullcontext(bool(accel.active()))
+
+
+def _run(run: FleetRun, workers: int, debug: bool, firmware: str = "",
+         spawn: bool = False) -> dict[str, Any]:
     """The fleet under a live progress line (elapsed, ETA, the late ticks so far), drawn from
     when the clock starts (the start line first), not while the workers and broker start."""
     label = f"fleet of {robots_text(run.fleet.robots)}"
@@ -265,6 +285,7 @@ def _run(run: FleetRun, workers: int, debug: bool, firmware: str = "") -> dict[s
             workers,
             on_start=started,
             debug=debug,
+            spawn=spawn,
             on_progress=lambda ticks, late: _relabel(bar, label, ticks, late),
         )
 
