@@ -19,6 +19,7 @@ import can
 import pytest
 
 from odocan.host.cli.app import main
+from odocan.host.judge.liverobot import UNJUDGED_WHY
 from odocan.host.judge.monitor import BusMonitor
 from odocan.host.judge.reference import Geometry
 from odocan.host.judge.watchend import end_watch
@@ -34,7 +35,8 @@ from tests.test_profile_page import crc32_iso_hdlc, parameter_bytes
 from tests.test_robot_from_log import ODD
 
 NAME = "robot007"
-FROM_PAGE = {"name": "kobuki", "source": "PROFILE page", "page_fits": ["kobuki"]}
+FROM_PAGE = {"name": "kobuki", "source": "PROFILE page", "page_fits": ["kobuki"],
+             "unjudged": None}
 
 
 @pytest.fixture(scope="module")
@@ -90,20 +92,24 @@ def test_the_monitor_given_pmir_still_diagnoses_the_kobuki(logs: dict[str, Path]
     model, fails = watched(logs["kobuki"], "pmir")
     assert fails, "the kobuki judged as pmir"
     assert fails[0].startswith("the on-board pose was wrong"), fails
-    assert model.robot.as_dict() == {"name": "pmir", "source": "--robot", "page_fits": []}
+    assert model.robot.as_dict() == {"name": "pmir", "source": "--robot", "page_fits": [],
+                                     "unjudged": None}
     assert "parameters of robot 'kobuki', not 'pmir'" in model.status["profile_mismatch"]
 
 
-def test_the_monitor_keeps_the_default_for_a_custom_profile(logs: dict[str, Path]) -> None:
-    """A page no shipped robot fits: pmir and today's diagnosis (the pose found wrong)."""
+def test_the_monitor_does_not_judge_a_custom_profile_as_the_default(
+        logs: dict[str, Path]) -> None:
+    """A page no shipped robot fits: nothing judged with pmir (UNJUDGED, not a FAIL: a custom
+    robot's firmware once FAILed as pmir, tests.test_live_robot_unjudged), the page's
+    diagnosis still said in ``analyze``'s words."""
     model, fails = watched(logs["odd"], None)
-    assert model.robot.as_dict() == {"name": "pmir", "source": "default", "page_fits": []}
+    assert model.robot.as_dict() == {"name": "pmir", "source": "default", "page_fits": [],
+                                     "unjudged": UNJUDGED_WHY}
     assert model.robot.said("odocan monitor") is None
-    assert fails, "the odd robot judged as pmir"
+    assert fails == []
     assert "profile hash differs" in model.status["profile_mismatch"]
     assert ", the default robot pmir 0x" in model.status["profile_mismatch"]  # analyze's words
     assert "--robot" not in model.status["profile_mismatch"]  # none was given
-    assert model.robot.judged_as() == "; judged as robot 'pmir' (the default robot)"
 
 
 def bridged(log: Path, from_page: bool) -> RobotTelemetry:
@@ -135,15 +141,17 @@ def test_the_bridge_given_pmir_still_fails_and_names_kobuki(logs: dict[str, Path
     assert telemetry.status()[1]["profile"]["robot"] == "kobuki"
 
 
-def test_the_bridge_keeps_the_default_for_a_custom_profile(logs: dict[str, Path]) -> None:
+def test_the_bridge_does_not_judge_a_custom_profile_as_the_default(
+        logs: dict[str, Path]) -> None:
     telemetry = bridged(logs["odd"], from_page=True)
     status = telemetry.status()[1]
-    assert status["robot_profile"] == {"name": "pmir", "source": "default", "page_fits": []}
+    assert status["robot_profile"] == {"name": "pmir", "source": "default", "page_fits": [],
+                                       "unjudged": UNJUDGED_WHY}
     assert status["profile"]["verdict"] == "MISMATCH"
     assert ", the default robot pmir 0x" in status["profile"]["detail"]  # analyze's words
     verdict = end_verdict(telemetry, profile_name="pmir")
-    assert verdict.verdict == "FAIL"
-    assert "; judged as robot 'pmir' (the default robot)" in verdict.reason
+    assert verdict.verdict == "UNJUDGED", verdict.text
+    assert "judged as robot" not in verdict.reason
     assert "--robot" not in verdict.reason.replace("give --robot", "")  # none was given
 
 

@@ -81,7 +81,8 @@ def add_robot_argument(
                "one does (said on stderr); else pmir" if from_log else "pmir")
     if live:
         default = ("the shipped robot whose parameters the firmware's first PROFILE page gives, "
-                   "when exactly one does (frames held till it comes, said on stderr); else pmir")
+                   "when exactly one does (frames held till it comes, said on stderr); else pmir, "
+                   "unless the page is not pmir's: then nothing is judged (UNJUDGED)")
     parser.add_argument(
         "--robot",
         default=None if from_log or live else "pmir",

@@ -147,7 +147,8 @@ class LiveChoice:
         if self._take(p):
             self.taken += 1
             tracker.raw.odometry = p.twin
-            tracker.raw.at.update(p.twin_at)
+            if not tracker.raw.blind:  # a blind reference keeps none (livereference)
+                tracker.raw.at.update(p.twin_at)
             if p.gap is not None:
                 tracker.placer.took_gap(p.gap)
         else:

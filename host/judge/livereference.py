@@ -15,15 +15,18 @@ class RawReference:
     """``odometry`` (None until started, again after a restart), ``at`` (its pose at the latest
     encoder frames, by seq), ``gate`` (``StepGate``: the frames' steps the firmware takes) and
     ``started`` (the pose it started at, on the frame it primed on: ``livereprime`` replays a
-    re-prime after a stall before the life's first sample from it)."""
+    re-prime after a stall before the life's first sample from it). ``blind``: its poses are
+    kept nowhere, so nothing is compared with it (``liverobot``: a robot the firmware does not
+    run; the samples are still numbered, settled and published, without a reference)."""
 
-    __slots__ = ("at", "gate", "odometry", "started")
+    __slots__ = ("at", "blind", "gate", "odometry", "started")
 
     def __init__(self, gate: StepGate) -> None:
         self.odometry: ReferenceOdometry | None = None
         self.at: dict[int, FramePose] = {}
         self.gate = gate
         self.started: FramePose | None = None
+        self.blind = False
 
     def start(self, odometry: ReferenceOdometry, geometry: Geometry, counter_bits: int,
               told: RestartLog) -> None:
@@ -41,6 +44,8 @@ class RawReference:
         step = self.gate.step(frame)
         if step is not None:
             ref.step_deltas(*step)
+        if self.blind:  # nothing compared (liverobot)
+            return step
         seq = frame[0]  # ``ref.heading_rad`` in line (per encoder frame): ``_heading_at``'s sum;
         # the NamedTuple made by ``tuple.__new__`` (its ``__new__`` is a Python lambda)
         self.at[seq] = tuple.__new__(FramePose, (seq, ref.x_m, ref.y_m, ref._heading0_rad

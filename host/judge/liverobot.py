@@ -13,13 +13,26 @@ page fits, when exactly one shipped profile does (``profilepage.shipped_robots``
 the judges see the whole watch, each with the robot it was decided with, as a watch given
 ``--robot`` would. ``--robot`` given always wins (no wait; a mismatch is said as before);
 with another DBC (``--dbc``) the page does not pick either.
+
+A page that contradicts the default (it fits no shipped robot, or several but not the default),
+or a first page heard only after the wait (it cannot choose then: the watch began with the
+default) that is not the default's, leaves the watch UNJUDGED (``LiveRobot.unjudged``:
+``UNJUDGED_WHY``, ``analyze``'s refusal in the live judges' words): judging a custom robot's
+correct firmware as pmir FAILed it for an option the user did not give, and a live judge runs
+too long for ``analyze``'s exit 2. Its judges are built anew (a late page: what they judged
+with the default is forgotten), their reference blind (``RawReference.blind``: the on-board
+pose is still followed, shown and bridged, compared with nothing) and DISTANCE and the twist
+speeds not judged: nothing is judged with a robot the firmware does not run. The monitor's
+state says why (UNVERIFIED), the JSON's ``robot.unjudged`` and the bridge's
+``robot_profile.unjudged`` carry it, and the watch ends UNJUDGED (``--require-firmware``:
+FAIL). A robot given (``--robot``) is judged as before.
 """
 
 from __future__ import annotations
 
 import math
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any, Generic, Protocol, TypeVar
 
 from odocan.host.judge.livedistance import LiveDistance, robot_of
@@ -36,9 +49,15 @@ from odocan.sim.robot import MM_PER_M, RobotProfile
 if TYPE_CHECKING:
     from cantools.database.can import Database
 
-__all__ = ["DEFAULT", "DEFAULT_ROBOT", "FROM_PAGE", "GIVEN", "LiveRobot", "PageWait", "decide"]
+    from odocan.host.judge.sources import SourceWatch
+
+__all__ = ["DEFAULT", "DEFAULT_ROBOT", "FROM_PAGE", "GIVEN", "UNJUDGED_WHY", "LiveRobot",
+           "PageWait", "decide", "late_page"]
 PAGE_PERIOD_S = 0.6  # ODOM_STATUS's PROFILE page: every 6th 100 ms status frame
 PAGE_WAIT_S = 2.5 * PAGE_PERIOD_S  # frames held at most this long (bus time) for the page
+
+UNJUDGED_WHY = (f"the firmware runs a different profile than the default robot {DEFAULT_ROBOT}: "
+                "give --robot")  # analyze's refusal (host.cli.robotchoice), live
 
 Held = TypeVar("Held")
 
@@ -46,16 +65,28 @@ Held = TypeVar("Held")
 @dataclass(frozen=True)
 class LiveRobot:
     """The robot live judges judge with and where it came from (``source``: ``--robot``,
-    ``PROFILE page``, ``default``); ``page_fits``: the shipped profiles the first page fits."""
+    ``PROFILE page``, ``default``); ``page_fits``: the shipped profiles the first page fits;
+    ``awaits_page``: the default taken for want of a page, whose first page may still
+    contradict it (``late_page``); ``page_heard``: the page was heard. ``unjudged``: why
+    nothing is judged (``UNJUDGED_WHY``: the default, contradicted by the page), else None."""
 
     profile: RobotProfile
     source: str
     page_fits: tuple[str, ...] = ()
+    awaits_page: bool = False
+    page_heard: bool = False
+
+    @property
+    def unjudged(self) -> str | None:
+        """``UNJUDGED_WHY`` when the page contradicts the default taken, else None."""
+        contradicted = (self.source == DEFAULT and self.page_heard
+                        and DEFAULT_ROBOT not in self.page_fits)
+        return UNJUDGED_WHY if contradicted else None
 
     def as_dict(self) -> dict[str, Any]:
-        """``{"name", "source", "page_fits"}``: the JSON status's ``robot``."""
+        """``{"name", "source", "page_fits", "unjudged"}``: the JSON status's ``robot``."""
         return {"name": self.profile.name, "source": self.source,
-                "page_fits": list(self.page_fits)}
+                "page_fits": list(self.page_fits), "unjudged": self.unjudged}
 
     def said(self, prefix: str) -> str | None:
         """The one stderr line when the page chose a robot other than the default (a watch of
@@ -128,11 +159,14 @@ class PageWait(Generic[Held]):
                               int(s["PROFILE_CRC"]))
 
     def decided(self) -> LiveRobot:
-        """The robot the page fits, when exactly one shipped profile does, else the default."""
+        """The robot the page fits, when exactly one shipped profile does, else the default
+        (``unjudged`` when the page contradicts it; awaiting its page when none was heard)."""
         fits = self.fits or ()
         if len(fits) == 1:
-            return LiveRobot(robots.load(fits[0]), FROM_PAGE, fits)
-        return LiveRobot(robots.load(DEFAULT_ROBOT), DEFAULT, fits)
+            return LiveRobot(robots.load(fits[0]), FROM_PAGE, fits, page_heard=True)
+        heard = self.fits is not None
+        return LiveRobot(robots.load(DEFAULT_ROBOT), DEFAULT, fits, awaits_page=not heard,
+                         page_heard=heard)
 
     def release(self) -> list[Held]:
         """The frames held, in bus order; the wait holds nothing more."""
@@ -148,6 +182,7 @@ class _Judged(Protocol):
     twist: LiveTwist
     events: deque[dict[str, Any]]
     robot: LiveRobot
+    sources: SourceWatch
 
 
 def decide(model: _Judged, wait: PageWait[Held], name: str | None = None) -> list[Held]:
@@ -155,11 +190,37 @@ def decide(model: _Judged, wait: PageWait[Held], name: str | None = None) -> lis
     have judged nothing yet: the frames were held; ``--integrator`` stays); ``name``: the
     DISTANCE judge's robot name (default: the profile's). Returns the frames held, for the
     model to judge now, in bus order."""
-    model.robot = chosen = wait.decided()
+    model.robot = wait.decided()
+    rebuild(model, name)
+    return wait.release()
+
+
+def late_page(model: _Judged, max_wheel_speed_m_s: float, crc: int,
+              name: str | None = None) -> bool:
+    """A PROFILE page heard (MAX_WHEEL_SPEED decoded, in m/s; PROFILE_CRC) once the wait is
+    over: when the default still awaits its page (the wait ended without one) and this first
+    page is not the default's, the watch is ``unjudged`` from now on and its judges are built
+    anew (what they judged with the default is forgotten); True then (``name``: ``decide``'s).
+    It cannot choose another robot: the watch began with the default (``analyze``, a page not
+    in its log's head: the default)."""
+    if not model.robot.awaits_page:
+        return False
+    fits = shipped_robots(RunningProfile(round(max_wheel_speed_m_s * MM_PER_M), crc))
+    model.robot = replace(model.robot, page_fits=fits, awaits_page=False, page_heard=True)
+    if model.robot.unjudged is None:
+        return False
+    rebuild(model, name)
+    return True
+
+
+def rebuild(model: _Judged, name: str | None = None) -> None:
+    """``model``'s judges built anew for ``model.robot`` (``--integrator`` stays)."""
+    chosen = model.robot
     profile, geometry = chosen.profile, Geometry.of(chosen.profile)
     integrator = model.tracker.integrator if model.tracker.forced else None
     model.tracker = PoseTracker(geometry, profile.counter_bits, integrator)
     model.tracker.restarts.events = model.events
+    model.tracker.raw.blind = chosen.unjudged is not None  # nothing compared (module docstring)
+    model.sources.first = model.tracker.first  # what the reboot watch tells (livefirst)
     model.distance = LiveDistance(robot_of(name or profile.name, geometry, profile.counter_bits))
     model.twist = LiveTwist(geometry, profile.counter_bits)
-    return wait.release()

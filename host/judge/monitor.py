@@ -35,7 +35,8 @@ latest sample vs reference beyond ``analyze``'s limit, one LSB of position after
 allowance or of heading: ``livefit.pose_wrong``, the start narrowed as ``analyze`` fits it; or
 an episode latched since the pose was last set anew, which the latest sample does not undo:
 ``livestanding``),
-UNVERIFIED (nothing compared yet; or, for good, two firmwares were heard), HELD (frames the
+UNVERIFIED (nothing compared yet; or, for good, two firmwares were heard, or the PROFILE
+page contradicts the default robot: ``liverobot``), HELD (frames the
 stamps cannot decide wait for the evidence: ``livesettle``), DISTANCE WRONG and
 TWIST WRONG (ODOM_TWIST's DISTANCE and speeds, latched: ``livedistance``, ``livetwist``), OK
 (saying so when the reference was placed again after a stall or a gap: ``livestanding``).
@@ -51,7 +52,6 @@ from __future__ import annotations
 import time
 from collections import Counter, deque
 from collections.abc import Callable
-from functools import partial
 from typing import Any
 
 import can
@@ -62,10 +62,16 @@ from odocan.host.judge.busstats import LoadWindow
 from odocan.host.judge.liveconfig import SAME_TICK_S, ConfigFollower, follow_config_ack, rebooted
 from odocan.host.judge.livedistance import LiveDistance
 from odocan.host.judge.livekept import KeptWatch
-from odocan.host.judge.liverobot import DEFAULT, GIVEN, LiveRobot, PageWait, decide
+from odocan.host.judge.liverobot import (
+    DEFAULT,
+    GIVEN,
+    LiveRobot,
+    PageWait,
+    decide,
+    late_page,
+)
 from odocan.host.judge.livesetpose import SetPoseFollower, apply_set_pose, set_pose_event
 from odocan.host.judge.livesettle import SettleHold
-from odocan.host.judge.livestanding import placed_why, pose_wrong_why
 from odocan.host.judge.livetwins import CRC_RIGHT_REFUSED, refused_encoders
 from odocan.host.judge.livetwist import LiveTwist
 from odocan.host.judge.messagestats import MessageStats
@@ -79,8 +85,8 @@ from odocan.host.judge.monitorvalues import (
     shown_value,
     to_json,
 )
+from odocan.host.judge.monitorverdict import verdict
 from odocan.host.judge.profilepage import follow_profile
-from odocan.host.judge.reasonwords import reason_text
 from odocan.host.judge.reference import Geometry
 from odocan.host.judge.sources import CONFLICT_HOLD_S, FIRMWARE_NODE, SourceWatch
 from odocan.host.judge.statuslatch import StatusLatch
@@ -302,10 +308,14 @@ class BusMonitor:
         frame = (int(s["COUNTER"]), int(s["LEFT_COUNT"]), int(s["RIGHT_COUNT"]), self._bus_time_s,
                  int(s.get("CTRL_UPTIME", 0)))
         self.tracker.on_encoders(*frame)
+        if self.robot.unjudged:  # the page contradicts the default: not judged (liverobot)
+            return
         self.distance.on_encoders(self.tracker, *frame)
         self.twist.on_encoders(self.tracker, *frame)
 
     def _on_twist(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
+        if self.robot.unjudged:  # (liverobot: nothing judged)
+            return
         self.distance.on_twist(self.tracker, int(s["ENC_COUNTER"]), round(s["DISTANCE"] * 1000),
                                self._bus_time_s, int(s["COUNTER"]))
         self.twist.on_twist(self.distance.named, round(s["LINEAR_VEL"] * 1000),
@@ -348,6 +358,7 @@ class BusMonitor:
         elif page == "FRAME_TOTALS":
             self.status.update({k.lower(): int(v) for k, v in s.items() if k.endswith("_FRAMES")})
         elif page == "PROFILE":  # what the firmware runs with, against --robot (profilepage)
+            late_page(self, s["MAX_WHEEL_SPEED"], int(s["PROFILE_CRC"]))  # (liverobot)
             follow_profile(self, self._bus_time_s, s["MAX_WHEEL_SPEED"], int(s["PROFILE_CRC"]))
 
     def _watch_source(self, uptime_s: int, state: str, counter: int) -> None:
@@ -395,6 +406,11 @@ class BusMonitor:
                        self.tracker)  # ticks, poses
         return src.status_frame(self.tracker, message, data, config, self._bus_time_s)
 
+    @property
+    def bus_time_s(self) -> float:
+        """The latest bus timestamp heard (s)."""
+        return self._bus_time_s
+
     def health(self, now_s: float | None = None) -> dict[str, Any]:
         """The verdict on the firmware and its pose (module docstring), why, node ages, events."""
         now_s = time.monotonic() if now_s is None else now_s
@@ -403,61 +419,10 @@ class BusMonitor:
         if self.settle.quiet(now_s):  # nothing heard for a hold's time: judged now (livesettle)
             self.release_held()
         nodes = node_ages(self.db, self.messages, now_s)
-        state, why = self._verdict(nodes.get(FIRMWARE_NODE))
+        state, why = verdict(self, nodes.get(FIRMWARE_NODE))  # (monitorverdict)
         return {"state": state, "why": why, "nodes": nodes, "events": list(self.events),
                 "firmware_events": list(self.firmware_events),
                 "pose_wrongs": self.tracker.wrongs.as_dict()}  # latched: host.judge.posewrongs
-
-    def _verdict(self, firmware: dict[str, Any] | None) -> tuple[str, list[str]]:
-        if firmware is None:
-            return "NO FIRMWARE", [f"no cyclic {FIRMWARE_NODE} message heard"]
-        if firmware["stale"] and not self.settle.held:  # held frames were heard (livesettle)
-            return "STALE", [
-                f"{FIRMWARE_NODE} silent for {firmware['age_s']:.2f} s (timeout "
-                f"{firmware['timeout_s']:.2f} s); it last said {self.status.get('state', '?')}"
-            ]
-        if self._bus_time_s <= self.sources.conflict_until_s:
-            return "CONFLICT", [str(self.events[-1]["detail"]) if self.events else "two sources"]
-        reported = str(self.status.get("state", "?"))
-        if reported != "OK":
-            return self._reported_verdict(reported)
-        if self.sources.conflict_from_s is not None:  # whose pose is it? (posewrongs: none judged)
-            return "UNVERIFIED", [self.sources.conflict_text()]
-        error = self.tracker.vs_reference.latest
-        if not error:
-            return "UNVERIFIED", ["no on-board pose compared with the reference yet"]
-        if self.tracker.awaiting_boot:
-            return "UNVERIFIED", ["rebooted: waiting for the encoder frame it primed on"]
-        for verdict, why in (("POSE WRONG", partial(pose_wrong_why, self.tracker)),  # livestanding
-                             ("DISTANCE WRONG", self.distance.verdict),  # latched, in this order
-                             ("TWIST WRONG", self.twist.verdict),  # LINEAR_VEL, ANGULAR_VEL
-                             ("HELD", self.settle.why)):  # frames not judged yet: livesettle
-            if reasons := why():
-                return verdict, reasons
-        return "OK", placed_why(self.tracker)
-
-    def _reported_verdict(self, reported: str) -> tuple[str, list[str]]:
-        """The firmware's own state when not OK, with its REASON; but a pose, DISTANCE or twist
-        found wrong (``livedistance``, ``livetwist``: latched once settled) outranks DEGRADED,
-        which a latched REASON (COUNTER_RESET, POSE_UNCERTAIN) keeps until a set-pose: the
-        judge's finding is not hidden behind it. The pose is wrong as it is beside an OK
-        (``livestanding``: the latest sample, or an episode of the pose's current life)."""
-        said = f"firmware reports {reported} ({reason_text(str(self.status.get('reason', '?')))})"
-        if reported == "DEGRADED":
-            for verdict, why in (("POSE WRONG", self._pose_wrong_degraded()),
-                                 ("DISTANCE WRONG", self.distance.verdict()),
-                                 ("TWIST WRONG", self.twist.verdict())):
-                if why:
-                    return verdict, [*why, said]
-        return reported, [said]
-
-    def _pose_wrong_degraded(self) -> list[str]:
-        """``pose_wrong_why`` beside a DEGRADED; while no sample can be judged (two sources, a
-        reboot's priming frame awaited), the episodes of the pose's current life alone."""
-        if self.sources.conflict_from_s is not None or self.tracker.awaiting_boot:
-            text = self.tracker.wrongs.standing_text()
-            return [text] if text else []
-        return pose_wrong_why(self.tracker)
 
     def snapshot(self, now_s: float | None = None) -> dict[str, Any]:
         """The whole model as JSON-ready data (``odocan monitor --json``); ``now_s``: local

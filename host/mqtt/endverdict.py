@@ -15,6 +15,13 @@ pose (issue #11: the rig never shows OK while the pose it reports is wrong). Now
     UNJUDGED: the firmware stalled before its first pose after its power-up (INIT at UPTIME 0)
     while the robot moved: ... (``livefirst.unproven_why``: the same)
 
+Without ``--robot``, a firmware whose PROFILE page is not the default robot's is not judged
+(``host.judge.liverobot``: judging it as pmir FAILed a correct firmware for an option not
+given)::
+
+    UNJUDGED: the firmware runs a different profile than the default robot pmir: give --robot
+    (--require-firmware fails it); profile mismatch: ...
+
 FAIL (exit 1) when the pose was wrong at any time of the watch, DISTANCE or the twist speeds
 wrong once, two firmwares on the bus, or (``require_firmware``) when nothing was judged; the
 firmware's PROFILE page against ``--robot``, when it differs, follows on the line (a firmware set
@@ -106,7 +113,7 @@ def end_verdict(telemetry: RobotTelemetry, *, profile_name: str | None = None,
     fails = failures(telemetry.tracker, telemetry.distance, telemetry.twist, telemetry.sources,
                      judged_as)
     compared = telemetry.tracker.vs_reference.samples
-    why = nothing_judged(telemetry.db, telemetry.frames, compared)
+    why = telemetry.robot.unjudged or nothing_judged(telemetry.db, telemetry.frames, compared)
     if why and require_firmware:
         fails.append(f"{why} {REQUIRE_FIRMWARE}")
     if fails:

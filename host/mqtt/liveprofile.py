@@ -27,7 +27,7 @@ from collections import deque
 from typing import TYPE_CHECKING, Any, Protocol
 
 from odocan.host.judge.livedistance import LiveDistance
-from odocan.host.judge.liverobot import PageWait, decide
+from odocan.host.judge.liverobot import PageWait, decide, late_page
 from odocan.host.judge.profilepage import (
     GIVEN_AS,
     diagnose_profile,
@@ -131,6 +131,13 @@ def judge_waited(telemetry: RobotTelemetry) -> list[Publication]:
         else:
             published += telemetry.feed_fields(*item)
     return published
+
+
+def late_robot_page(telemetry: RobotTelemetry, max_wheel_speed_m_s: float, crc: int) -> None:
+    """A PROFILE page heard once the wait is over (``liverobot.late_page``): when it leaves the
+    watch unjudged, its judges were built anew, and the plans made for them too."""
+    if late_page(telemetry, max_wheel_speed_m_s, crc, name=telemetry.name):
+        telemetry.plans.update(plans(telemetry, telemetry._routes))
 
 
 def wait_page(telemetry: RobotTelemetry, wait: PageWait[Any], t_s: float, can_id: int,

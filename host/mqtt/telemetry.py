@@ -76,7 +76,7 @@ from odocan.host.mqtt.haltstretch import HaltStretches
 from odocan.host.mqtt.livecommands import CommandFollowing
 from odocan.host.mqtt.livehold import BridgeHold
 from odocan.host.mqtt.liveplan import Plan, plans
-from odocan.host.mqtt.liveprofile import ProfileStatus, judge_waited, wait_page
+from odocan.host.mqtt.liveprofile import ProfileStatus, judge_waited, late_robot_page, wait_page
 from odocan.host.mqtt.liveroutes import Route, routes, takes
 from odocan.host.mqtt.topics import stamp, status_payload
 from odocan.host.protocol.busfacts import ENC_COUNTER_MASK as MASK
@@ -322,6 +322,8 @@ class RobotTelemetry(CommandFollowing):
     def _on_encoders(self, s: tuple[Any, ...], t_s: float) -> list[Publication]:
         frame = (int(s[0]), int(s[1]), int(s[2]), t_s, int(s[3]))
         self.tracker.on_encoders(*frame)
+        if self.robot.unjudged is not None:  # the page contradicts the default (liverobot)
+            return []
         self.distance.on_encoders(self.tracker, *frame)
         self.twist.on_encoders(self.tracker, *frame)
         return []
@@ -339,6 +341,8 @@ class RobotTelemetry(CommandFollowing):
         enc_counter, linear, angular, distance, counter = s
         self._twist = {"linear_vel_m_s": linear, "angular_vel_rad_s": angular,
                        "distance_m": distance}
+        if self.robot.unjudged is not None:  # published, not judged (liverobot)
+            return []
         self.distance.on_twist(self.tracker, int(enc_counter), round(distance * 1e3), t_s,
                                int(counter))
         self.twist.on_twist(self.distance.named, round(linear * 1e3), round(angular * 1e3), t_s)
@@ -435,6 +439,7 @@ class RobotTelemetry(CommandFollowing):
             self.events += self.latch.observe(t_s, int(s["STATE"]), int(s["REASON"]),
                                               int(s["ERROR_MASK"]))
         elif name == "profile":  # the bus's speed bound judges; a mismatch is said
+            late_robot_page(self, float(s["MAX_WHEEL_SPEED"]), int(s["PROFILE_CRC"]))
             self.on_profile_page(s, t_s)  # (it settles a config two senders left in doubt)
         return []
 

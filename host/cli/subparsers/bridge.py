@@ -81,7 +81,8 @@ def _add_arguments(parser: argparse.ArgumentParser) -> None:
         "--require-firmware",
         action="store_true",
         help="exit 1 when the bridge heard no firmware (no cyclic ODOM_MCU message) or compared "
-        "no on-board pose with the reference: a CI run that judged nothing fails (default: off; "
+        "no on-board pose with the reference (or, without --robot, the firmware's PROFILE page is "
+        "not the default robot's): a CI run that judged nothing fails (default: off; "
         "UNJUDGED exits 0)",
     )
     parser.add_argument(

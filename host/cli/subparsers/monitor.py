@@ -129,7 +129,8 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
         "--require-firmware",
         action="store_true",
         help="exit 1 when the watch heard no firmware (no cyclic ODOM_MCU message) or compared "
-        "no on-board pose with the reference: a CI watch that judged nothing fails (default: "
+        "no on-board pose with the reference (or, without --robot, the firmware's PROFILE page is "
+        "not the default robot's): a CI watch that judged nothing fails (default: "
         "off, so that the monitor views or records (--log) any bus; NO FIRMWARE exits 0)",
     )
     add_robot_argument(parser, role="profile for the reference", live=True)
@@ -198,11 +199,14 @@ def _say_failures(args: argparse.Namespace, model: BusMonitor, profile: robot.Ro
     judged_as = (f"{model.robot.judged_as()}{_robot_hint(args, profile, model.robot.given_as)}"
                  if model.tracker.wrongs.count else "")  # (the hint reads the whole --log)
     fails = failures(model.tracker, model.distance, model.twist, model.sources, judged_as)
-    if args.require_firmware and (why := nothing_judged(  # judged nothing: no pass (CI)
-            model.db, model.messages, model.tracker.vs_reference.samples)):
+    unjudged = model.robot.unjudged  # the page contradicts the default (host.judge.liverobot)
+    if args.require_firmware and (why := unjudged or nothing_judged(  # judged nothing: no
+            model.db, model.messages, model.tracker.vs_reference.samples)):  # pass (CI)
         fails.append(f"{why} {REQUIRE_FIRMWARE}")
     for line in fails:
         print(f"monitor: FAIL: {line}", file=sys.stderr)
+    if unjudged and not fails:  # as the bridge's end line says it
+        print(f"monitor: UNJUDGED: {unjudged} (--require-firmware fails it)", file=sys.stderr)
     if args.interface == "odocan" and not model.frames_total:
         print("monitor: heard no frame: the odocan interface carries frames within one process "
               "only; watch a bus other processes share (udp_multicast, socketcan)",
