@@ -259,8 +259,9 @@ class _Follower:
         self.last_t = t
         self.heard_since_pose += 1
         self.halves.clear()
-        if round(t * 1e6) in self.reboots_us:  # a new firmware: primed on this frame
-            self.prev, self.refused, self.held = None, [], None
+        if round(t * 1e6) in self.reboots_us:  # a new firmware: primed on this frame; the
+            self.prev, self.refused, self.held = None, [], None  # silence of its boot before
+            self.last_pose_t, self.heard_since_pose = t, 0  # it was no stall (none to place)
         uptime = int(s.get("CTRL_UPTIME", 0))
         held, self.held = self.held, None
         if held is not None and self._confirms(held, frame, s):

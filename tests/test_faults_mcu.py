@@ -26,7 +26,10 @@ from odocan.firmware import frames as fr
 from odocan.host.cli.app import main
 from odocan.host.io.logs import read_log
 from odocan.host.judge.analysis import analyze
+from odocan.host.judge.monitor import BusMonitor
+from odocan.host.judge.reference import Geometry
 from odocan.host.judge.stream_analysis import analyze_file
+from odocan.host.mqtt.telemetry import RobotTelemetry
 from odocan.sim.board import TICK_S
 from odocan.sim.exceptions import ConfigurationError
 from odocan.sim.faults import FaultInjectingBus
@@ -293,26 +296,96 @@ def test_a_reboot_at_an_odd_tick_is_replayed_life_by_life(
     assert " identical, max difference 0.0000 mm" in first, first
 
 
-@pytest.mark.xfail(strict=True, reason="a reset in the firmware's first second of uptime "
-                   "followed by >= 0.3 s of boot silence is told as a stall (UPTIME 0 -> 0, the "
-                   "COUNTERs' power-up signature lost in the silence, host.judge.bootticks): the "
-                   "new life's DISTANCE from 0 then FAILs the correct firmware (90 mm, seed 3)")
+BOOT_SILENCES = ["reboot=0.5:0.5", "reboot=0.5:0.3", "reboot=0.8:0.5"]
+
+
+def _boot_silence(tmp_path: Path, faults: str) -> tuple[Path, float]:
+    """``odocan run`` (seed 3) with a reset in the firmware's first second and a boot silence:
+    exit 0; its log and the bus time the new firmware primed on (its first tick: T + DUR)."""
+    log = tmp_path / "boot.log"
+    assert main(["run", "--duration", str(RUN_S), "--seed", "3", "--faults", faults,
+                 "--log", str(log), "--report", str(log.with_suffix(".json"))]) == 0
+    at_s, boot_s = (float(v) for v in faults.split("=")[1].split(":"))
+    return log, min(t for t in _encoder_times(log) if t >= at_s + boot_s - TICK_S / 2)
+
+
+def _live(log: Path) -> tuple[BusMonitor, RobotTelemetry]:
+    monitor = BusMonitor(PMIR, "exact")
+    bridge = RobotTelemetry("r1", Geometry.of(PMIR), "exact", counter_bits=PMIR.counter_bits)
+    with can.LogReader(str(log)) as reader:
+        for msg in reader:
+            monitor.feed(msg, now_s=msg.timestamp)
+            bridge.feed(msg)
+    return monitor, bridge
+
+
+@pytest.mark.parametrize("faults", BOOT_SILENCES)
 def test_a_boot_silence_in_the_first_second_is_told_as_a_reboot(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+    faults: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    assert main(["run", "--duration", str(RUN_S), "--seed", "3", "--faults", "reboot=0.5:0.5",
-                 "--log", str(tmp_path / "boot.log")]) == 0
+    """UPTIME says 0 in both lives and the silence is long enough for one life to count both
+    COUNTERs on to 0 (frames lost): it was told a stall, and the new life's DISTANCE from 0
+    FAILed the correct firmware (90..162 mm) in every judge, the live ones by 1.1 m. The
+    twist's DISTANCE falling in the new pose run tells the reboot (``bootticks.tied_to_run``).
+    """
+    log, primed = _boot_silence(tmp_path, faults)
+    capsys.readouterr()
+    own = ic.check(log, _robot(), "exact", lambda _t: (0.0, 0.0, 0.0), reboots_t_s=[primed])
+    assert own.samples > 300, own
+    assert own.passed, own
+    whole = analyze(read_log(log), PMIR, "exact")
+    assert whole.passed
+    kinds = [e["kind"] for e in whole.report["events"]]
+    assert kinds.count("reboot") == 1, kinds
+    assert "firmware_stall" not in kinds, kinds
+    streamed = analyze_file(log, PMIR, "exact", chunk_frames=97)
+    assert streamed["passed"]
+    assert streamed["events"] == whole.report["events"]
+    for stream in ("always", "never"):
+        assert main(["analyze", str(log), "--stream", stream]) == 0
+    assert main(["replay", str(log)]) == 0
+    monitor, bridge = _live(log)
+    assert [e["kind"] for e in monitor.events if e["kind"] == "reboot"] == ["reboot"]
+    assert monitor.health(monitor.tracker.now_s)["state"] == "OK"
+    assert bridge.reboots == 1
+    assert bridge.tracker.vs_reference.max_dpos_m < 1e-4
     capsys.readouterr()
 
 
-@pytest.mark.xfail(strict=True, reason="a bit-timed log whose firmware halted 9 ticks (10 tick "
-                   "periods between its ticks: just at sim.board.HALT_AFTER_S) is replayed with "
-                   "no halt; the replay departs by 0.14 mm and says FAIL, not UNJUDGED")
+@pytest.mark.parametrize("lsb", [TAMPER_LSB, 100 * TAMPER_LSB])  # 10 mm, 1 m
+def test_a_pose_moved_after_a_boot_silence_fails(
+    lsb: int, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The same reboot (``reboot=0.5:0.5``), ODOM_POSE_X's X raised 10 mm or 1 m from the new
+    firmware's first pose on: the tests' odometry and every judge FAIL it."""
+    log, primed = _boot_silence(tmp_path, BOOT_SILENCES[0])
+    tampered = tmp_path / "tampered.log"
+    assert raise_raw(log, tampered, "ODOM_POSE_X", (2, 4), lsb, primed) > 50
+    capsys.readouterr()
+    own = ic.check(tampered, _robot(), "exact", lambda _t: (0.0, 0.0, 0.0), reboots_t_s=[primed])
+    assert own.max_position_error_m > 9e-3
+    assert not analyze(read_log(tampered), PMIR, "exact").passed
+    assert not analyze_file(tampered, PMIR, "exact", chunk_frames=97)["passed"]
+    for stream in ("always", "never"):
+        assert main(["analyze", str(tampered), "--stream", stream]) == 1
+    assert main(["replay", str(tampered)]) == 1
+    monitor, bridge = _live(tampered)
+    assert monitor.health(monitor.tracker.now_s)["state"] == "POSE WRONG"
+    assert bridge.tracker.vs_reference.max_dpos_m > 9e-3
+    capsys.readouterr()
+
+
 def test_a_halt_at_the_threshold_on_a_bit_timed_bus_is_not_blamed_by_the_replay(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
+    """The firmware halted 9 ticks (10 tick periods between its ticks: the board's
+    ``HALT_AFTER_S``), its frames 108.5 ms apart on a bit-timed bus: the replay took only
+    silences of its frames over 11 periods for halts, ran every tick, departed by 0.14 mm and
+    FAILed the correct firmware. The frame-less ticks decide (``firmware_silences``)."""
     log = tmp_path / "edge.log"
     assert main(["run", "--duration", str(RUN_S), "--seed", "4", "-b", "500000", "--faults",
                  "stall=2.015:0.095", "--log", str(log)]) == 0
-    assert main(["replay", str(log)]) == 0
     capsys.readouterr()
+    assert main(["replay", str(log)]) == 0
+    out = capsys.readouterr().out
+    assert "1 stalls replayed as halts" in out, out

@@ -152,19 +152,21 @@ def next_run(run: tuple[float, int, bool] | None, t_s: float, counter: int,
 
 
 def boot_tick(uptime_s: int, counter: int, t_s: float, pose: tuple[float, int, bool] | None,
-              summary_before_s: float | None, status_before: tuple[float, int] | None) -> bool:
+              summary_before_s: float | None, status_before: tuple[float, int] | None,
+              fell: bool = False) -> bool:
     """The summary (UPTIME ``uptime_s``, E2E ``counter``, bus time ``t_s``) is a firmware's
     power-up tick (module docstring): ``pose``, the pose run of the ODOM_POSE_X frames heard
     before it (``next_run``; None: none); ``summary_before_s``: the bus time of the summary
     before (None: none); ``status_before``: bus time and COUNTER of the ODOM_STATUS frame
     heard before it (any page; None: none). The run's pose of COUNTER 0 or the summary must
-    break its message's sequence (``breaks_sequence``, ``status_breaks``)."""
+    break its message's sequence (``breaks_sequence``, ``status_breaks``), or the twists'
+    DISTANCE fell in the run's window (``fell``: ``fell_in_run``)."""
     if not RULE_HOLDS or uptime_s != 0 or counter != 0 or pose is None:
         return False
     if summary_before_s is not None and t_s - summary_before_s < REPEAT_S:
         return False
-    broken = pose[2] or status_before is None or status_breaks(status_before[1],
-                                                               t_s - status_before[0])
+    broken = fell or pose[2] or status_before is None or status_breaks(status_before[1],
+                                                                       t_s - status_before[0])
     return broken and 0 <= pose[1] < BOOT_POSE_FRAMES and 0.0 <= t_s - pose[0] < BOOT_WINDOW_S
 
 
@@ -251,6 +253,31 @@ def fell_around(falls: Falls, summary_s: float) -> bool:
                for k in range(first, last))
 
 
+def tied_to_run(t_s: float, counter: int, summary_s: float) -> bool:
+    """Whether a twist (bus time ``t_s``, E2E ``counter``) whose DISTANCE fell is the new
+    firmware's of a power-up tick whose summary at ``summary_s`` came after its poses
+    (``boot_tick``): heard by the summary, less than ``BOOT_WINDOW_S`` before it, COUNTER below
+    ``BOOT_POSE_FRAMES`` (the run's own twists: ODOM_TWIST shares the pose's cycle). A reset in
+    the firmware's first second followed by 0.3 s or more of boot silence (``reboot=0.5:0.5``)
+    breaks neither COUNTER sequence (one life losing its frames on the bus could count on to 0
+    in that time), and UPTIME says 0 in both lives: it was told a stall and the new life's
+    DISTANCE from 0 FAILed the correct firmware (90..162 mm, issue #11). A stalled firmware's
+    DISTANCE goes on from where it was; one that fell is a new life."""
+    since_s = summary_s - t_s
+    return bool(0.0 <= since_s < BOOT_WINDOW_S and counter < BOOT_POSE_FRAMES)
+
+
+def fell_in_run(falls: Falls, summary_s: float) -> bool:
+    """Whether a twist's DISTANCE fell (``distfall.fall_times``, bus times in order) where it
+    is the pose run's before the summary at ``summary_s`` (``tied_to_run``): ``boot_tick``'s
+    ``fell``, read when the summary is heard (live: ``distfall.fell_within``)."""
+    times_s = falls.times_s
+    first = int(np.searchsorted(times_s, summary_s - BOOT_WINDOW_S))
+    last = int(np.searchsorted(times_s, summary_s, side="right"))
+    return any(tied_to_run(float(times_s[k]), int(falls.counters[k]), summary_s)
+               for k in range(first, last))
+
+
 def restarts_small(counter: int, t_s: float, before: tuple[float, int] | None) -> bool:
     """Whether an ODOM_POSE_X of E2E ``counter`` (1 .. ``BOOT_POSE_FRAMES`` - 1) heard at bus
     time ``t_s`` is a new firmware's whose power-up pose the bus lost: its COUNTER restarted
@@ -304,11 +331,13 @@ def ahead_ticks(frames: FrameArrays, decoder: BulkDecoder, positions: npt.NDArra
 
 def boot_ticks(uptime_s: npt.NDArray[np.int64], counters: npt.NDArray[np.int64],
                t_s: npt.NDArray[np.float64], poses: Runs, statuses: Latest,
-               summary_before_s: float | None) -> npt.NDArray[np.bool_]:
+               summary_before_s: float | None, falls: Falls | None = None
+               ) -> npt.NDArray[np.bool_]:
     """``boot_tick`` of summaries in bus order (their UPTIMEs, COUNTERs, bus times) at once;
     ``poses``: each one's pose run (``poses_before``: NaN, -1, False where none);
     ``statuses``: each one's ODOM_STATUS frame before (``status_before``: NaN, -1 where none);
-    ``summary_before_s``: the bus time of the summary before the first."""
+    ``summary_before_s``: the bus time of the summary before the first; ``falls``: the twists
+    whose DISTANCE fell (``fell_in_run``; None: none read)."""
     before = np.concatenate(([-math.inf if summary_before_s is None else summary_before_s],
                              t_s[:-1]))
     pose_t, pose_counter, pose_new = poses
@@ -320,9 +349,13 @@ def boot_ticks(uptime_s: npt.NDArray[np.int64], counters: npt.NDArray[np.int64],
     since = t_s - pose_t  # NaN where no pose: every comparison False
     found: npt.NDArray[np.bool_] = (RULE_HOLDS & (uptime_s == 0) & (counters == 0)
                                     & (pose_counter >= 0) & (pose_counter < BOOT_POSE_FRAMES)
-                                    & (t_s - before >= REPEAT_S) & (pose_new | status_new)
+                                    & (t_s - before >= REPEAT_S)
                                     & (since >= 0.0) & (since < BOOT_WINDOW_S))
-    return found
+    broken = pose_new | status_new
+    if falls is not None and len(falls.times_s):  # rare: read only where the rest holds
+        for i in np.flatnonzero(found & ~broken).tolist():
+            broken[i] = fell_in_run(falls, float(t_s[i]))
+    return found & broken
 
 
 def poses_before(frames: FrameArrays, decoder: BulkDecoder, positions: npt.NDArray[np.int64],

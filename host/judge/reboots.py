@@ -58,8 +58,16 @@ import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.bootnamed import named_start, pose_enc_rows, powerup_poses
-from odocan.host.judge.bootticks import ahead_ticks, boot_ticks, poses_before, status_before
+from odocan.host.judge.bootticks import (
+    TWIST_COUNTERS,
+    ahead_ticks,
+    boot_ticks,
+    fell_in_run,
+    poses_before,
+    status_before,
+)
 from odocan.host.judge.breaks import merged_breaks
+from odocan.host.judge.distfall import fall_times
 from odocan.host.judge.gapseen import crc_holds
 from odocan.host.judge.liveconfig import config_text
 from odocan.host.judge.primed import counted_start
@@ -217,7 +225,8 @@ def _watch_summaries(
     counters = page["COUNTER"][good].astype(np.int64)
     poses = poses_before(frames, decoder, positions)[0]  # their ticks' (``bootticks``)
     statuses = status_before(frames, decoder, positions)[0]
-    booted = boot_ticks(uptimes_s, counters, times_s, poses, statuses, None)
+    falls = fall_times(frames, decoder, TWIST_COUNTERS)[0]  # a new life's DISTANCE fell
+    booted = boot_ticks(uptimes_s, counters, times_s, poses, statuses, None, falls)
     ahead = ahead_ticks(frames, decoder, positions, uptimes_s, counters, times_s, statuses)
     watch = SourceWatch()
     boots = []
@@ -240,7 +249,7 @@ def _watch_summaries(
         watch.status_before = (None if status_counter < 0
                                else (float(statuses[0][k]), status_counter))
         kind = watch.observe(float(times_s[k]), int(uptimes_s[k]), name, int(counters[k]),
-                             bool(ahead[k]))
+                             bool(ahead[k]), fell=fell_in_run(falls, float(times_s[k])))
         if kind == "reboot":
             boots.append((int(positions[k]), int(uptimes_s[k]), name, int(before)))
         if watch.changed_at_s == float(times_s[k]):

@@ -151,15 +151,19 @@ def first_power_up(frames: FrameArrays, decoder: BulkDecoder,
 
 def firmware_silences(frames: FrameArrays, decoder: BulkDecoder,
                       track: EncoderTrack) -> list[tuple[int, int]]:
-    """[first, end) ticks in which the firmware ran none: between two of its frames more than
-    ``LOST_TIME_PERIODS`` encoder periods apart while the encoder frames went on, from the
-    tick after the one that sent the first to the one that sent the second (its encoder frame
-    the latest before it)."""
+    """[first, end) ticks in which the firmware ran none: between two of its frames while the
+    encoder frames went on, from the tick after the one that sent the first to the one that
+    sent the second (its encoder frame the latest before it), ``LOST_TIME_PERIODS`` ticks or
+    more. The frames' own gap only preselects (over ``LOST_TIME_PERIODS - 1`` periods): on a
+    bit-timed bus a tick's frames leave up to a few ms after it, and a firmware halted 9 ticks
+    (10 periods between its ticks, the board's ``HALT_AFTER_S``: its FIFO overran) sent its
+    frames 108.5 ms apart; taken only over 11 periods, the replay ran every tick, departed by
+    0.14 mm and FAILed the correct firmware (issue #11)."""
     ids = [m.frame_id for m in contract.database().messages if m.senders == [FIRMWARE_NODE]]
     sent_s = np.sort(frames.timestamp_s[np.isin(frames.can_id, ids)])
     period_s = contract.cycle_time_s("WHEEL_ENCODERS")
     halts = []
-    for at in np.flatnonzero(np.diff(sent_s) > (LOST_TIME_PERIODS + 1) * period_s).tolist():
+    for at in np.flatnonzero(np.diff(sent_s) > (LOST_TIME_PERIODS - 1) * period_s).tolist():
         last = int(np.searchsorted(track.timestamp_s, sent_s[at], "right")) - 1
         resumed = int(np.searchsorted(track.timestamp_s, sent_s[at + 1], "right")) - 1
         if last < 0 or resumed <= last:

@@ -31,6 +31,7 @@ from odocan.host.judge.bootticks import (
     next_run,
     pose_heard,
     tied_to_boot,
+    tied_to_run,
     told_run_s,
 )
 from odocan.host.judge.distfall import (
@@ -151,17 +152,24 @@ class SourceWatch:
         return False
 
     def observe(self, t_s: float, uptime_s: int, state: str, counter: int | None = None,
-                ahead: bool = False, seq: int | None = None) -> str | None:
+                ahead: bool = False, seq: int | None = None, fell: bool | None = None
+                ) -> str | None:
         """One ODOM_STATUS summary (``counter``: its E2E COUNTER, None: not told; with the
         watch's ``pose``, the run of the ODOM_POSE_X frames heard before the summary, it tells
         a power-up tick: ``bootticks.boot_tick``; ``ahead``: the first pose after it told one,
-        ``bootticks.boot_ahead``, a log's; ``seq``: the encoder frame latest heard, live);
-        returns ``"reboot"``, ``"two sources"``, ``"uptime jump"`` or None. A summary the first
-        pose after it may tell is kept in ``ahead`` (live: ``hear_pose``, ``told_ahead``)."""
+        ``bootticks.boot_ahead``, a log's; ``seq``: the encoder frame latest heard, live;
+        ``fell``: a twist of that run fell, ``bootticks.fell_in_run``, a log's; None: read from
+        ``twists``, live); returns ``"reboot"``, ``"two sources"``, ``"uptime jump"`` or None.
+        A summary the first pose after it may tell is kept in ``ahead`` (live: ``hear_pose``,
+        ``told_ahead``)."""
         offset = uptime_s - t_s
         kind = None
         booted = counter is not None and boot_tick(uptime_s, counter, t_s, self.pose,
                                                    self.summary_s, self.status_before)
+        if not booted and counter == 0 and uptime_s == 0 and self.pose is not None:
+            fell = self._fell_in_run(t_s) if fell is None else fell
+            booted = boot_tick(uptime_s, counter, t_s, self.pose, self.summary_s,
+                               self.status_before, fell)
         broke = (None if booted or counter is None else
                  ahead_candidate(uptime_s, counter, t_s, self.summary_s, self.status_before))
         booted, ahead = booted or (ahead and broke is not None), ahead and not booted
@@ -195,6 +203,13 @@ class SourceWatch:
         self.last_uptime_s, self.last_state = uptime_s, state
         self.page_pending = self.page_pending and kind != "reboot"
         return kind
+
+    def _fell_in_run(self, summary_s: float) -> bool:
+        """Whether a twist kept live fell where it is the pose run's before the summary at
+        ``summary_s`` (``bootticks.tied_to_run``)."""
+        return fell_within(self.twist_field, self.twists,
+                           lambda t_s, counter: tied_to_run(t_s, counter, summary_s),
+                           TWIST_COUNTERS)
 
     def hear_pose(self, t_s: float, counter: int) -> None:
         """An ODOM_POSE_X whose CRC holds, heard at bus time ``t_s`` with E2E ``counter``,

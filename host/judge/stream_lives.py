@@ -41,6 +41,7 @@ from odocan.host.judge.bootticks import (
     boot_ahead,
     continues_summary,
     fell_around,
+    fell_in_run,
     pose_rows,
     poses_before,
     status_before,
@@ -327,7 +328,8 @@ class StreamLives:
             self._watch.pose = ((pose[0], int(pose[1]), bool(pose[2])) if pose[1] >= 0
                                 else None)
             self._watch.status_before = (status[0], int(status[1])) if status[1] >= 0 else None
-            kind = self._watch.observe(float(t_s), int(uptime_s), name, int(counter))
+            kind = self._watch.observe(float(t_s), int(uptime_s), name, int(counter),
+                                       fell=fell_in_run(self._falls[0], float(t_s)))
             at = int(position) + self._offset
             if self._watch.changed_at_s == float(t_s):
                 self._changed = (at, float(t_s))
