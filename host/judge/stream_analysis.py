@@ -50,7 +50,7 @@ from odocan.host.judge.samples import (
     require_messages,
 )
 from odocan.host.judge.setposekept import Kept, check_cut
-from odocan.host.judge.stallreprime import STREAM, any_declared
+from odocan.host.judge.stallreprime import detail as reprime_detail
 from odocan.host.judge.stream import StreamE2E
 from odocan.host.judge.stream_carry import CarriedSpans, carried
 from odocan.host.judge.stream_choice import RSS_MARGIN as RSS_MARGIN
@@ -77,6 +77,7 @@ from odocan.host.judge.stream_place import start_pose as place_start
 from odocan.host.judge.stream_primed import judged_from_candidates
 from odocan.host.judge.stream_refusal import UNSETTLED
 from odocan.host.judge.stream_refusal import NotStreamable as NotStreamable
+from odocan.host.judge.stream_reprime import stream_reprimes
 from odocan.host.judge.stream_stalls import StreamBreakCounts
 from odocan.host.judge.twosenders import LogSenders
 from odocan.host.judge.unseenrestart import restart_detail, whole_only
@@ -231,6 +232,12 @@ def _analyze_lives(
     return report
 
 
+def _drained(chunks: Iterator[Any]) -> None:
+    """Run a pass for what it tells on the way (``stream_reprime.ReprimeTap``)."""
+    for _ in chunks:
+        pass
+
+
 def _as_life(span: LifeSpan) -> Life:
     """A ``reboots.Life`` for ``merge`` (which reads its time and UPTIME, not its frames)."""
     return Life(np.zeros(0, dtype=np.int64), span.boot, span.t_s, span.uptime_before_s,
@@ -312,7 +319,16 @@ def _judged(
     breaks = first.breaks
     spans = first.losses.spans(power_up and start_pose is None)
     geometry, bits = Geometry.of(robot), min(robot.counter_bits, WIRE_COUNTER_BITS)
-    drops = SpanDrops(spans, geometry, bits, integrator, [b for b in breaks.tolist() if b > e0])
+    seen_all = first.pages.seen(power_up)
+    stalled = stream_reprimes(  # a stall it declared it re-primed after: stream_reprime
+        lambda tap: _drained(life_chunks(frames(), db, robot, integrator, e0=e0, breaks=breaks,
+                                         max_wheel_speed_mm_s=max_wheel_speed_mm_s, tap=tap)),
+        BulkDecoder(db), breaks.tolist(), e0, seen_all.resets,
+        least_of(geometry, bits, max_wheel_speed_mm_s),
+        start_pose if start_pose is not None else (0.0, 0.0, 0.0) if power_up else None,
+        (geometry, bits, integrator))
+    drops = SpanDrops(spans, geometry, bits, integrator,  # losses.life_placements
+                      [b for b in breaks.tolist() if b > e0 and b - e0 not in stalled.reprimes])
     across = StreamBreakCounts(breaks[breaks > e0].tolist(), geometry, bits, integrator,
                                max_wheel_speed_mm_s)
 
@@ -323,7 +339,8 @@ def _judged(
     def placed(info: LifeInfo | None = None, losses: bool = False) -> Iterator[PlacedChunk]:
         for chunk, _ in life_chunks(frames(), db, robot, integrator, e0=e0, breaks=breaks,
                                     max_wheel_speed_mm_s=max_wheel_speed_mm_s, info=info,
-                                    on_encoders=on_encoders if losses else None):
+                                    on_encoders=on_encoders if losses else None,
+                                    left_out=stalled.left_out):
             if losses:
                 drops.named(chunk.enc)
             across.named(chunk.enc)  # the same each pass: the first sets it
@@ -335,12 +352,10 @@ def _judged(
     # the offsets' pass also weighs the lossy spans (losses.loss_allowance) and keeps the
     # counts across the stalls' breaks (their allowance)
     raw = segment_offsets(lambda: placed(losses=True), (x0, y0, h0), info.segments + 1)
-    seen, reprimed = whole_only(first.pages.seen(power_up), info, NotStreamable)  # gapseen
-    if any(b > e0 for b in breaks.tolist()) and any_declared(  # stallreprime: judged whole
-            seen.resets, seen.resets.cycle_s, least_of(geometry, bits, max_wheel_speed_mm_s)):
-        raise NotStreamable(STREAM)
+    seen, reprimed = whole_only(seen_all, info, NotStreamable)  # gapseen
     off_x, off_y, placements = placed_offsets(
-        *raw, info.openings, lambda b: across.allowance(b, seen, reprimed),
+        *raw, info.openings, lambda b: stalled.allowance_m[b] if b in stalled.allowance_m
+        else across.allowance(b, seen, reprimed),
         lambda b: 0.0 if b in info.by_uptime or seen.gap_missed(b, reprimed)  # reference_path's
         else gap_or_fill_allowance(seen.filled(b, reprimed),  # gapfill: the log's late frames
             *info.gap_steps[b], geometry, bits, integrator, max_wheel_speed_mm_s),
@@ -349,13 +364,14 @@ def _judged(
     truth = TruthCompare((x0, y0, h0), offsets, rebase=rebase, e0=e0)
     last: list[PlacedChunk] = []
     wanted = (frozenset(info.reprimed) | frozenset(breaks.tolist())
-              | frozenset(first for first, _, _ in spans))
+              | frozenset(first for first, _, _ in spans)
+              | frozenset(e0 + rep.r for rep in stalled.reprimes.values()))
     final = LifeInfo()
 
     def with_truth() -> Iterator[PlacedChunk]:
         for chunk, told in life_chunks(frames(), db, robot, integrator, e0=e0, breaks=breaks,
                                        max_wheel_speed_mm_s=max_wheel_speed_mm_s, info=final,
-                                       times_of=wanted):
+                                       times_of=wanted, left_out=stalled.left_out):
             truth.feed(chunk, told)
             if len(chunk.enc):
                 last[:] = [chunk]
@@ -403,6 +419,10 @@ def _judged(
             {"kind": "counter_restart", "t_s": final.times_s[e], "encoder_frame": int(e),
              "detail": restart_detail(e in info.by_uptime)}
             for e in info.reprimed
+        ] + [
+            {"kind": "stall_reprime", "t_s": final.times_s[e0 + rep.r],
+             "encoder_frame": e0 + rep.r, "detail": reprime_detail(rep.stall_s)}
+            for _, rep in sorted(stalled.reprimes.items())
         ] + [
             {"kind": "firmware_stall", "t_s": final.times_s[e], "encoder_frame": int(e),
              "detail": STALL_DETAIL}
