@@ -13,6 +13,12 @@ RSS_TARGET_MB = 300.0  # the max RSS ``odocan analyze`` of one log aims to stay 
 # the size where that reaches RSS_TARGET_MB / RSS_MARGIN streams.
 WHOLE_RSS_MB = {".log": (65.4, 2.738), ".asc": (54.6, 1.888), ".blf": (52.2, 21.480)}
 RSS_MARGIN = 1.2  # over a worst-case fit (one long life): 250 MB, the bench log stays whole
+# A log the stream refused (``NotStreamable``) is then read whole after the stream's attempt, on
+# a heap the attempt left grown: ``bench/stream_stall.py`` measured that path (the stall refusal,
+# main before stream_reprime; pmir on the circle, 13-53 MB .log) at 1.20-1.32x WHOLE_RSS_MB's
+# fit for the correct firmware (121, 165, 277 MB) and 1.44x for a firmware 1 m off (302 MB):
+# the fit alone understated it by up to a third (docs/benchmarks.md).
+REFUSED_OVER_WHOLE = 1.5
 
 
 def stream_above_bytes(suffix: str) -> float:
@@ -33,6 +39,13 @@ def whole_rss_mb(path: str | Path) -> float | None:
     base, per_mb = WHOLE_RSS_MB.get(Path(path).suffix.lower(), max(WHOLE_RSS_MB.values(),
                                                                   key=lambda fit: fit[1]))
     return base + per_mb * size_mb
+
+
+def refused_rss_mb(path: str | Path) -> float | None:
+    """About the most max RSS (MB) ``odocan analyze`` takes on ``path`` when the stream refused
+    it (``REFUSED_OVER_WHOLE`` over ``whole_rss_mb``); None when it cannot be read."""
+    rss_mb = whole_rss_mb(path)
+    return None if rss_mb is None else REFUSED_OVER_WHOLE * rss_mb
 
 
 def streams(path: str | Path, mode: str = "auto") -> bool:

@@ -97,11 +97,13 @@ class ReprimeTap:
                  g: npt.NDArray[np.int64]) -> None:
         """A chunk, its E2E verdicts and accepted encoder frames (``g``: their numbers)."""
         self.cycle_s = enc.cycle_s
+        g0 = int(g[0]) if len(g) else 0  # the numbers run on: g0, g0 + 1, ...
         for w in self.windows:
-            hit = np.flatnonzero(g == w.b)
-            if len(hit):
-                w.b_s = float(enc.timestamp_s[hit[0]])
-            for k in np.flatnonzero((g >= w.b - 1) & (g < w.b - 1 + FIFO_SPAN + 1)).tolist():
+            if w.b - 1 + FIFO_SPAN < g0 or w.b - 1 >= g0 + len(g):
+                continue
+            if 0 <= w.b - g0 < len(g):
+                w.b_s = float(enc.timestamp_s[w.b - g0])
+            for k in range(max(w.b - 1 - g0, 0), min(w.b + FIFO_SPAN - g0, len(g))):
                 for name, values in (("seq", enc.seq), ("left", enc.left),
                                      ("right", enc.right)):
                     w.counts[name].append(int(values[k]))
@@ -128,6 +130,8 @@ class ReprimeTap:
         if len(chunk.enc) == 0:
             return
         for w in self.windows:
+            if len(w.after) == COMPARED:
+                continue
             before = np.flatnonzero(chunk.enc < w.b)
             if len(before) and w.first is None:
                 w.anchor = _sample(chunk, int(before[-1]))

@@ -257,14 +257,15 @@ def _streamed(
 def refused_line(log: Path | str, reason: str) -> str:
     """The one stderr line for a log ``--stream always`` could not stream: a user who asked
     for bounded memory learns it was not kept, and why; the verdict is the whole log's, the
-    same report, and the memory the whole log's judge takes for it (``whole_rss_mb``: not the
-    stream's bound, about 2.7 MB per MB of candump log). Under ``auto`` (the CLI's choice, not
-    the user's) a refusal is quiet."""
-    from odocan.host.judge.stream_choice import RSS_TARGET_MB, whole_rss_mb
+    same report, and the most memory the process then takes (``refused_rss_mb``: the stream's
+    attempt, then the whole log's judge; not the stream's bound: up to about 4 MB per MB of
+    candump log plus 100 MB). Under ``auto`` (the CLI's choice, not the user's) a refusal is
+    quiet."""
+    from odocan.host.judge.stream_choice import RSS_TARGET_MB, refused_rss_mb
 
-    rss_mb = whole_rss_mb(log)
-    memory = "" if rss_mb is None else (
-        f", in about {rss_mb:.0f} MB of memory (the stream aims under {RSS_TARGET_MB:.0f} MB)")
+    rss_mb = refused_rss_mb(log)
+    memory = "" if rss_mb is None else (f", in up to about {rss_mb:.0f} MB of memory (the stream "
+                                        f"aims under {RSS_TARGET_MB:.0f} MB)")
     return f"odocan analyze: {log}: not streamable ({reason}): judged whole{memory}"
 
 
