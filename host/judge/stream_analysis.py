@@ -17,7 +17,9 @@ A life whose frames came in a burst after a busy bus is refused (``NotStreamable
 the applied set-poses and configs (``stream_cuts``), as the whole log's judge cuts them. A
 power-up primed late (the first count page's k >= 1) is judged from each frame it may have
 primed on, the life streamed again per candidate (``stream_primed``, from its first frames).
-``streams`` says when to stream at all."""
+A stall the firmware declared it re-primed after (``stallreprime``) takes one pass more before
+step 2, which holds a few frames around each stall (``stream_reprime``): the placing passes then
+leave out the steps its re-prime left out. ``streams`` says when to stream at all."""
 
 from __future__ import annotations
 
