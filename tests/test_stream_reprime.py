@@ -49,6 +49,18 @@ def drive(scenario: str, halted: int) -> tuple[can.Message, ...]:
     return tuple(heard)
 
 
+@cache
+def drive_twice(scenario: str, tail_s: float) -> tuple[can.Message, ...]:
+    """Two declared stalls (6 s from tick ``MID``, 8 s from tick 1500), ``tail_s`` driven after
+    the second (0.2 s: fewer than ``COMPARED`` samples after it)."""
+    heard: list[can.Message] = []
+    with FaultRig(scenario=get_scenario(scenario, PMIR, duration_s=60.0)) as rig:
+        rig.observers.append(lambda _k, got: heard.extend(got))
+        rig.halted = lambda k: MID < k <= MID + 600 or 1500 < k <= 2300
+        rig.run(2300 * TICK_S + tail_s)
+    return tuple(heard)
+
+
 def _both(messages: tuple[can.Message, ...], path: Path) -> tuple[dict[str, Any], list[bool]]:
     """The whole log's report, and its JSON against each chunk size's streamed one."""
     _written(messages, path)
@@ -71,6 +83,23 @@ def test_the_correct_firmware_streamed_is_the_whole_report(scenario: str, halted
     assert _reprimed(whole) == 1  # the whole judge re-primed there (stallreprime)
     assert whole["passed"], whole["onboard_vs_reference"]
     assert same == [True, True]  # before: NotStreamable
+
+
+@pytest.mark.parametrize("tail_s", [0.2, 3.0])
+@pytest.mark.parametrize("scenario", ["circle", "square"])
+def test_two_stalls_streamed_are_the_whole_report(scenario: str, tail_s: float,
+                                                  tmp_path: Path) -> None:
+    """The second stall's COUNTER_RESET was latched by the first (sticky: it says nothing
+    new), so the whole judge keeps the exact rule there (``stallreprime``; measured: it PASSes
+    the circle, FAILs the square's correct firmware: the whole judge's rule, not the stream's):
+    the stream says what the whole judge says, byte for byte, either way."""
+    whole, same = _both(drive_twice(scenario, tail_s), tmp_path / "twice.log")
+    assert _reprimed(whole) == 1
+    assert same == [True, True]
+    wrong, same = _both(_wrong(drive_twice(scenario, tail_s), MID + 1, 100, 1),
+                        tmp_path / "wrong.log")
+    assert not wrong["passed"]
+    assert same == [True, True]
 
 
 @pytest.mark.parametrize("late_s", [0.01, 0.05])
