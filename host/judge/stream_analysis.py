@@ -37,7 +37,7 @@ from odocan.host.io.logs import CHUNK_FRAMES, FrameArrays, iter_log, warn_on_std
 from odocan.host.judge import acrosscut
 from odocan.host.judge.analysis import STALL_DETAIL, Tolerance
 from odocan.host.judge.breaks import placed_offsets
-from odocan.host.judge.configs import in_force
+from odocan.host.judge.configs import ConfigPages, in_force
 from odocan.host.judge.distance import DistanceJudge
 from odocan.host.judge.gapfill import gap_or_fill_allowance
 from odocan.host.judge.keptmark import mark_kept
@@ -117,12 +117,15 @@ def analyze_file(
     warn: Callable[[str], None] = warn_on_stderr,
     count: FrameCount | None = None,
     whole_on_config: bool = False,
+    config_pages: ConfigPages | None = None,
 ) -> dict[str, Any]:
     """``analyze(read_log(path), ...).report``, the log read ``chunk_frames`` at a time
     (``warn``: where ``iter_log`` says it skipped a partial last line; ``count``, when given:
     the number of frames in the log, counted as they are read). ``whole_on_config``:
     ``NotStreamable`` when a config was applied (the CLI's PROFILE-page checks, which read
-    the whole log: ``configs.running_before_configs``, ``later_mismatches``)."""
+    the whole log: ``configs.running_before_configs``, ``later_mismatches``), unless
+    ``config_pages`` reads them from the frames spilled (the robot then judged with its bound
+    before the first config's APPLY, as the whole log's path)."""
     db = db if db is not None else default_plan()
     count = count if count is not None else FrameCount()
     decoder = BulkDecoder(db)
@@ -152,8 +155,11 @@ def analyze_file(
 
         firmware = lives.finish_one_source()  # two firmwares: not judged from there, a FAIL
         applied = cuts.configs(robot.counter_bits, firmware)
-        if applied and whole_on_config:
+        if applied and whole_on_config and config_pages is None:
             raise NotStreamable("a config was applied: its PROFILE pages are judged whole")
+        if applied and config_pages is not None:
+            robot = config_pages.read(applied, lambda lo, hi: spill.read(lo, hi, chunk_frames),
+                                      count.frames)
         spans = cut_spans(firmware, cuts.set_poses(firmware), applied)
         report = _analyze_lives(
             spans, facts, frames_of, robot, integrator, tolerance=tolerance, db=db,

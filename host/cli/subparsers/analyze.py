@@ -45,7 +45,7 @@ import argparse
 import os
 import sys
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from odocan.host.cli.options import add_judge_arguments, add_robot_argument, float_in, int_in
 from odocan.host.io.export import add_export_arguments, check_export_paths, write_exports
@@ -60,6 +60,7 @@ if TYPE_CHECKING:  # imported where used: a command pays only for what it runs
     from odocan.host.cli.batch import LogResult
     from odocan.host.io.logs import FrameArrays
     from odocan.host.judge.analysis import Analysis
+    from odocan.host.judge.configs import ConfigPages
     from odocan.sim import robot
 
 MAX_JOBS = 1024
@@ -151,11 +152,9 @@ def _analyze_single(args: argparse.Namespace) -> int:
     from odocan.host.cli.robotchoice import choose_robot, say
     from odocan.host.io.logs import read_log
     from odocan.host.judge.analysis import analyze
-    from odocan.host.judge.configs import later_mismatches, running_before_configs
+    from odocan.host.judge.configs import ConfigPages, running_before_configs
     from odocan.host.judge.profilepage import head_profile, profile_mismatch, with_bus_speed
-    from odocan.host.judge.twosenders import log_events
     from odocan.host.outputs import check_distinct
-    from odocan.host.protocol.dbcplan import default_plan
     from odocan.host.report.ci import analysis_checks, write_checks
     from odocan.host.report.progress import wall_clock_progress
     from odocan.host.report.summary import finish
@@ -172,7 +171,10 @@ def _analyze_single(args: argparse.Namespace) -> int:
     with wall_clock_progress(f"analysing {args.log}", None):
         streams = _streams(args)
         running = head_profile(args.log) if streams and db is None else None
-        analysis = _streamed(args, with_bus_speed(profile, running), db) if streams else None
+        pages = ConfigPages(profile)  # an applied config's pages, read as the log streams
+        analysis = (_streamed(args, with_bus_speed(profile, running), db, pages) if streams
+                    else None)
+        running = pages.running(running)  # the page before a first config (the whole: below)
         frames: FrameArrays | None = None
         if analysis is None:
             frames = whole = read_log(args.log)
@@ -197,9 +199,8 @@ def _analyze_single(args: argparse.Namespace) -> int:
         log_inputs(args.log, profile, analysis.report["integrator"], args.dbc))
     said = profile_mismatch(running, profile, analysis.report["integrator"], choice.given_as)
     hints: list[str] = [] if said is None else [said]  # the firmware's PROFILE page names it
-    if frames is not None and db is None:  # the pages after an applied config: its robot's
-        hints += later_mismatches(frames, profile, analysis.report["integrator"])
-        analysis.report["events"] += log_events(frames, default_plan())  # two senders (#11)
+    if db is None:  # the pages after an applied config: its robot's
+        hints += _later(frames, pages, profile, analysis.report)
     if not analysis.passed and db is None:  # a wrong --robot must not read as a firmware fault
         from odocan.host.judge.diagnosis import mismatches
 
@@ -218,6 +219,20 @@ def _analyze_single(args: argparse.Namespace) -> int:
     return code
 
 
+def _later(frames: FrameArrays | None, pages: ConfigPages, profile: robot.RobotProfile,
+           report: dict[str, Any]) -> list[str]:
+    """The pages after each applied config against its robot (``configs.later_mismatches``):
+    the whole log's, which also adds its two senders' events (#11), or the stream's."""
+    from odocan.host.judge.configs import later_mismatches
+    from odocan.host.judge.twosenders import log_events
+    from odocan.host.protocol.dbcplan import default_plan
+
+    if frames is None:  # streamed: the same pages, read from its spill
+        return pages.mismatches(report["integrator"])
+    report["events"] += log_events(frames, default_plan())
+    return later_mismatches(frames, profile, report["integrator"])
+
+
 def _streams(args: argparse.Namespace) -> bool:
     """Whether the analysis streams (the module docstring): nothing asks for the whole log,
     and ``--stream`` (auto: the log's size) says so."""
@@ -228,11 +243,13 @@ def _streams(args: argparse.Namespace) -> bool:
 
 
 def _streamed(
-    args: argparse.Namespace, profile: robot.RobotProfile, db: cantools.database.can.Database | None
+    args: argparse.Namespace, profile: robot.RobotProfile,
+    db: cantools.database.can.Database | None, pages: ConfigPages,
 ) -> Analysis | None:
     """The streamed analysis of ``args.log``; None when it refuses the log (the whole log's
     path then says why, in the log's terms) or cannot judge it exactly (``NotStreamable``:
-    said on stderr under ``--stream always``, ``refused_line``)."""
+    said on stderr under ``--stream always``, ``refused_line``); ``pages``: an applied
+    config's PROFILE pages read as it streams (odocan's DBC)."""
     from odocan.host.io.logs import CHUNK_FRAMES, warn_on_stderr
     from odocan.host.judge.analysis import Analysis
     from odocan.host.judge.samples import AnalysisError
@@ -242,7 +259,8 @@ def _streamed(
     try:
         report = analyze_file(args.log, profile, args.integrator, tolerance=args.tolerance,
                               db=db, chunk_frames=args.chunk_frames or CHUNK_FRAMES,
-                              warn=warnings.append, whole_on_config=db is None)
+                              warn=warnings.append, whole_on_config=db is None,
+                              config_pages=pages if db is None else None)
     except AnalysisError:
         return None
     except NotStreamable as refusal:
