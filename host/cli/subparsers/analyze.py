@@ -31,8 +31,8 @@ frames at a time, the report bit for bit the whole log's, at about 3x the CPU), 
 memory whatever its size; those four read the whole log (their series and frames), and so does
 a log the analysis refuses (to explain why in the log's terms) or fails (to look for a wrong
 ``--robot``), or that the stream cannot judge exactly (``stream_analysis.NotStreamable``: frame
-times going back around a stall, frames let out in a burst after a busy bus; on odocan's DBC,
-an applied config: its PROFILE pages are judged against its robot over the whole log).
+times going back around a stall, frames let out in a burst after a busy bus; an applied
+config's PROFILE pages are read from the stream's spill: ``configs.ConfigPages``).
 ``odocan analyze LOG…`` chooses the same way for each log (``host.cli.batch.analyze_one``).
 Under ``--stream always`` such a refusal is said on stderr, one line per log naming its reason
 (``refused_line``: the bounded memory asked for is not kept; stdout, ``--report -`` included,
@@ -109,8 +109,8 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
         help="analyse the log as a stream in bounded memory (about 3x the CPU) or read it "
         "whole: auto streams a log too big for the whole path to stay under 300 MB max RSS; "
         "the report is the same either way. A log the stream cannot judge exactly (frame "
-        "times going back, a burst after a busy bus, a stall before a first pose, an applied "
-        "config) is read whole: quietly under auto, with one line on stderr under always "
+        "times going back, a burst after a busy bus, a stall before a first pose) is read "
+        "whole: quietly under auto, with one line on stderr under always "
         "(default: %(default)s)",
     )
     parser.set_defaults(func=_do_analyze)
