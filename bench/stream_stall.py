@@ -62,6 +62,37 @@ def make_log(path: Path, minutes: float, at_tick: int, halted: int, bias_lsb: in
     return writer.n
 
 
+def make_config_log(path: Path, minutes: float) -> int:
+    """``--config``: kobuki (seed 3) with a config it ACKs at 3 s (wheelbase 0.25 m:
+    ``tests/test_analyze_config.py``'s drive), ``minutes`` long, written as it runs."""
+    from odocan.host.protocol.heard import Recorder
+    from odocan.host.protocol.session import CommandSession
+    from odocan.sim.contract import database
+    from odocan.sim.rig import LockstepRig, RigConfig
+    from tests.test_analyze_config import KOBUKI, WIDER_M, _config
+
+    n = 0
+    with path.open("w") as out:
+        class Write(can.Listener):
+            def on_message_received(self, msg: can.Message) -> None:
+                nonlocal n
+                out.write(f"({msg.timestamp:.6f}) vcan0 {msg.arbitration_id:03X}#"
+                          f"{bytes(msg.data).hex().upper()}\n")
+                n += 1
+
+        heard = Recorder(database())
+        rig = LockstepRig(RigConfig(robot=KOBUKI, seed=3, channel="bench-config",
+                                    duration_s=minutes * 60 + 10), [heard, Write()])
+        try:
+            session = CommandSession(heard, rig.send, rig.run_until, ack_timeout_s=0.5)
+            rig.run(3.0)
+            session.configure(**_config(wheelbase_m=WIDER_M))  # type: ignore[arg-type]
+            rig.run(minutes * 60 - 3.0)
+        finally:
+            rig.close()
+    return n
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--minutes", type=float, default=60.0)
@@ -71,10 +102,14 @@ def main() -> None:
     parser.add_argument("--dir", type=Path, default=Path(tempfile.gettempdir()))
     parser.add_argument("--keep", type=Path, help="write the log here and keep it")
     parser.add_argument("--modes", default="always,never")
+    parser.add_argument("--config", action="store_true",
+                        help="instead: kobuki with a config applied at 3 s (no stall)")
     args = parser.parse_args()
     at_min = args.minutes / 2 if args.at_min is None else args.at_min
     with tempfile.TemporaryDirectory(dir=args.dir) as tmp:
         log = args.keep or Path(tmp) / "stall.log"
+        if not log.exists() and args.config:
+            print(f"{log}: {make_config_log(log, args.minutes)} frames", flush=True)
         if not log.exists():
             frames = make_log(log, args.minutes, round(at_min * 60 / TICK_S),
                               round(args.halt_s / TICK_S), args.bias_lsb)
@@ -83,7 +118,7 @@ def main() -> None:
               f"{args.halt_s:g} s at {at_min:g} min, X +{args.bias_lsb} LSB", flush=True)
         reports = {}
         for mode in args.modes.split(","):
-            analyze(log, mode, Path(tmp) / f"{mode}.json")
+            analyze(log, mode, Path(tmp) / f"{mode}.json", "kobuki" if args.config else "pmir")
             reports[mode] = json.loads((Path(tmp) / f"{mode}.json").read_text())
         if len(reports) == 2:
             a, b = reports.values()
