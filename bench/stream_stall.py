@@ -9,7 +9,8 @@ re-primes on resuming (COUNTER_RESET); ``--bias-lsb`` X LSBs added to every pose
 on (a wrong firmware; E2E re-protected). The log is written as the rig runs (never held in
 memory), then ``odocan analyze`` runs both ways as whole processes (GNU time's max RSS and CPU);
 prints each one's max RSS, exit code, its stderr lines, and whether the two JSON reports are
-equal. Asserts nothing.
+equal. Asserts nothing. ``--config``: instead, kobuki with a config applied at 3 s
+(``host.judge.configs.ConfigPages``).
 Run: ``.venv/bin/python bench/stream_stall.py [--minutes 60] [--halt-s 6] [--keep LOG]``."""
 
 from __future__ import annotations
@@ -114,8 +115,9 @@ def main() -> None:
             frames = make_log(log, args.minutes, round(at_min * 60 / TICK_S),
                               round(args.halt_s / TICK_S), args.bias_lsb)
             print(f"{log}: {frames} frames", flush=True)
-        print(f"{log}: {log.stat().st_size / 1e6:.1f} MB, {args.minutes:g} min, halted "
-              f"{args.halt_s:g} s at {at_min:g} min, X +{args.bias_lsb} LSB", flush=True)
+        print(f"{log}: {log.stat().st_size / 1e6:.1f} MB, {args.minutes:g} min, " + (
+            "a config applied at 3 s" if args.config else f"halted {args.halt_s:g} s at "
+            f"{at_min:g} min, X +{args.bias_lsb} LSB"), flush=True)
         reports = {}
         for mode in args.modes.split(","):
             analyze(log, mode, Path(tmp) / f"{mode}.json", "kobuki" if args.config else "pmir")

@@ -276,8 +276,8 @@ def refused_line(log: Path | str, reason: str) -> str:
     """The one stderr line for a log ``--stream always`` could not stream: a user who asked
     for bounded memory learns it was not kept, and why; the verdict is the whole log's, the
     same report, and the most memory the process then takes (``refused_rss_mb``: the stream's
-    attempt, then the whole log's judge; not the stream's bound: up to about 4 MB per MB of
-    candump log plus 100 MB). Under ``auto`` (the CLI's choice, not the user's) a refusal is
+    attempt, then the whole log's judge; not the stream's bound: up to about 5 MB per MB of
+    candump log plus 65 MB). Under ``auto`` (the CLI's choice, not the user's) a refusal is
     quiet."""
     from odocan.host.judge.stream_choice import RSS_TARGET_MB, refused_rss_mb
 
