@@ -70,3 +70,30 @@ def test_the_pages_are_read_from_the_stream(logs: dict[bool, Path]) -> None:
     assert len(pages.after) == 1
     assert pages.after[0][1] is not None
     assert pages.before.profile_crc != pages.after[0][1].profile_crc  # the wheelbase changed
+
+
+def test_a_new_speed_bound_the_page_before_the_apply_is_the_runnings(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The config also raises MAX_WHEEL_SPEED (0.7 -> 1.5 m/s): the log's head (``head_profile``,
+    all 9 s of it) ends on the new bound, the page before the APPLY holds the old one, which the
+    whole log's path judges with and names ``--robot kobuki`` by; the stream now the same."""
+    import tests.test_analyze_config as drive_module
+
+    plain = drive_module._config
+    with pytest.MonkeyPatch.context() as monkeypatch:
+        monkeypatch.setattr(drive_module, "_config",
+                            lambda **changed: {**plain(**changed), "max_wheel_speed_m_s": 1.5})
+        messages = _drive(False, monkeypatch)
+    log = tmp_path / "faster.log"
+    log.write_text("".join(f"({m.timestamp:.6f}) vcan0 {m.arbitration_id:03X}#"
+                           f"{bytes(m.data).hex().upper()}\n" for m in messages))
+    pages = ConfigPages(robot.load("kobuki"))
+    analyze_file(log, pages.profile, whole_on_config=True, config_pages=pages)
+    assert pages.before is not None
+    assert pages.after[0][1] is not None
+    assert (pages.before.max_wheel_speed_mm_s, pages.after[0][1].max_wheel_speed_mm_s) == (
+        700, 1500)
+    whole = _cli(log, "kobuki", "never", tmp_path / "whole.json")
+    streamed = _cli(log, "kobuki", "always", tmp_path / "streamed.json")
+    assert "not streamable" not in capsys.readouterr().err
+    assert streamed == whole
