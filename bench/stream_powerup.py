@@ -84,9 +84,10 @@ def make_log(path: Path, minutes: float, late_s: float, bias_lsb: int) -> int:
     return writer.n
 
 
-def analyze(log: Path, mode: str, report: Path) -> tuple[float, int, list[str]]:
+def analyze(log: Path, mode: str, report: Path,
+            robot: str = "pmir") -> tuple[float, int, list[str]]:
     """Max RSS MB, exit code and stderr lines of ``odocan analyze LOG --stream MODE``."""
-    argv = [sys.executable, "-m", "odocan", "analyze", str(log), "--robot", "pmir",
+    argv = [sys.executable, "-m", "odocan", "analyze", str(log), "--robot", robot,
             "--integrator", "exact", "--stream", mode, "--report", str(report)]
     with tempfile.NamedTemporaryFile("r", suffix=".rss") as rss:
         done = subprocess.run(["/usr/bin/time", "-f", "%M %U %S", "-o", rss.name, *argv],

@@ -27,7 +27,7 @@ from odocan.host.judge import stream_primed
 from odocan.host.judge.analysis import analyze
 from odocan.host.judge.primedon import PRIMED_KIND
 from odocan.host.judge.stream_analysis import NotStreamable, analyze_file
-from odocan.host.judge.stream_choice import whole_rss_mb
+from odocan.host.judge.stream_choice import refused_rss_mb
 from tests.test_first_second_reboot import _written
 from tests.test_powerup_primed_range import _frames
 from tests.test_stall_beyond_window import PMIR
@@ -79,10 +79,10 @@ def test_a_prefix_past_its_bound_is_refused_and_said(
                  "--stream", "always", "--chunk-frames", "32"])
     err = capsys.readouterr().err
     assert code == 1  # 1 m off: FAIL, the whole log's verdict
-    rss_mb = whole_rss_mb(path)
+    rss_mb = refused_rss_mb(path)
     assert rss_mb is not None
     assert ("not streamable (the firmware's first count page says it primed after the log's "
             "first encoder frame, and its first pose or count page came after the first 50 "
             "frames") in err  # (the reason names the bound it was built with)
-    assert err.rstrip().endswith(f"judged whole, in about {rss_mb:.0f} MB of memory (the "
+    assert err.rstrip().endswith(f"judged whole, in up to about {rss_mb:.0f} MB of memory (the "
                                  "stream aims under 300 MB)"), err

@@ -34,10 +34,12 @@ def _reason() -> str:
 
 
 def _said(log: Path | str) -> str:
-    """The line, with the whole judge's memory for the log (its size: ``WHOLE_RSS_MB``)."""
+    """The line, with the memory the refused path takes for the log (its size:
+    ``WHOLE_RSS_MB``, its slope ``REFUSED_SLOPE_OVER_WHOLE`` times steeper)."""
     base, per_mb = stream_choice.WHOLE_RSS_MB[Path(log).suffix]
-    rss_mb = base + per_mb * Path(log).stat().st_size / 1e6
-    return (f"odocan analyze: {log}: not streamable ({_reason()}): judged whole, in about "
+    rss_mb = base + stream_choice.REFUSED_SLOPE_OVER_WHOLE * per_mb * Path(
+        log).stat().st_size / 1e6
+    return (f"odocan analyze: {log}: not streamable ({_reason()}): judged whole, in up to about "
             f"{rss_mb:.0f} MB of memory (the stream aims under 300 MB)")
 
 

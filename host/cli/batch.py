@@ -102,7 +102,7 @@ def analyze_one(path: str, job: Job) -> LogResult:
     from odocan.host.cli.subparsers.analyze import load_judges_dbc, log_inputs
     from odocan.host.io.logs import read_log
     from odocan.host.judge.analysis import Tolerance, analyze
-    from odocan.host.judge.configs import later_mismatches, running_before_configs
+    from odocan.host.judge.configs import ConfigPages, later_mismatches, running_before_configs
     from odocan.host.judge.profilepage import head_profile, with_bus_speed
     from odocan.host.judge.samples import AnalysisError
     from odocan.host.judge.stream_analysis import FrameCount, NotStreamable, analyze_file, streams
@@ -120,10 +120,15 @@ def analyze_one(path: str, job: Job) -> LogResult:
         later: list[str] = []  # its pages after an applied config, against the config's robot
         if streams(log, job.stream):  # in bounded memory (host.judge.stream_analysis)
             running = head_profile(log) if db is None else None
+            pages = ConfigPages(profile) if db is None else None  # an applied config's
             try:
                 streamed = analyze_file(log, with_bus_speed(profile, running), job.integrator,
                                         tolerance=tolerance, db=db, warn=lambda message: None,
-                                        count=count, whole_on_config=db is None)
+                                        count=count, whole_on_config=db is None,
+                                        config_pages=pages)
+                if pages is not None:  # the pages read from the stream's spill
+                    running = pages.running(running)
+                    later = pages.mismatches(streamed["integrator"])
             except AnalysisError:  # the whole log's path says why, in the log's terms
                 streamed = None
             except NotStreamable as refusal:  # said under --stream always (analyze.py)

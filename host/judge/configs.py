@@ -25,7 +25,7 @@ configs (``stream_cuts``: ``cuts_of`` of the rows it gathers chunk by chunk).
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -33,7 +33,13 @@ import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.liveconfig import INTEGRATORS, PARAMS, ConfigFollower
-from odocan.host.judge.profilepage import RunningProfile, profile_mismatch, running_profile
+from odocan.host.judge.profilepage import (
+    RunningProfile,
+    profile_mismatch,
+    running_profile,
+    running_profile_of,
+    with_bus_speed,
+)
 from odocan.host.judge.reboots import Life
 from odocan.host.judge.reference import PROFILE_SPEED, SpeedBound
 from odocan.host.judge.samples import AnalysisError, pick_integrator
@@ -210,14 +216,53 @@ def later_mismatches(frames: FrameArrays, robot: RobotProfile, integrator: str) 
     decoder = BulkDecoder(default_plan())
     cuts = config_cuts(frames, decoder, robot.counter_bits)
     ends = [c.apply_position for c in cuts[1:]] + [len(frames)] * bool(cuts)
+    return mismatch_lines([(cut, running_profile(frames.select(np.arange(
+        cut.apply_position, end)), decoder)) for cut, end in zip(cuts, ends, strict=True)],
+        robot, integrator)
+
+
+def mismatch_lines(pages: list[tuple[ConfigCut, RunningProfile | None]], robot: RobotProfile,
+                   integrator: str) -> list[str]:
+    """``later_mismatches``' lines from each applied config's page (``running_profile`` of
+    the frames from its APPLY to the next one's)."""
     said = []
-    for cut, end in zip(cuts, ends, strict=True):
+    for cut, page in pages:
         robot, integrator = cut.robot(robot), cut.integrator(integrator)
-        page = running_profile(frames.select(np.arange(cut.apply_position, end)), decoder)
         text = profile_mismatch(page, robot, integrator)
         if text is not None:
             said.append(f"after the config applied at {cut.t_s:.3f} s: {text}")
     return said
+
+
+@dataclass
+class ConfigPages:
+    """The PROFILE pages around the applied configs of a streamed log (the CLI's checks of
+    ``running_before_configs`` and ``later_mismatches``, which read the whole log): read from
+    the streamed judge's spilled frames (``read``) once it found the configs. ``profile``: the
+    robot as given, without the bus's speed bound."""
+
+    profile: RobotProfile
+    before: RunningProfile | None = None  # the page before the first APPLY
+    after: list[tuple[ConfigCut, RunningProfile | None]] = dataclasses.field(
+        default_factory=list)
+
+    def read(self, cuts: list[ConfigCut],
+             between: Callable[[int, int], Iterable[FrameArrays]], n_frames: int) -> RobotProfile:
+        """The pages of the log's ``n_frames`` frames (``between``: the frames [lo, hi), chunk
+        by chunk) around ``cuts``; the robot to judge with (``running_before_configs``')."""
+        self.before = running_profile_of(between(0, cuts[0].apply_position))
+        ends = [c.apply_position for c in cuts[1:]] + [n_frames]
+        self.after = [(cut, running_profile_of(between(cut.apply_position, end)))
+                      for cut, end in zip(cuts, ends, strict=True)]
+        return with_bus_speed(self.profile, self.before)
+
+    def running(self, head: RunningProfile | None) -> RunningProfile | None:
+        """The page the firmware ran with as ``--robot``: before the first config when one
+        was applied, else the log's head's (``head_profile``)."""
+        return self.before if self.after else head
+
+    def mismatches(self, integrator: str) -> list[str]:
+        return mismatch_lines(self.after, self.profile, integrator)
 
 
 def first_integrator(frames: FrameArrays, lives: list[Life], decoder: BulkDecoder,

@@ -23,7 +23,7 @@ import dataclasses
 import struct
 import zlib
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
@@ -94,6 +94,19 @@ def running_profile(
     caller need not run the whole log's E2E check for it."""
     pages = _pages(frames, decoder)
     return next((page for page in reversed(pages) if page.bounded), pages[-1] if pages else None)
+
+
+def running_profile_of(chunks: Iterable[FrameArrays]) -> RunningProfile | None:
+    """``running_profile`` of the frames ``chunks`` gives, chunk by chunk (a page is judged by
+    its own frame: the same pages at any chunking; ``configs.ConfigPages``)."""
+    decoder = BulkDecoder(default_plan())
+    last: RunningProfile | None = None
+    bounded: RunningProfile | None = None
+    for chunk in chunks:
+        pages = _pages(chunk, decoder)
+        last = pages[-1] if pages else last
+        bounded = next((page for page in reversed(pages) if page.bounded), bounded)
+    return bounded if bounded is not None else last
 
 
 def first_page(frames: FrameArrays, decoder: BulkDecoder | None = None) -> RunningProfile | None:

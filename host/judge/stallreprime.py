@@ -109,17 +109,25 @@ def declared_stalls(breaks: IntArray | None, enc: Encoders, e0: int, resets: Res
     stall, ``stalls.after_stalls``) after which the firmware declared a re-prime (module
     docstring): each frame, from ``e0``, with the stall's length (s: between the firmware's
     summaries around it)."""
+    if breaks is None or enc.cycle_s is None:
+        return {}
+    return declared_at({b: float(enc.timestamp_s[b]) for b in breaks.tolist()
+                        if e0 < b < len(enc.timestamp_s)}, enc.cycle_s, e0, resets, least)
+
+
+def declared_at(break_s: dict[int, float], cycle_s: float, e0: int, resets: Resets,
+                least: int | None) -> dict[int, float]:
+    """``declared_stalls`` of the breaks after ``e0`` given with their encoder frames' bus
+    times (``break_s``; the streamed judge's, ``stream_reprime``, read in a pass)."""
     out: dict[int, float] = {}
-    if breaks is None or enc.cycle_s is None or len(resets.sent_s) == 0:
+    if len(resets.sent_s) == 0:
         return out
-    for b in breaks.tolist():
-        if not e0 < b < len(enc.timestamp_s):
-            continue
-        i = around(resets.sent_s, float(enc.timestamp_s[b]))
+    for b, b_s in sorted(break_s.items()):
+        i = around(resets.sent_s, b_s)
         if i is None:
             continue
         stall_s = float(resets.sent_s[i + 1] - resets.sent_s[i])
-        if possible(stall_s, enc.cycle_s, least) and said_reset(resets.mask, i):
+        if possible(stall_s, cycle_s, least) and said_reset(resets.mask, i):
             out[b - e0] = stall_s
     return out
 

@@ -381,6 +381,7 @@ class StreamReference:
     _window: dict[str, np.ndarray] = field(default_factory=dict)  # left, right, seq, g, t, uptime
     _sums: tuple[int, int, float, float, float, float] = (0, 0, 0.0, 0.0, 0.0, 0.0)
     _count: int = 0  # encoder frames fed
+    left_out: tuple[tuple[int, int], ...] = ()  # re-primes' steps (f, r] (``stream_reprime``)
     last_steps: tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]] | None = None  # the
     # firmware's step into each frame of the last chunk fed (d_left, d_right; host.judge.distance)
 
@@ -406,7 +407,8 @@ class StreamReference:
         self.reprimed += [int(win["g"][k]) for k in steps.reprimed]  # decided in this window
         self.by_uptime += [int(win["g"][k]) for k in steps.by_uptime]
         skip = max(carried, 1) - 1  # step k leads into window frame k + 1
-        out = self._integrate(steps.d_left[skip:], steps.d_right[skip:])
+        out = self._integrate(*self._held(win["g"][skip + 1:], steps.d_left[skip:],
+                                          steps.d_right[skip:]))
         last = steps.open_from if steps.open_from is not None else len(win["g"]) - 1
         self._window = {k: v[last:] for k, v in win.items()}
         first = np.zeros(1 if first_chunk else 0, dtype=np.int64)  # no step into frame 0
@@ -415,6 +417,17 @@ class StreamReference:
         if first_chunk:  # the very first frame: pose 0 before any step
             out = {k: np.concatenate(([0.0], v)) for k, v in out.items()}
         return out
+
+    def _held(self, into: npt.NDArray[np.int64], d_left: npt.NDArray[np.int64],
+              d_right: npt.NDArray[np.int64]) -> tuple[npt.NDArray[np.int64], ...]:
+        """The steps into frames ``into`` with those a declared stall's re-prime left out
+        zeroed (``left_out``: frames (f, r], ``stallreprime.left_out``), the reference's only."""
+        held = np.zeros(len(into), dtype=np.bool_)
+        for f, r in self.left_out:
+            held |= (into > f) & (into <= r)
+        if not held.any():
+            return d_left, d_right
+        return np.where(held, 0, d_left), np.where(held, 0, d_right)
 
     def _integrate(
         self, d_left: npt.NDArray[np.int64], d_right: npt.NDArray[np.int64]

@@ -17,7 +17,9 @@ A life whose frames came in a burst after a busy bus is refused (``NotStreamable
 the applied set-poses and configs (``stream_cuts``), as the whole log's judge cuts them. A
 power-up primed late (the first count page's k >= 1) is judged from each frame it may have
 primed on, the life streamed again per candidate (``stream_primed``, from its first frames).
-``streams`` says when to stream at all."""
+A stall the firmware declared it re-primed after (``stallreprime``) takes one pass more before
+step 2, which holds a few frames around each stall (``stream_reprime``): the placing passes then
+leave out the steps its re-prime left out. ``streams`` says when to stream at all."""
 
 from __future__ import annotations
 
@@ -35,7 +37,7 @@ from odocan.host.io.logs import CHUNK_FRAMES, FrameArrays, iter_log, warn_on_std
 from odocan.host.judge import acrosscut
 from odocan.host.judge.analysis import STALL_DETAIL, Tolerance
 from odocan.host.judge.breaks import placed_offsets
-from odocan.host.judge.configs import in_force
+from odocan.host.judge.configs import ConfigPages, in_force
 from odocan.host.judge.distance import DistanceJudge
 from odocan.host.judge.gapfill import gap_or_fill_allowance
 from odocan.host.judge.keptmark import mark_kept
@@ -50,7 +52,7 @@ from odocan.host.judge.samples import (
     require_messages,
 )
 from odocan.host.judge.setposekept import Kept, check_cut
-from odocan.host.judge.stallreprime import STREAM, any_declared
+from odocan.host.judge.stallreprime import detail as reprime_detail
 from odocan.host.judge.stream import StreamE2E
 from odocan.host.judge.stream_carry import CarriedSpans, carried
 from odocan.host.judge.stream_choice import RSS_MARGIN as RSS_MARGIN
@@ -77,6 +79,7 @@ from odocan.host.judge.stream_place import start_pose as place_start
 from odocan.host.judge.stream_primed import judged_from_candidates
 from odocan.host.judge.stream_refusal import UNSETTLED
 from odocan.host.judge.stream_refusal import NotStreamable as NotStreamable
+from odocan.host.judge.stream_reprime import stream_reprimes
 from odocan.host.judge.stream_stalls import StreamBreakCounts
 from odocan.host.judge.twosenders import LogSenders
 from odocan.host.judge.unseenrestart import restart_detail, whole_only
@@ -114,12 +117,15 @@ def analyze_file(
     warn: Callable[[str], None] = warn_on_stderr,
     count: FrameCount | None = None,
     whole_on_config: bool = False,
+    config_pages: ConfigPages | None = None,
 ) -> dict[str, Any]:
     """``analyze(read_log(path), ...).report``, the log read ``chunk_frames`` at a time
     (``warn``: where ``iter_log`` says it skipped a partial last line; ``count``, when given:
     the number of frames in the log, counted as they are read). ``whole_on_config``:
     ``NotStreamable`` when a config was applied (the CLI's PROFILE-page checks, which read
-    the whole log: ``configs.running_before_configs``, ``later_mismatches``)."""
+    the whole log: ``configs.running_before_configs``, ``later_mismatches``), unless
+    ``config_pages`` reads them from the frames spilled (the robot then judged with its bound
+    before the first config's APPLY, as the whole log's path)."""
     db = db if db is not None else default_plan()
     count = count if count is not None else FrameCount()
     decoder = BulkDecoder(db)
@@ -149,8 +155,11 @@ def analyze_file(
 
         firmware = lives.finish_one_source()  # two firmwares: not judged from there, a FAIL
         applied = cuts.configs(robot.counter_bits, firmware)
-        if applied and whole_on_config:
+        if applied and whole_on_config and config_pages is None:
             raise NotStreamable("a config was applied: its PROFILE pages are judged whole")
+        if applied and config_pages is not None:
+            robot = config_pages.read(applied, lambda lo, hi: spill.read(lo, hi, chunk_frames),
+                                      count.frames)
         spans = cut_spans(firmware, cuts.set_poses(firmware), applied)
         report = _analyze_lives(
             spans, facts, frames_of, robot, integrator, tolerance=tolerance, db=db,
@@ -229,6 +238,12 @@ def _analyze_lives(
     )
     mark_kept(report, kept)  # a set-pose that changed a field it kept: FAIL
     return report
+
+
+def _drained(chunks: Iterator[Any]) -> None:
+    """Run a pass for what it tells on the way (``stream_reprime.ReprimeTap``)."""
+    for _ in chunks:
+        pass
 
 
 def _as_life(span: LifeSpan) -> Life:
@@ -312,7 +327,16 @@ def _judged(
     breaks = first.breaks
     spans = first.losses.spans(power_up and start_pose is None)
     geometry, bits = Geometry.of(robot), min(robot.counter_bits, WIRE_COUNTER_BITS)
-    drops = SpanDrops(spans, geometry, bits, integrator, [b for b in breaks.tolist() if b > e0])
+    seen_all = first.pages.seen(power_up)
+    stalled = stream_reprimes(  # a stall it declared it re-primed after: stream_reprime
+        lambda tap: _drained(life_chunks(frames(), db, robot, integrator, e0=e0, breaks=breaks,
+                                         max_wheel_speed_mm_s=max_wheel_speed_mm_s, tap=tap)),
+        BulkDecoder(db), breaks.tolist(), e0, seen_all.resets,
+        least_of(geometry, bits, max_wheel_speed_mm_s),
+        start_pose if start_pose is not None else (0.0, 0.0, 0.0) if power_up else None,
+        (geometry, bits, integrator))
+    drops = SpanDrops(spans, geometry, bits, integrator,  # losses.life_placements
+                      [b for b in breaks.tolist() if b > e0 and b - e0 not in stalled.reprimes])
     across = StreamBreakCounts(breaks[breaks > e0].tolist(), geometry, bits, integrator,
                                max_wheel_speed_mm_s)
 
@@ -323,7 +347,8 @@ def _judged(
     def placed(info: LifeInfo | None = None, losses: bool = False) -> Iterator[PlacedChunk]:
         for chunk, _ in life_chunks(frames(), db, robot, integrator, e0=e0, breaks=breaks,
                                     max_wheel_speed_mm_s=max_wheel_speed_mm_s, info=info,
-                                    on_encoders=on_encoders if losses else None):
+                                    on_encoders=on_encoders if losses else None,
+                                    left_out=stalled.left_out):
             if losses:
                 drops.named(chunk.enc)
             across.named(chunk.enc)  # the same each pass: the first sets it
@@ -335,12 +360,10 @@ def _judged(
     # the offsets' pass also weighs the lossy spans (losses.loss_allowance) and keeps the
     # counts across the stalls' breaks (their allowance)
     raw = segment_offsets(lambda: placed(losses=True), (x0, y0, h0), info.segments + 1)
-    seen, reprimed = whole_only(first.pages.seen(power_up), info, NotStreamable)  # gapseen
-    if any(b > e0 for b in breaks.tolist()) and any_declared(  # stallreprime: judged whole
-            seen.resets, seen.resets.cycle_s, least_of(geometry, bits, max_wheel_speed_mm_s)):
-        raise NotStreamable(STREAM)
+    seen, reprimed = whole_only(seen_all, info, NotStreamable)  # gapseen
     off_x, off_y, placements = placed_offsets(
-        *raw, info.openings, lambda b: across.allowance(b, seen, reprimed),
+        *raw, info.openings, lambda b: stalled.allowance_m[b] if b in stalled.allowance_m
+        else across.allowance(b, seen, reprimed),
         lambda b: 0.0 if b in info.by_uptime or seen.gap_missed(b, reprimed)  # reference_path's
         else gap_or_fill_allowance(seen.filled(b, reprimed),  # gapfill: the log's late frames
             *info.gap_steps[b], geometry, bits, integrator, max_wheel_speed_mm_s),
@@ -349,13 +372,14 @@ def _judged(
     truth = TruthCompare((x0, y0, h0), offsets, rebase=rebase, e0=e0)
     last: list[PlacedChunk] = []
     wanted = (frozenset(info.reprimed) | frozenset(breaks.tolist())
-              | frozenset(first for first, _, _ in spans))
+              | frozenset(first for first, _, _ in spans)
+              | frozenset(e0 + rep.r for rep in stalled.reprimes.values()))
     final = LifeInfo()
 
     def with_truth() -> Iterator[PlacedChunk]:
         for chunk, told in life_chunks(frames(), db, robot, integrator, e0=e0, breaks=breaks,
                                        max_wheel_speed_mm_s=max_wheel_speed_mm_s, info=final,
-                                       times_of=wanted):
+                                       times_of=wanted, left_out=stalled.left_out):
             truth.feed(chunk, told)
             if len(chunk.enc):
                 last[:] = [chunk]
@@ -403,6 +427,10 @@ def _judged(
             {"kind": "counter_restart", "t_s": final.times_s[e], "encoder_frame": int(e),
              "detail": restart_detail(e in info.by_uptime)}
             for e in info.reprimed
+        ] + [
+            {"kind": "stall_reprime", "t_s": final.times_s[e0 + rep.r],
+             "encoder_frame": e0 + rep.r, "detail": reprime_detail(rep.stall_s)}
+            for _, rep in sorted(stalled.reprimes.items())
         ] + [
             {"kind": "firmware_stall", "t_s": final.times_s[e], "encoder_frame": int(e),
              "detail": STALL_DETAIL}

@@ -13,6 +13,13 @@ RSS_TARGET_MB = 300.0  # the max RSS ``odocan analyze`` of one log aims to stay 
 # the size where that reaches RSS_TARGET_MB / RSS_MARGIN streams.
 WHOLE_RSS_MB = {".log": (65.4, 2.738), ".asc": (54.6, 1.888), ".blf": (52.2, 21.480)}
 RSS_MARGIN = 1.2  # over a worst-case fit (one long life): 250 MB, the bench log stays whole
+# A log the stream refused (``NotStreamable``) is read whole, after the stream's attempt: an
+# hour's .log (52.7 MB) took 277-302 MB (pmir on the circle, a stall: ``bench/stream_stall.py``)
+# and 329 MB (kobuki, a config applied: ``--config``; the whole path alone 326 MB, 6.2 MB per MB
+# of log where WHOLE_RSS_MB's fit, of another drive, says 210): the refusal line takes the fit's
+# base and 1.83x its slope (5.0 MB per MB of .log), above every one measured (121, 165 MB at
+# 12.9, 26.1 MB; docs/benchmarks.md).
+REFUSED_SLOPE_OVER_WHOLE = 1.83
 
 
 def stream_above_bytes(suffix: str) -> float:
@@ -33,6 +40,19 @@ def whole_rss_mb(path: str | Path) -> float | None:
     base, per_mb = WHOLE_RSS_MB.get(Path(path).suffix.lower(), max(WHOLE_RSS_MB.values(),
                                                                   key=lambda fit: fit[1]))
     return base + per_mb * size_mb
+
+
+def refused_rss_mb(path: str | Path) -> float | None:
+    """About the most max RSS (MB) ``odocan analyze`` takes on ``path`` when the stream refused
+    it (``WHOLE_RSS_MB``'s fit, its slope ``REFUSED_SLOPE_OVER_WHOLE`` times steeper); None when
+    it cannot be read."""
+    try:
+        size_mb = Path(path).stat().st_size / 1e6
+    except OSError:
+        return None
+    base, per_mb = WHOLE_RSS_MB.get(Path(path).suffix.lower(), max(WHOLE_RSS_MB.values(),
+                                                                  key=lambda fit: fit[1]))
+    return base + REFUSED_SLOPE_OVER_WHOLE * per_mb * size_mb
 
 
 def streams(path: str | Path, mode: str = "auto") -> bool:

@@ -31,6 +31,7 @@ from odocan.host.protocol.decode import BulkDecoder
 from odocan.sim.robot import RobotProfile
 
 if TYPE_CHECKING:  # a cantools Database or a plan of it (host.protocol.dbcplan)
+    from odocan.host.judge.stream_reprime import ReprimeTap
     from odocan.host.protocol.dbcplan import DatabaseSpec
 
 
@@ -139,16 +140,20 @@ def life_chunks(
     max_wheel_speed_mm_s: SpeedBound, info: LifeInfo | None = None,
     times_of: frozenset[int] = frozenset(),
     on_encoders: Callable[[Encoders], None] | None = None,
+    left_out: tuple[tuple[int, int], ...] = (), tap: ReprimeTap | None = None,
 ) -> Iterator[tuple[PlacedChunk, TruthChunk]]:
     """``placed_chunks`` with the truth samples beside them (``stream_truth.StreamTruth``),
     each with the reference's rows at its encoder frame; ``info`` filled at the end;
-    ``on_encoders``: told each chunk's accepted encoder frames."""
+    ``on_encoders``: told each chunk's accepted encoder frames; ``left_out``: the steps the
+    declared stalls' re-primes left out (``stream.StreamReference.left_out``); ``tap``: shown
+    each chunk and each placed chunk with the rows still held (``stream_reprime``)."""
     decoder = BulkDecoder(db)
     e2e, numbering = StreamE2E(db), StreamEncoders(decoder)
     poses, truth = StreamPoses(decoder), StreamTruth(decoder)  # one decoder: its cache too
     stalls: StreamStalls | None = None
     reference = StreamReference(Geometry.of(robot), integrator,
-                                min(robot.counter_bits, WIRE_COUNTER_BITS), max_wheel_speed_mm_s)
+                                min(robot.counter_bits, WIRE_COUNTER_BITS), max_wheel_speed_mm_s,
+                                left_out=left_out)
     rows, count, last_sample = _Rows(), 0, -1
     inside = breaks[breaks > e0]
     wanted = np.array(sorted(times_of), dtype=np.int64)
@@ -161,6 +166,8 @@ def life_chunks(
         stalls = stalls or StreamStalls(enc.cycle_s)
         g = count + np.arange(len(enc.index), dtype=np.int64)
         count += len(g)
+        if tap is not None:
+            tap.encoders(chunk, accepted, enc, g)
         asked = np.isin(g, wanted)
         info.times_s.update(zip(g[asked].tolist(), enc.timestamp_s[asked].tolist(), strict=True))
         from_e0 = g >= e0
@@ -174,6 +181,8 @@ def life_chunks(
         placed = _placed(stalls.feed(samples, sent, enc.timestamp_s, watermark, pose_t), rows)
         told = _truth(truth.feed(chunk, accepted, enc)[0], rows, e0,
                       _truth_floor(truth, count - 1))
+        if tap is not None:
+            tap.placed(placed, rows.at)
         last_sample = int(placed.enc[-1]) if len(placed.enc) else last_sample
         rows.drop_below(int(min(last_sample, told.floor)))
         yield placed, told
@@ -181,8 +190,13 @@ def life_chunks(
         return
     samples, sent = poses.finish()
     placed = _placed(stalls.feed(samples, sent, np.zeros(0), np.inf), rows)
+    if tap is not None:
+        tap.placed(placed, rows.at)
     yield placed, _truth(truth.finish()[0], rows, e0, np.inf)
-    yield _placed(stalls.finish(), rows), _truth(_no_truth(), rows, e0, np.inf)
+    placed = _placed(stalls.finish(), rows)
+    if tap is not None:
+        tap.placed(placed, rows.at)
+    yield placed, _truth(_no_truth(), rows, e0, np.inf)
     info.refused, info.segments, info.openings = reference.refused, rows.segment, rows.openings
     info.gap_steps = rows.gap_steps
     info.reprimed = [e0 + k for k in reference.reprimed]

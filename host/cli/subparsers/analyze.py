@@ -32,8 +32,8 @@ frames at a time, the report bit for bit the whole log's, at about 3x the CPU), 
 memory whatever its size; those four read the whole log (their series and frames), and so does
 a log the analysis refuses (to explain why in the log's terms) or fails (to look for a wrong
 ``--robot``), or that the stream cannot judge exactly (``stream_analysis.NotStreamable``: frame
-times going back around a stall, frames let out in a burst after a busy bus; on odocan's DBC,
-an applied config: its PROFILE pages are judged against its robot over the whole log).
+times going back around a stall, frames let out in a burst after a busy bus; an applied
+config's PROFILE pages are read from the stream's spill: ``configs.ConfigPages``).
 ``odocan analyze LOG…`` chooses the same way for each log (``host.cli.batch.analyze_one``).
 Under ``--stream always`` such a refusal is said on stderr, one line per log naming its reason
 (``refused_line``: the bounded memory asked for is not kept; stdout, ``--report -`` included,
@@ -46,7 +46,7 @@ import argparse
 import os
 import sys
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from odocan.host.cli.options import add_judge_arguments, add_robot_argument, float_in, int_in
 from odocan.host.io.export import add_export_arguments, check_export_paths, write_exports
@@ -61,6 +61,7 @@ if TYPE_CHECKING:  # imported where used: a command pays only for what it runs
     from odocan.host.cli.batch import LogResult
     from odocan.host.io.logs import FrameArrays
     from odocan.host.judge.analysis import Analysis
+    from odocan.host.judge.configs import ConfigPages
     from odocan.sim import robot
 
 MAX_JOBS = 1024
@@ -109,8 +110,8 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
         help="analyse the log as a stream in bounded memory (about 3x the CPU) or read it "
         "whole: auto streams a log too big for the whole path to stay under 300 MB max RSS; "
         "the report is the same either way. A log the stream cannot judge exactly (frame "
-        "times going back, a burst after a busy bus, a stall before a first pose, an applied "
-        "config) is read whole: quietly under auto, with one line on stderr under always "
+        "times going back, a burst after a busy bus, a stall before a first pose) is read "
+        "whole: quietly under auto, with one line on stderr under always "
         "(default: %(default)s)",
     )
     parser.set_defaults(func=_do_analyze)
@@ -152,11 +153,9 @@ def _analyze_single(args: argparse.Namespace) -> int:
     from odocan.host.cli.robotchoice import choose_robot, say
     from odocan.host.io.logs import read_log
     from odocan.host.judge.analysis import analyze
-    from odocan.host.judge.configs import later_mismatches, running_before_configs
+    from odocan.host.judge.configs import ConfigPages, running_before_configs
     from odocan.host.judge.profilepage import head_profile, profile_mismatch, with_bus_speed
-    from odocan.host.judge.twosenders import log_events
     from odocan.host.outputs import check_distinct
-    from odocan.host.protocol.dbcplan import default_plan
     from odocan.host.report.ci import analysis_checks, write_checks
     from odocan.host.report.progress import wall_clock_progress
     from odocan.host.report.summary import finish
@@ -173,7 +172,10 @@ def _analyze_single(args: argparse.Namespace) -> int:
     with wall_clock_progress(f"analysing {args.log}", None):
         streams = _streams(args)
         running = head_profile(args.log) if streams and db is None else None
-        analysis = _streamed(args, with_bus_speed(profile, running), db) if streams else None
+        pages = ConfigPages(profile)  # an applied config's pages, read as the log streams
+        analysis = (_streamed(args, with_bus_speed(profile, running), db, pages) if streams
+                    else None)
+        running = pages.running(running)  # the page before a first config (the whole: below)
         frames: FrameArrays | None = None
         if analysis is None:
             frames = whole = read_log(args.log)
@@ -198,9 +200,8 @@ def _analyze_single(args: argparse.Namespace) -> int:
         log_inputs(args.log, profile, analysis.report["integrator"], args.dbc))
     said = profile_mismatch(running, profile, analysis.report["integrator"], choice.given_as)
     hints: list[str] = [] if said is None else [said]  # the firmware's PROFILE page names it
-    if frames is not None and db is None:  # the pages after an applied config: its robot's
-        hints += later_mismatches(frames, profile, analysis.report["integrator"])
-        analysis.report["events"] += log_events(frames, default_plan())  # two senders (#11)
+    if db is None:  # the pages after an applied config: its robot's
+        hints += _later(frames, pages, profile, analysis.report)
     if not analysis.passed and db is None:  # a wrong --robot must not read as a firmware fault
         from odocan.host.judge.diagnosis import mismatches
 
@@ -219,6 +220,20 @@ def _analyze_single(args: argparse.Namespace) -> int:
     return code
 
 
+def _later(frames: FrameArrays | None, pages: ConfigPages, profile: robot.RobotProfile,
+           report: dict[str, Any]) -> list[str]:
+    """The pages after each applied config against its robot (``configs.later_mismatches``):
+    the whole log's, which also adds its two senders' events (#11), or the stream's."""
+    from odocan.host.judge.configs import later_mismatches
+    from odocan.host.judge.twosenders import log_events
+    from odocan.host.protocol.dbcplan import default_plan
+
+    if frames is None:  # streamed: the same pages, read from its spill
+        return pages.mismatches(report["integrator"])
+    report["events"] += log_events(frames, default_plan())
+    return later_mismatches(frames, profile, report["integrator"])
+
+
 def _streams(args: argparse.Namespace) -> bool:
     """Whether the analysis streams (the module docstring): nothing asks for the whole log,
     and ``--stream`` (auto: the log's size) says so."""
@@ -229,11 +244,13 @@ def _streams(args: argparse.Namespace) -> bool:
 
 
 def _streamed(
-    args: argparse.Namespace, profile: robot.RobotProfile, db: cantools.database.can.Database | None
+    args: argparse.Namespace, profile: robot.RobotProfile,
+    db: cantools.database.can.Database | None, pages: ConfigPages,
 ) -> Analysis | None:
     """The streamed analysis of ``args.log``; None when it refuses the log (the whole log's
     path then says why, in the log's terms) or cannot judge it exactly (``NotStreamable``:
-    said on stderr under ``--stream always``, ``refused_line``)."""
+    said on stderr under ``--stream always``, ``refused_line``); ``pages``: an applied
+    config's PROFILE pages read as it streams (odocan's DBC)."""
     from odocan.host.io.logs import CHUNK_FRAMES, warn_on_stderr
     from odocan.host.judge.analysis import Analysis
     from odocan.host.judge.samples import AnalysisError
@@ -243,7 +260,8 @@ def _streamed(
     try:
         report = analyze_file(args.log, profile, args.integrator, tolerance=args.tolerance,
                               db=db, chunk_frames=args.chunk_frames or CHUNK_FRAMES,
-                              warn=warnings.append, whole_on_config=db is None)
+                              warn=warnings.append, whole_on_config=db is None,
+                              config_pages=pages if db is None else None)
     except AnalysisError:
         return None
     except NotStreamable as refusal:
@@ -258,14 +276,15 @@ def _streamed(
 def refused_line(log: Path | str, reason: str) -> str:
     """The one stderr line for a log ``--stream always`` could not stream: a user who asked
     for bounded memory learns it was not kept, and why; the verdict is the whole log's, the
-    same report, and the memory the whole log's judge takes for it (``whole_rss_mb``: not the
-    stream's bound, about 2.7 MB per MB of candump log). Under ``auto`` (the CLI's choice, not
-    the user's) a refusal is quiet."""
-    from odocan.host.judge.stream_choice import RSS_TARGET_MB, whole_rss_mb
+    same report, and the most memory the process then takes (``refused_rss_mb``: the stream's
+    attempt, then the whole log's judge; not the stream's bound: up to about 5 MB per MB of
+    candump log plus 65 MB). Under ``auto`` (the CLI's choice, not the user's) a refusal is
+    quiet."""
+    from odocan.host.judge.stream_choice import RSS_TARGET_MB, refused_rss_mb
 
-    rss_mb = whole_rss_mb(log)
-    memory = "" if rss_mb is None else (
-        f", in about {rss_mb:.0f} MB of memory (the stream aims under {RSS_TARGET_MB:.0f} MB)")
+    rss_mb = refused_rss_mb(log)
+    memory = "" if rss_mb is None else (f", in up to about {rss_mb:.0f} MB of memory (the stream "
+                                        f"aims under {RSS_TARGET_MB:.0f} MB)")
     return f"odocan analyze: {log}: not streamable ({reason}): judged whole{memory}"
 
 
