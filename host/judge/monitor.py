@@ -38,7 +38,8 @@ an episode latched since the pose was last set anew, which the latest sample doe
 UNVERIFIED (nothing compared yet; or, for good, two firmwares were heard), HELD (frames the
 stamps cannot decide wait for the evidence: ``livesettle``), DISTANCE WRONG and
 TWIST WRONG (ODOM_TWIST's DISTANCE and speeds, latched: ``livedistance``, ``livetwist``), OK
-(saying so when the reference was placed again after a stall or a gap: ``livestanding``).
+(saying so when the reference was placed again after a stall or a gap: ``livestanding``), or
+STALE instead while the firmware's last summary is too old to vouch for (``monitorverdict``).
 
 ``bus_load`` (``busstats.LoadWindow``): bits per second over the last second of bus time, from
 every frame's exact stuffed length; the load as a fraction when given the bitrate.
@@ -79,8 +80,8 @@ from odocan.host.judge.monitorvalues import (
     shown_value,
     to_json,
 )
+from odocan.host.judge.monitorverdict import reported_verdict, summary_stale_why
 from odocan.host.judge.profilepage import follow_profile
-from odocan.host.judge.reasonwords import reason_text
 from odocan.host.judge.reference import Geometry
 from odocan.host.judge.sources import CONFLICT_HOLD_S, FIRMWARE_NODE, SourceWatch
 from odocan.host.judge.statuslatch import StatusLatch
@@ -122,6 +123,7 @@ class BusMonitor:
         self.messages: dict[str, MessageStats] = {}
         self.unknown_ids: Counter[str] = Counter()
         self.status: dict[str, Any] = {}
+        self.summary_heard_s: float | None = None  # local monotonic time of the last summary
         self.frames_total = 0
         self.undecodable = 0
         self.started_monotonic_s = time.monotonic()
@@ -180,7 +182,7 @@ class BusMonitor:
             self.load.add(msg)
             self.e2e.count_frame_kind(error=msg.is_error_frame, remote=msg.is_remote_frame)
             return
-        data = bytes(msg.data)
+        data, self._now_s = bytes(msg.data), now_s
         timestamp_s = self._bus_time_s = msg.timestamp
         message = self._by_key.get(frame_key(msg.arbitration_id, msg.is_extended_id))
         summary = self._summary(message, data) if message is not None else None
@@ -330,6 +332,7 @@ class BusMonitor:
         proven = self.sources.on_page(page.lower(), s, self.tracker)  # the power-up rule
         self.tracker.on_status(self._bus_time_s, s)  # alive; a summary: livereprime
         if page == "SUMMARY":
+            self.summary_heard_s = self._now_s  # an OK needs a fresh one (monitorverdict)
             mask = int(s["ERROR_MASK"])
             self.firmware_events += self.latch.observe(self._bus_time_s, int(s["STATE"]),
                                                        int(s["REASON"]), mask)
@@ -404,6 +407,8 @@ class BusMonitor:
             self.release_held()
         nodes = node_ages(self.db, self.messages, now_s)
         state, why = self._verdict(nodes.get(FIRMWARE_NODE))
+        if state == "OK" and (stale := summary_stale_why(self, now_s)):  # (monitorverdict)
+            state, why = "STALE", stale
         return {"state": state, "why": why, "nodes": nodes, "events": list(self.events),
                 "firmware_events": list(self.firmware_events),
                 "pose_wrongs": self.tracker.wrongs.as_dict()}  # latched: host.judge.posewrongs
@@ -420,7 +425,7 @@ class BusMonitor:
             return "CONFLICT", [str(self.events[-1]["detail"]) if self.events else "two sources"]
         reported = str(self.status.get("state", "?"))
         if reported != "OK":
-            return self._reported_verdict(reported)
+            return reported_verdict(self, reported)
         if self.sources.conflict_from_s is not None:  # whose pose is it? (posewrongs: none judged)
             return "UNVERIFIED", [self.sources.conflict_text()]
         error = self.tracker.vs_reference.latest
@@ -435,29 +440,6 @@ class BusMonitor:
             if reasons := why():
                 return verdict, reasons
         return "OK", placed_why(self.tracker)
-
-    def _reported_verdict(self, reported: str) -> tuple[str, list[str]]:
-        """The firmware's own state when not OK, with its REASON; but a pose, DISTANCE or twist
-        found wrong (``livedistance``, ``livetwist``: latched once settled) outranks DEGRADED,
-        which a latched REASON (COUNTER_RESET, POSE_UNCERTAIN) keeps until a set-pose: the
-        judge's finding is not hidden behind it. The pose is wrong as it is beside an OK
-        (``livestanding``: the latest sample, or an episode of the pose's current life)."""
-        said = f"firmware reports {reported} ({reason_text(str(self.status.get('reason', '?')))})"
-        if reported == "DEGRADED":
-            for verdict, why in (("POSE WRONG", self._pose_wrong_degraded()),
-                                 ("DISTANCE WRONG", self.distance.verdict()),
-                                 ("TWIST WRONG", self.twist.verdict())):
-                if why:
-                    return verdict, [*why, said]
-        return reported, [said]
-
-    def _pose_wrong_degraded(self) -> list[str]:
-        """``pose_wrong_why`` beside a DEGRADED; while no sample can be judged (two sources, a
-        reboot's priming frame awaited), the episodes of the pose's current life alone."""
-        if self.sources.conflict_from_s is not None or self.tracker.awaiting_boot:
-            text = self.tracker.wrongs.standing_text()
-            return [text] if text else []
-        return pose_wrong_why(self.tracker)
 
     def snapshot(self, now_s: float | None = None) -> dict[str, Any]:
         """The whole model as JSON-ready data (``odocan monitor --json``); ``now_s``: local
