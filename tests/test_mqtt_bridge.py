@@ -635,4 +635,5 @@ def test_a_broker_that_lost_its_state_is_reported(
         assert asyncio.run(scenario()) == 1
     finally:
         logger.removeHandler(caplog.handler)
-    assert any("the broker lost its session state" in r.getMessage() for r in caplog.records)
+    assert any("the broker no longer had this bridge's session" in r.getMessage()
+               and "restarted without its persistence" in r.getMessage() for r in caplog.records)

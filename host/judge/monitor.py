@@ -39,7 +39,8 @@ UNVERIFIED (nothing compared yet; or, for good, two firmwares were heard, or the
 page contradicts the default robot: ``liverobot``), HELD (frames the
 stamps cannot decide wait for the evidence: ``livesettle``), DISTANCE WRONG and
 TWIST WRONG (ODOM_TWIST's DISTANCE and speeds, latched: ``livedistance``, ``livetwist``), OK
-(saying so when the reference was placed again after a stall or a gap: ``livestanding``).
+(saying so when the reference was placed again after a stall or a gap: ``livestanding``), or
+STALE instead while the firmware's last summary is too old to vouch for (``monitorverdict``).
 
 ``bus_load`` (``busstats.LoadWindow``): bits per second over the last second of bus time, from
 every frame's exact stuffed length; the load as a fraction when given the bitrate.
@@ -85,7 +86,7 @@ from odocan.host.judge.monitorvalues import (
     shown_value,
     to_json,
 )
-from odocan.host.judge.monitorverdict import verdict
+from odocan.host.judge.monitorverdict import summary_stale_why, verdict
 from odocan.host.judge.profilepage import follow_profile
 from odocan.host.judge.reference import Geometry
 from odocan.host.judge.sources import CONFLICT_HOLD_S, FIRMWARE_NODE, SourceWatch
@@ -128,6 +129,7 @@ class BusMonitor:
         self.messages: dict[str, MessageStats] = {}
         self.unknown_ids: Counter[str] = Counter()
         self.status: dict[str, Any] = {}
+        self.summary_heard_s: float | None = None  # local monotonic time of the last summary
         self.frames_total = 0
         self.undecodable = 0
         self.started_monotonic_s = time.monotonic()
@@ -186,7 +188,7 @@ class BusMonitor:
             self.load.add(msg)
             self.e2e.count_frame_kind(error=msg.is_error_frame, remote=msg.is_remote_frame)
             return
-        data = bytes(msg.data)
+        data, self._now_s = bytes(msg.data), now_s
         timestamp_s = self._bus_time_s = msg.timestamp
         message = self._by_key.get(frame_key(msg.arbitration_id, msg.is_extended_id))
         summary = self._summary(message, data) if message is not None else None
@@ -340,6 +342,7 @@ class BusMonitor:
         proven = self.sources.on_page(page.lower(), s, self.tracker)  # the power-up rule
         self.tracker.on_status(self._bus_time_s, s)  # alive; a summary: livereprime
         if page == "SUMMARY":
+            self.summary_heard_s = self._now_s  # an OK needs a fresh one (monitorverdict)
             mask = int(s["ERROR_MASK"])
             self.firmware_events += self.latch.observe(self._bus_time_s, int(s["STATE"]),
                                                        int(s["REASON"]), mask)
@@ -420,6 +423,8 @@ class BusMonitor:
             self.release_held()
         nodes = node_ages(self.db, self.messages, now_s)
         state, why = verdict(self, nodes.get(FIRMWARE_NODE))  # (monitorverdict)
+        if state == "OK" and (stale := summary_stale_why(self, now_s)):
+            state, why = "STALE", stale
         return {"state": state, "why": why, "nodes": nodes, "events": list(self.events),
                 "firmware_events": list(self.firmware_events),
                 "pose_wrongs": self.tracker.wrongs.as_dict()}  # latched: host.judge.posewrongs

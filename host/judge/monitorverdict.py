@@ -5,6 +5,12 @@ A watch left unjudged (``liverobot``: no ``--robot``, and the firmware's PROFILE
 the default robot's) compares nothing: its state is UNVERIFIED, saying why
 (``LiveRobot.unjudged``: "the firmware runs a different profile than the default robot pmir:
 give --robot") where a watch that compared nothing yet says so.
+
+An OK vouches for the firmware's own state as much as for its pose: a firmware whose poses flow
+again while its last ODOM_STATUS summary is older than ``NODE_TIMEOUT_CYCLES`` of its cycle (a
+SIGCONT after a stall sends poses first; its DEGRADED comes with the next summary) is STALE, not
+OK (``summary_stale_why``): the screen's firmware line then says STALE too, and an OK beside it
+would contradict it.
 """
 
 from __future__ import annotations
@@ -13,11 +19,30 @@ from functools import partial
 from typing import TYPE_CHECKING, Any
 
 from odocan.host.judge.livestanding import placed_why, pose_wrong_why
+from odocan.host.judge.monitorvalues import NODE_TIMEOUT_CYCLES
 from odocan.host.judge.reasonwords import reason_text
 from odocan.host.judge.sources import FIRMWARE_NODE
 
 if TYPE_CHECKING:
     from odocan.host.judge.monitor import BusMonitor
+
+SUMMARY_MESSAGE = "ODOM_STATUS"
+
+
+def summary_stale_why(monitor: BusMonitor, now_s: float) -> list[str]:
+    """Why the firmware's own state is unknown now: its last accepted summary is older than
+    ``NODE_TIMEOUT_CYCLES`` x ODOM_STATUS's DBC cycle (``now_s``: local monotonic time, as
+    ``feed``'s); [] while it is fresh (or none was heard: the verdict is not OK then)."""
+    heard_s = monitor.summary_heard_s
+    cycle_ms = monitor.db.get_message_by_name(SUMMARY_MESSAGE).cycle_time
+    if heard_s is None or not cycle_ms:
+        return []
+    timeout_s = NODE_TIMEOUT_CYCLES * cycle_ms / 1e3
+    age_s = now_s - heard_s
+    if age_s <= timeout_s:
+        return []
+    return [f"no {SUMMARY_MESSAGE} summary for {age_s:.2f} s (timeout {timeout_s:.2f} s): the "
+            f"firmware's own state is unknown; it last said {monitor.status.get('state', '?')}"]
 
 
 def verdict(model: BusMonitor, firmware: dict[str, Any] | None) -> tuple[str, list[str]]:

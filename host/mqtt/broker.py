@@ -337,3 +337,16 @@ class EmbeddedBroker:
         tb: TracebackType | None,
     ) -> None:
         await self.stop()
+
+
+def session_lost(robot: str, away_s: float, expiry_s: float) -> str:
+    """Why a broker we reconnected to after ``away_s`` lacks our session of ``expiry_s``: it
+    lost its state (restarted without its persistence: a mosquitto started as root writes its
+    database as user mosquitto, and a directory it cannot write keeps none), or it closed our
+    connection well before we saw it go (a bridge stalled past 1.5 keepalives, then its session
+    expired meanwhile: ``away_s`` counts from when we saw the loss), or it keeps sessions for
+    less than we asked. The line names them all: it is true whichever happened."""
+    return (f"{robot}: the broker no longer had this bridge's session after {away_s:.1f} s "
+            f"away (expiry {expiry_s:g} s): it lost its state (restarted without its "
+            "persistence?), dropped the connection earlier than the bridge saw (a stall), or "
+            "keeps sessions for less; commands and results it held may be lost")

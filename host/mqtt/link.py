@@ -13,8 +13,8 @@
 * client id ``<client_prefix><robot>`` (0-9a-zA-Z, at most 23 bytes: MQTT 3.1.1's guarantee;
   else a stable short form: ``host.mqtt.clientids``), clean start off, session expiry
   ``command_expiry_s``.
-  A broker that comes back without that session although we were away for less is one warning
-  line (``sessions_lost``: it lost its state, and with it what it held);
+  A broker that comes back without that session although we saw ourselves away for less is one
+  warning line (``sessions_lost``: what it held is gone; ``broker.session_lost`` says why);
 * commands are read off this loop: ``host.mqtt.cmdreader.CommandReader``, a thread with its own
   connection, one per bridge process (``commands``: this robot's share of it; without it, one of
   its own), with its own session of the same expiry (the broker keeps the ``cmd/+``
@@ -75,6 +75,7 @@ from odocan.host.mqtt.broker import (
     connect_failure,
     first_connect_failure,
     protocol_unsupported,
+    session_lost,
 )
 from odocan.host.mqtt.client import Arrived, ClosedBeforeConnack, LinkClient, persistent_session
 from odocan.host.mqtt.clientids import DEFAULT_PREFIX, link_client_id, reader_client_id
@@ -308,13 +309,12 @@ class RobotLink:
                                              name=f"mqtt-commands-{self.robot}")
 
     def _check_session(self, client: LinkClient, away_s: float) -> None:
-        """A v5 broker without our session, though we were away for less than its expiry, has
-        lost its state (restarted without persistence, killed): commands it acknowledged but
-        had not delivered, and results it had not delivered, are gone. Say so (once a time)."""
+        """A v5 broker without our session, though we saw ourselves away for less than its
+        expiry: commands it acknowledged but had not delivered, and results it had not
+        delivered, are gone. Said once a time, with the causes it can be (``session_lost``)."""
         if self.v5 and not client.session_present and away_s < self.command_expiry_s:
             self.sessions_lost += 1
-            log.warning("%s: the broker lost its session state (restarted without its "
-                        "persistence?): commands and results it held may be lost", self.robot)
+            log.warning("%s", session_lost(self.robot, away_s, self.command_expiry_s))
 
     async def _connect(self, client: LinkClient) -> None:
         """CONNECT within ``connect_timeout_s`` (TCP, TLS and CONNACK; DNS gets one more s)."""

@@ -70,7 +70,7 @@ from odocan.host.judge.sources import SourceWatch, boot_summary, start_new_life
 from odocan.host.judge.statuslatch import StatusLatch
 from odocan.host.judge.tracking import PoseTracker
 from odocan.host.judge.watchend import end_watch
-from odocan.host.mqtt.dbcnames import named_value, page_name
+from odocan.host.mqtt.dbcnames import page_name, signal_value
 from odocan.host.mqtt.errorbatch import SinceLast
 from odocan.host.mqtt.haltstretch import HaltStretches
 from odocan.host.mqtt.livecommands import CommandFollowing
@@ -78,6 +78,7 @@ from odocan.host.mqtt.livehold import BridgeHold
 from odocan.host.mqtt.liveplan import Plan, plans
 from odocan.host.mqtt.liveprofile import ProfileStatus, judge_waited, late_robot_page, wait_page
 from odocan.host.mqtt.liveroutes import Route, routes, takes
+from odocan.host.mqtt.lsbround import POSE_FIELDS, TRUTH_FIELDS, LsbRounding
 from odocan.host.mqtt.topics import stamp, status_payload
 from odocan.host.protocol.busfacts import ENC_COUNTER_MASK as MASK
 from odocan.host.protocol.e2e import e2e_messages
@@ -130,6 +131,8 @@ class RobotTelemetry(CommandFollowing):
         self.name = name
         self.db = db if db is not None else database()
         self._by_id = {m.frame_id: m for m in self.db.messages}
+        self._lsb = LsbRounding(self.db, POSE_FIELDS)  # float noise off, raw kept (lsbround)
+        self._truth_lsb = LsbRounding(self.db, TRUTH_FIELDS)
         self._routes = _routes(self.db)
         self.e2e = E2EMonitor(self.db)
         self.e2e.holds = True  # frames the stamps cannot decide wait for the evidence
@@ -157,7 +160,7 @@ class RobotTelemetry(CommandFollowing):
         self._pose_id, self._pose_ids = pose.frame_id, e2e_messages(self.db)[pose.frame_id]
         self._watched = {self._status_id, self._pose_id}  # heard before E2E (_watch_source)
         status = self._by_id[self._status_id]  # per signal: its key in ``firmware``, its enum
-        self._status_signals = {sig.name: (sig.name.lower(), sig.choices)
+        self._status_signals = {sig.name: (sig.name.lower(), sig)
                                 for sig in status.signals}
         self._page_names = {int(v): str(n).lower()
                             for v, n in (status.get_signal_by_name("PAGE").choices or {}).items()}
@@ -383,7 +386,8 @@ class RobotTelemetry(CommandFollowing):
         self, pose: FramePose, ref: FramePose | None, enc: int, counter: int, t_s: float
     ) -> list[Publication]:
         head = {"t_s": t_s, "counter": counter, "enc_counter": enc, "enc_seq": pose.seq}
-        pubs: list[Publication] = [("pose", stamp({**head, **pose_dict(pose), **self._twist}))]
+        pubs: list[Publication] = [("pose", stamp(self._lsb({**head, **pose_dict(pose),
+                                                              **self._twist})))]
         if ref is None or ref.seq != pose.seq:
             return self._with_truth(pubs, t_s)
         pubs.append(("reference", stamp({**head, **pose_dict(ref)})))
@@ -407,7 +411,7 @@ class RobotTelemetry(CommandFollowing):
         if ref is not None:  # sampled at that very encoder frame (difference: the tracker's)
             self._truth_error = {"enc_seq": ref.seq, **self.tracker.reference_vs_truth.latest}
         self._truth = {"t_s": t_s, "counter": int(s["COUNTER"]), "enc_counter": enc,
-                       "enc_seq": truth.seq, **pose_dict(truth)}
+                       "enc_seq": truth.seq, **self._truth_lsb(pose_dict(truth))}
         if t_s < self._truth_pub_t:  # the bus clock went back (a restart, a replay): follow it
             self._truth_pub_t = -math.inf
         period_s = self.publish_period_s
@@ -463,7 +467,7 @@ class RobotTelemetry(CommandFollowing):
         """The firmware's last ODOM_STATUS pages by name, each signal by its lower-case name
         (enums by DBC name): made when read (``status``, once a second), not per page heard."""
         signals = self._status_signals
-        return {name: {signals[k][0]: named_value(signals[k][1], v) for k, v in s.items()
+        return {name: {signals[k][0]: signal_value(signals[k][1], v) for k, v in s.items()
                        if k not in ("CHECKSUM", "COUNTER", "PAGE")}
                 for name, s in self._pages.items()}
 
