@@ -90,11 +90,13 @@ def test_the_correct_firmware_streamed_is_the_whole_report(scenario: str, halted
 def test_two_stalls_streamed_are_the_whole_report(scenario: str, tail_s: float,
                                                   tmp_path: Path) -> None:
     """The second stall's COUNTER_RESET was latched by the first (sticky: it says nothing
-    new), so the whole judge keeps the exact rule there (``stallreprime``; measured: it PASSes
-    the circle, FAILs the square's correct firmware: the whole judge's rule, not the stream's):
-    the stream says what the whole judge says, byte for byte, either way."""
+    new), yet the firmware re-primed there (its rule is the bound: ``stallreprime.certain``;
+    tests/test_reprime_latched.py): the whole judge re-primes at both (before: only the first,
+    and it FAILed the square's correct firmware by 2733 mrad), the stream says the same, byte
+    for byte, and a pose 10 mm off after the first stall still FAILs both."""
     whole, same = _both(drive_twice(scenario, tail_s), tmp_path / "twice.log")
-    assert _reprimed(whole) == 1
+    assert whole["passed"], whole["onboard_vs_reference"]
+    assert _reprimed(whole) == 2
     assert same == [True, True]
     wrong, same = _both(_wrong(drive_twice(scenario, tail_s), MID + 1, 100, 1),
                         tmp_path / "wrong.log")

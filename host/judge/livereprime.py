@@ -5,14 +5,17 @@ After a stall long enough for the firmware's step bound to reach the ambiguous s
 (``stallreprime.possible``: the silence since its last ODOM_STATUS), the correct firmware may
 have re-primed on the frame it took on resuming (COUNTER_RESET): the stall's motion is not in
 its pose, and its heading leaves the reference's. Its word comes in its next summary
-(``nearthreshold``'s rule: COUNTER_RESET set there, clear on the last summary before the stall),
-after its first poses. So the samples after such a stall are held, unjudged
-(``ReprimeHold.holds``), until a summary made ``AFTER_PERIODS`` after the stall's first sample
-is heard, or ``WAIT_S`` passed. Declared: the reference restarts from the next on-board pose
-(``livedark.DarkRestarts.owe``, as at a step near the threshold: ``livenewstart`` fits its start
-over a second of samples), told by an event with ``stallreprime.detail``; the firmware's own
-DEGRADED state shows. Not declared (or no word in time): the samples held are judged as they
-would have been, by the stall's position placement, the heading exact.
+(``nearthreshold``'s rule: COUNTER_RESET set there, clear on the last summary before the stall;
+or, latched by an earlier re-prime, set on both after a stall long enough that the firmware
+surely re-primed, ``stallreprime.certain``: before, a second such stall was judged with the
+exact heading, POSE WRONG on pmir's square), after its first poses. So the samples after such a
+stall are held, unjudged (``ReprimeHold.holds``), until a summary made ``AFTER_PERIODS`` after
+the stall's first sample is heard, or ``WAIT_S`` passed. Declared: the reference restarts from
+the next on-board pose (``livedark.DarkRestarts.owe``, as at a step near the threshold:
+``livenewstart`` fits its start over a second of samples), told by an event with
+``stallreprime.detail``; the firmware's own DEGRADED state shows. Not declared (or no word in
+time): the samples held are judged as they would have been, by the stall's position placement,
+the heading exact.
 
 A declared re-prime is held to where the frames the firmware took put it, as ``analyze``
 holds it (``reprimereplay``): its pose before the stall (its last sample compared, or the
@@ -63,7 +66,7 @@ from odocan.host.judge.nearthreshold import AFTER_PERIODS, COUNTER_RESET_BIT, SU
 from odocan.host.judge.primedon import PRIMED_KIND
 from odocan.host.judge.reprimereplay import Odometry, QuietFrames
 from odocan.host.judge.samples import POSITION_LSB_M
-from odocan.host.judge.stallreprime import FIFO_SPAN, R_SPAN, detail, possible
+from odocan.host.judge.stallreprime import FIFO_SPAN, R_SPAN, certain, detail, possible
 
 if TYPE_CHECKING:
     from odocan.host.judge.livepose import Sample
@@ -88,6 +91,7 @@ class ReprimeHold:
         self._mask = -1  # ERROR_MASK of the latest summary heard (-1: none)
         self._before = -1  # ... of the latest before the stall held for
         self._stall_s = 0.0  # the stall's silence (s)
+        self._sure = False  # ... long enough that the firmware surely re-primed (``certain``)
         self._from_s = math.inf  # bus time of the stall's first sample (s; inf: no hold)
         self._first = -1  # its encoder frame (seq)
         self._anchor: tuple[float, float] | None = None  # the firmware's position before (m)
@@ -119,8 +123,7 @@ class ReprimeHold:
             return
         self._mask = int(signals["ERROR_MASK"])
         if t_s >= self._from_s + AFTER_PERIODS * CYCLE_S:
-            said = self._before >= 0 and not self._before & COUNTER_RESET_BIT
-            word = said and bool(self._mask & COUNTER_RESET_BIT)
+            word = self._said()
             if word and ((self._power_up and not self._tracker.lives.power_up_proven)
                          or self.count.awaited):
                 self._word = True  # its power-up's proof, its count: the page, ``counted``
@@ -137,9 +140,18 @@ class ReprimeHold:
     def word(self) -> tuple[int, bool]:
         """The frame of the first sample after the latest stall held for, and whether the
         firmware said it re-primed there (COUNTER_RESET clear before, set on the latest
-        summary): ``livekept`` bounds a bare APPLY just after it (``reprimekept``)."""
-        said = self._before >= 0 and not self._before & COUNTER_RESET_BIT
-        return self._first, said and bool(self._mask & COUNTER_RESET_BIT)
+        summary; or latched before a stall it surely re-primed after, ``_said``): ``livekept``
+        bounds a bare APPLY just after it (``reprimekept``)."""
+        return self._first, self._said()
+
+    def _said(self) -> bool:
+        """The firmware's word for the stall held for, as ``stallreprime.reprimed_across``
+        reads it: COUNTER_RESET clear before and set on the latest summary; or set on both
+        (latched by an earlier re-prime: it cannot say it again) after a stall long enough
+        that its bound surely reached the ambiguous step (``stallreprime.certain``)."""
+        if self._before < 0 or not self._mask & COUNTER_RESET_BIT:
+            return False
+        return not self._before & COUNTER_RESET_BIT or self._sure
 
     def stalled(self, seq: int, t_s: float, talked: tuple[float, int] | None,
                 least: int | None) -> None:
@@ -152,6 +164,7 @@ class ReprimeHold:
         self.count.stalls += 1  # (one before the count page: ``PowerUpCount``)
         if possible(t_s - talked[0], CYCLE_S, least) and self._mask >= 0:
             self._from_s, self._before, self._stall_s = t_s, self._mask, t_s - talked[0]
+            self._sure = certain(self._stall_s, CYCLE_S, least)
             self._first, self._anchor_pose = seq, self._anchored()
             anchor, last = self._anchor_pose, self._tracker.last_pair
             self._anchor = None if anchor is None else (anchor.x_m, anchor.y_m)

@@ -27,10 +27,21 @@ and the firmware's own DEGRADED state stands (``finalstate``). The summaries aro
 are read by their gap, not by where a recorder's stamps put them (``around``: ODOM_STATUS
 stamped up to ``LATE_S`` late).
 
-A firmware that re-primes without saying so, or whose word was latched before the stall (it
-says nothing new), keeps the exact rule: its heading FAILs. What a wrong firmware can hide: a
-heading off by the turn of a few frames at the stall it declared (the pairs' choice); a
-position off by more than those frames' merge allowance, or any wrong step after, FAILs.
+A firmware whose word was latched before the stall (COUNTER_RESET set on both summaries around
+it: sticky until a set-pose, it says nothing new) re-primes there all the same: its rule
+(firmware/encoders.py) is the bound, not the bit. Its bound on the frame after the stall is the
+step's periods plus a COUNTER cycle plus the periods since its last sample, measured over halts
+of 3-8 s at least twice the halt; the summaries around a stall lie at most a summary period
+either side of the halt, and a recorder's stamp ``LATE_S`` more (``SURE_SLACK_S``). So where
+twice the stall less that slack reaches the ambiguous step (``certain``) the correct firmware
+has re-primed and the reference re-primes with it, the pair chosen as for a declared one (issue
+#11: on pmir's square halted 6 s then 8 s, the second stall was judged with the exact heading
+and the correct firmware FAILed by 2733 mrad). Between ``possible`` and ``certain`` (about 0.5 s
+of stall on pmir) the latched word cannot tell, and the exact rule stays. A firmware that
+re-primes without ever saying so keeps the exact rule: its heading FAILs. What a wrong firmware
+can hide: a heading off by the turn of a few frames at the stall it declared (the pairs'
+choice); a position off by more than those frames' merge allowance, or any wrong step after,
+FAILs.
 """
 
 from __future__ import annotations
@@ -64,6 +75,8 @@ FIFO_SPAN = HW_RX_FIFO_FRAMES + 1  # frames after the last sample's the firmware
 R_SPAN = SILENCE_CYCLES  # frames before the first kept sample's the re-prime may lie on
 COMPARED = 10  # samples after the stall the pairs are compared on
 LATE_S = 0.05  # a recorder's stamps of ODOM_STATUS this late (half its period) still read
+SUMMARY_S = 0.1  # ODOM_STATUS summary period (the DBC's cycle time of the page)
+SURE_SLACK_S = 2 * SUMMARY_S + LATE_S  # a stall's summaries' gap beyond the halt, at most
 
 
 @dataclass(frozen=True)
@@ -89,17 +102,38 @@ def possible(stall_s: float, cycle_s: float, least: int | None) -> bool:
     return least is not None and 2.0 * stall_s / cycle_s + SLACK_PERIODS >= least
 
 
+def certain(stall_s: float, cycle_s: float, least: int | None) -> bool:
+    """Whether a stall whose summaries lie ``stall_s`` apart (bus time) surely brought the
+    firmware's step bound to the ambiguous step (``least`` periods): its halt at least
+    ``stall_s - SURE_SLACK_S``, its bound at least twice the halt (module docstring)."""
+    return least is not None and 2.0 * (stall_s - SURE_SLACK_S) / cycle_s >= least
+
+
+def latched(mask: IntArray, i: int) -> bool:
+    """COUNTER_RESET set on both summaries ``i`` and ``i + 1``: the firmware's word was said
+    before the stall and cannot be said again (sticky until a set-pose)."""
+    return bool(mask[i] & COUNTER_RESET_BIT) and bool(mask[i + 1] & COUNTER_RESET_BIT)
+
+
+def reprimed_across(mask: IntArray, i: int, stall_s: float, cycle_s: float,
+                    least: int | None) -> bool:
+    """Whether the firmware re-primed across its summaries ``i``, ``i + 1`` (``stall_s``
+    apart): said there after a stall that could bring it (``possible``, ``said_reset``), or
+    its word latched before a stall that surely brought it (``certain``, ``latched``)."""
+    return ((possible(stall_s, cycle_s, least) and said_reset(mask, i))
+            or (certain(stall_s, cycle_s, least) and latched(mask, i)))
+
+
 STREAM = ("a stall the firmware declared it re-primed after (COUNTER_RESET): judged on the "
           "whole log (its re-prime's frames chosen by the samples after)")
 
 
 def any_declared(resets: Resets, cycle_s: float, least: int | None) -> bool:
-    """Whether two consecutive summaries of ``resets`` are a silence long enough to re-prime
-    (``possible``) with COUNTER_RESET clear before and set after: the streamed judge, which
-    steps before it reads the summaries, refuses such a life (the whole log's judges it)."""
+    """Whether two consecutive summaries of ``resets`` are a silence the firmware re-primed
+    across (``reprimed_across``): the streamed judge then takes one more pass over the life
+    (``stream_reprime``)."""
     gaps = np.diff(resets.sent_s)
-    bit = (resets.mask & COUNTER_RESET_BIT) != 0
-    return any(possible(float(g), cycle_s, least) and not bit[k] and bit[k + 1]
+    return any(reprimed_across(resets.mask, k, float(g), cycle_s, least)
                for k, g in enumerate(gaps.tolist()))
 
 
@@ -127,7 +161,7 @@ def declared_at(break_s: dict[int, float], cycle_s: float, e0: int, resets: Rese
         if i is None:
             continue
         stall_s = float(resets.sent_s[i + 1] - resets.sent_s[i])
-        if possible(stall_s, cycle_s, least) and said_reset(resets.mask, i):
+        if reprimed_across(resets.mask, i, stall_s, cycle_s, least):
             out[b - e0] = stall_s
     return out
 
