@@ -278,7 +278,8 @@ def analyze(
         except AnalysisError as exc:  # a life without on-board samples: reported, not compared
             failure = failure or exc
             silent.append(life)
-            unjudged.append(silent_life(frames, life, life_robot, life_integrator, db, str(exc)))
+            if said := silent_life(frames, life, life_robot, life_integrator, db, str(exc)):
+                unjudged.append(said)
             continue
         if life.set_pose is not None:
             kept[len(done)] = check_cut(lambda lo, hi: frames.select(np.arange(lo, hi)), (

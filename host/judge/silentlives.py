@@ -43,13 +43,17 @@ class SilentLife:
 
 
 def silent_life(frames: FrameArrays, life: Life, robot: RobotProfile, integrator: str,
-                db: DatabaseSpec, why: str) -> SilentLife:
+                db: DatabaseSpec, why: str) -> SilentLife | None:
     """``life`` (no on-board sample: ``why``, the ``AnalysisError``'s words) with the robot and
-    integrator it would have been judged with."""
+    integrator it would have been judged with; None for a life without an encoder frame the
+    firmware could have integrated (a set-pose in the log's first millisecond: nothing there to
+    judge, left out as before and as the streamed judge leaves it)."""
     part = frames.select(life.index)
     e2e, accepted = check_frames(part, db)
-    t0, t1 = float(part.timestamp_s[0]), float(part.timestamp_s[-1])
     decoder = BulkDecoder(db)
+    if not accepted[decoder.decode(part, "WHEEL_ENCODERS")["index"]].any():
+        return None
+    t0, t1 = float(part.timestamp_s[0]), float(part.timestamp_s[-1])
     final = firmware_fields(part, accepted, decoder).get("firmware_final") or {}
     poses = decoder.decode(part, "ODOM_POSE_Y")["index"]
     held = ("the pose and ODOM_TWIST held on a frame integrated before"
