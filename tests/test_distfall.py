@@ -71,7 +71,7 @@ def test_the_log_and_the_live_reading_tell_a_fall_alike(
     assert (len(found.times_s) == 1) is fell
     field = distance_field(TWIST, e2e_messages(DB)[TWIST.frame_id])
     heard = [(m.timestamp, bytes(m.data)) for m in messages]
-    assert fell_within(field, heard, lambda t_s, _c: 0.0 <= t_s <= 2.0, SMALL) is fell
+    assert fell_within(field, heard, lambda t_s, _c, _b: 0.0 <= t_s <= 2.0, SMALL) is fell
 
 
 def test_the_rule_on_raw_values() -> None:
@@ -107,7 +107,7 @@ def test_a_drive_without_a_reboot_never_falls(seed: int, tmp_path: Path) -> None
     field = distance_field(TWIST, e2e_messages(DB)[TWIST.frame_id])
     heard = [(m.timestamp, bytes(m.data)) for m in messages
              if m.arbitration_id == TWIST.frame_id]
-    assert not fell_within(field, heard, lambda _t, _c: True, 16)
+    assert not fell_within(field, heard, lambda _t, _c, _b: True, 16)
 
 
 def test_a_fall_ties_to_a_boot_summary_by_the_next_summary() -> None:

@@ -74,6 +74,7 @@ import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.distfall import Falls, fall_times
+from odocan.host.judge.latefall import continues_twice, fell_late
 from odocan.host.protocol import busfacts
 from odocan.host.protocol.busfacts import ENC_COUNTER_MASK
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
@@ -323,10 +324,21 @@ def ahead_ticks(frames: FrameArrays, decoder: BulkDecoder, positions: npt.NDArra
         before = None if j == 0 else (float(t_pose[j - 1]), int(counter[j - 1]))
         found[i] = (broke is not None and i + 1 < n
                     and boot_ahead(float(t_s[i]), broke, float(t_pose[j]), int(counter[j]), before,
-                                   fell_around(falls, float(t_s[i])))
+                                   fell_around(falls, float(t_s[i]))
+                                   or _fell_late(falls, i, t_s, uptime_s, counters))
                     and continues_summary(float(t_s[i]), float(t_s[i + 1]), int(uptime_s[i + 1]),
                                           int(counters[i + 1])))
     return found
+
+
+def _fell_late(falls: Falls, i: int, t_s: npt.NDArray[np.float64],
+               uptime_s: npt.NDArray[np.int64], counters: npt.NDArray[np.int64]) -> bool:
+    """``latefall``: the summary ``i``'s first twist heard fell by the second summary after it,
+    which continues its sequence (read there live: ``SourceWatch.told_ahead``)."""
+    if i + 2 >= len(t_s) or not continues_twice(float(t_s[i]), float(t_s[i + 2]),
+                                                int(uptime_s[i + 2]), int(counters[i + 2])):
+        return False
+    return fell_late(falls, float(t_s[i]), float(t_s[i + 2]))
 
 
 def boot_ticks(uptime_s: npt.NDArray[np.int64], counters: npt.NDArray[np.int64],

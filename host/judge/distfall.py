@@ -26,8 +26,9 @@ the summary's broken sequence; the next summary still has to continue the boot s
 Where no fall shows the reboot stays untold as before: a robot that had not moved (the new pose
 is then no farther from the old reference than the old life drove since its last twist heard,
 a tick or two; standing since power-up, none: the old life's reference is the new one's,
-tests/test_first_second_lost_powerup.py), or the new firmware's first 6 twists or more lost
-too (its first twist heard after the next summary: a false FAIL left, 93 mm at tick 32).
+tests/test_first_second_lost_powerup.py). The new firmware's first 6 to 10 twists lost too (its
+first twist heard after the next summary) are read by the summary after (``latefall``); later,
+or once the new life drove farther than the old one had, no fall shows (a false FAIL left).
 
 Kept cheap live: a judge keeps the latest twists heard (bus time, bytes: ``RECENT_TWISTS``)
 and reads them only when a summary's first pose needs the fall (``fell_within``).
@@ -55,10 +56,23 @@ RECENT_TWISTS = 16  # kept live: the twists of the last 320 ms (one every 20 ms)
 
 
 class Falls(NamedTuple):
-    """The twists whose DISTANCE fell (``falls``): their bus times (in order) and E2E COUNTERs."""
+    """The twists whose DISTANCE fell (``falls``): their bus times (in order), E2E COUNTERs and
+    the bus times of the twists heard before them (``tied_late`` asks that one before the boot
+    summary)."""
 
     times_s: npt.NDArray[np.float64]
     counters: npt.NDArray[np.int64]
+    befores_s: npt.NDArray[np.float64]
+
+
+def no_falls() -> Falls:
+    """No twist fell (nothing read yet)."""
+    return Falls(np.zeros(0, np.float64), np.zeros(0, np.int64), np.zeros(0, np.float64))
+
+
+def joined(first: Falls, then: Falls) -> Falls:
+    """The falls of two stretches of a log in order (a stream's chunks)."""
+    return Falls(*(np.concatenate((a, b)) for a, b in zip(first, then, strict=True)))
 
 
 @dataclass(frozen=True)
@@ -113,10 +127,10 @@ def falls(before_raw: int, before_s: float, raw: int, t_s: float, counter: int,
 
 
 def fell_within(field: DistanceField | None, heard: Iterable[tuple[float, bytes]],
-                tied: Callable[[float, int], bool], small: int) -> bool:
+                tied: Callable[[float, int, float], bool], small: int) -> bool:
     """Whether a twist of ``heard`` (bus time, bytes; in order) that ``tied`` takes (its bus
-    time and E2E COUNTER: ``bootticks.tied_to_boot``, to a summary) fell below the twist heard
-    before it (``falls``; their CRC holding)."""
+    time, E2E COUNTER and the bus time of the twist before it: ``bootticks.tied_to_boot``, to a
+    summary) fell below the twist heard before it (``falls``; their CRC holding)."""
     if field is None:
         return False
     before: tuple[float, int] | None = None
@@ -125,7 +139,7 @@ def fell_within(field: DistanceField | None, heard: Iterable[tuple[float, bytes]
         if counter is None:
             continue
         raw = field.raw(data)
-        if (before is not None and tied(t_s, counter)
+        if (before is not None and tied(t_s, counter, before[0])
                 and falls(before[1], before[0], raw, t_s, counter, field.lap, small)):
             return True
         before = (t_s, raw)
@@ -138,7 +152,7 @@ def fall_times(frames: FrameArrays, decoder: BulkDecoder, small: int,
     """The twists in ``frames`` whose DISTANCE fell (``falls``; their CRC holding, any
     sequence), and the latest twist's (bus time, raw DISTANCE) for the next chunk
     (``carried``: the one before ``frames``)."""
-    none = Falls(np.zeros(0, np.float64), np.zeros(0, np.int64))
+    none = no_falls()
     try:
         message = decoder.message(TWIST_MESSAGE)
         rows = np.asarray(decoder.select(frames, TWIST_MESSAGE), dtype=np.int64)
@@ -167,7 +181,8 @@ def fall_times(frames: FrameArrays, decoder: BulkDecoder, small: int,
     gap = t_s[1:] - t_s[:-1]
     fell = ((fall > 0) & (fall < field.lap // 2) & (gap >= 0.0) & (gap < FALL_GAP_S)
             & (counter[1:] < small))
-    return Falls(t_s[1:][fell], counter[1:][fell]), (float(t_s[-1]), int(raw[-1]))
+    return (Falls(t_s[1:][fell], counter[1:][fell], t_s[:-1][fell]),
+            (float(t_s[-1]), int(raw[-1])))
 
 
 def any_within(times_s: npt.NDArray[np.float64], from_s: float, to_s: float) -> bool:

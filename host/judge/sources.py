@@ -41,6 +41,7 @@ from odocan.host.judge.distfall import (
     distance_field,
     fell_within,
 )
+from odocan.host.judge.latefall import continues_twice, tied_late
 from odocan.host.judge.liveadopted import LATE_REBOOT
 from odocan.host.judge.livegapseen import heard_status
 from odocan.host.judge.powerup import (
@@ -108,6 +109,8 @@ class SourceWatch:
     # the summary (poses, ODOM_STATUS, any sequence: the E2E check refused them till then)
     twist_field: DistanceField | None = None  # where ODOM_TWIST says DISTANCE (``distfall``)
     ahead_fall: bool = False  # ``ahead_posed`` needs the twists' DISTANCE fell (``told_ahead``)
+    ahead_late: tuple[float, int, str, int | None] | None = None  # such a summary continued
+    # with no fall yet: the second summary after it reads one (``latefall``, ``told_ahead``)
     twists: deque[tuple[float, bytes]] = field(  # the latest twists heard (bus time, bytes),
         default_factory=lambda: deque(maxlen=RECENT_TWISTS))  # read only at ``hear_pose``
 
@@ -208,7 +211,7 @@ class SourceWatch:
         """Whether a twist kept live fell where it is the pose run's before the summary at
         ``summary_s`` (``bootticks.tied_to_run``)."""
         return fell_within(self.twist_field, self.twists,
-                           lambda t_s, counter: tied_to_run(t_s, counter, summary_s),
+                           lambda t_s, counter, _before_s: tied_to_run(t_s, counter, summary_s),
                            TWIST_COUNTERS)
 
     def hear_pose(self, t_s: float, counter: int) -> None:
@@ -219,7 +222,7 @@ class SourceWatch:
         before = None if self.pose is None or self.pose_s is None else (self.pose_s, self.pose[1])
         self.pose = next_run(self.pose, t_s, counter, self.pose_s)
         self.pose_s = t_s
-        if self.ahead is not None or self.ahead_posed is not None:
+        if self.ahead is not None or self.ahead_posed is not None or self.ahead_late is not None:
             self.ahead_heard.append(t_s)
         ahead, self.ahead = self.ahead, None
         if ahead is None:
@@ -233,15 +236,26 @@ class SourceWatch:
         """The next summary (bus time ``t_s``, UPTIME, E2E ``counter``) after one left to it by
         ``hear_pose``, before it is observed: that one a power-up tick when this continues its
         sequence (``bootticks.continues_summary``): a reboot from it on (its bus time, UPTIME,
-        STATE, the encoder frame latest heard then, returned); else None."""
+        STATE, the encoder frame latest heard then, returned); else None. One whose first pose
+        told it only with DISTANCE fallen and no fall heard yet waits to the summary after
+        (``latefall``: the first twist heard since it fell by then)."""
+        late, self.ahead_late = self.ahead_late, None
+        if late is not None and continues_twice(late[0], t_s, uptime_s, counter) and fell_within(
+                self.twist_field, self.twists,
+                lambda t_s, counter, before_s: tied_late(t_s, counter, before_s, late[0]),
+                TWIST_COUNTERS):
+            self.take_ahead(late[0], late[1])
+            return late
         posed, self.ahead_posed = self.ahead_posed, None
         if posed is None or not continues_summary(posed[0], t_s, uptime_s, counter):
             return None
         summary_s = posed[0]  # (``fell_around``)
         if self.ahead_fall and not fell_within(
                 self.twist_field, self.twists,
-                lambda t_s, counter: tied_to_boot(t_s, counter, summary_s), TWIST_COUNTERS):
-            return None  # its first pose told it only with DISTANCE fallen, which did not
+                lambda t_s, counter, _before_s: tied_to_boot(t_s, counter, summary_s),
+                TWIST_COUNTERS):
+            self.ahead_late = posed  # no fall yet: the next summary reads a late one
+            return None
         self.take_ahead(posed[0], posed[1])
         return posed
 
@@ -259,7 +273,7 @@ class SourceWatch:
         ``counter``, whatever its sequence, before it is observed: the one before a summary
         tells whether it breaks the sequence (``bootticks.status_breaks``)."""
         self.status_before, self.status_last = self.status_last, (t_s, counter)
-        if self.ahead_posed is not None:
+        if self.ahead_posed is not None or self.ahead_late is not None:
             self.ahead_heard.append(t_s)
 
     def conflict_text(self) -> str:

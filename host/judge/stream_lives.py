@@ -46,8 +46,9 @@ from odocan.host.judge.bootticks import (
     poses_before,
     status_before,
 )
-from odocan.host.judge.distfall import Falls, fall_times
+from odocan.host.judge.distfall import Falls, fall_times, joined, no_falls
 from odocan.host.judge.gapseen import crc_holds
+from odocan.host.judge.latefall import continues_twice, fell_late
 from odocan.host.judge.primed import counted_start
 from odocan.host.judge.reboots import SUMMARY_PAGE, mark_two_sources
 from odocan.host.judge.samples import ENC_E2E_PAGE, AnalysisError, contract_cycle_s
@@ -121,9 +122,9 @@ class StreamLives:
     _deferred: list[tuple[int, _Boot | tuple[int, int]]] = field(default_factory=list)
     _naming: list[_Boot] = field(default_factory=list)  # reboots whose ``naming`` is not told
     _ahead_fall: bool = False  # the ``_ahead`` posed needs a twist's DISTANCE fallen
+    _late: bool = False  # ... continued with none yet: the next summary reads a late one
     _falls: tuple[Falls, tuple[float, int] | None] = field(  # the twists whose DISTANCE fell
-        default_factory=lambda: (Falls(np.zeros(0), np.zeros(0, np.int64)), None))  # (all
-    # kept), the latest twist's
+        default_factory=lambda: (no_falls(), None))  # (all kept), the latest twist's
 
     def feed(self, chunk: FrameArrays, accepted: npt.NDArray[np.bool_]) -> None:
         """Take the next chunk's accepted encoder frames, reboots and count pages."""
@@ -136,8 +137,7 @@ class StreamLives:
         self._powerups = carried_on(self._powerups,
                                     powerup_poses(chunk, self.decoder, self._offset))
         falls, twist = fall_times(chunk, self.decoder, TWIST_COUNTERS, self._falls[1])
-        self._falls = (Falls(np.concatenate((self._falls[0].times_s, falls.times_s)),  # rare:
-                             np.concatenate((self._falls[0].counters, falls.counters))), twist)
+        self._falls = (joined(self._falls[0], falls), twist)  # rare: all kept
         events = sorted(self._deferred + self._boot_events(chunk) + self._page_events(chunk),
                         key=lambda event: event[0])
         self._corroborate(chunk)
@@ -384,12 +384,19 @@ class StreamLives:
                     ) -> list[tuple[int, _Boot | tuple[int, int]]]:
         """The next summary (bus time ``t_s``, UPTIME, COUNTER) after an ``_ahead`` one its
         first pose left to it, before it is observed: that one's reboot when it continues its
-        sequence (``SourceWatch.told_ahead``), else none."""
+        sequence (``SourceWatch.told_ahead``; one with no fall yet waits to the summary after,
+        ``latefall``), else none."""
         ahead, self._ahead = self._ahead, None
-        if ahead is None or not ahead[2] or not continues_summary(ahead[0].t_s, t_s, uptime_s,
-                                                                  counter):
+        late, self._late = self._late, False
+        if ahead is not None and late:
+            if not (continues_twice(ahead[0].t_s, t_s, uptime_s, counter)
+                    and fell_late(self._falls[0], ahead[0].t_s, t_s)):
+                return []
+        elif ahead is None or not ahead[2] or not continues_summary(ahead[0].t_s, t_s, uptime_s,
+                                                                    counter):
             return []
-        if self._ahead_fall and not fell_around(self._falls[0], ahead[0].t_s):
+        elif self._ahead_fall and not fell_around(self._falls[0], ahead[0].t_s):
+            self._ahead, self._late = ahead, True  # its events wait on with it
             return []
         self._watch.take_ahead(ahead[0].t_s, ahead[0].uptime_s)
         return [(ahead[0].position, ahead[0])]
