@@ -18,7 +18,13 @@ period after the last frames, end up to a pose period before the first ones afte
 ``LOST_TIME_PERIODS - 1`` ticks: the board's ``HALT_AFTER_S``) and every FIFO content the log's
 frames allow, in turn, on the log up to the next stall: the one whose replayed poses are the
 log's, byte for byte, wins (a wrong firmware reproduces none); else one within tolerance; else
-the silence as it is, so the life departs after it and is UNJUDGED, as before.
+the one comparing the most poses, so the life departs after the stall and is UNJUDGED, as
+before. A trial that leaves any of the log's poses after the silence unnamed by the replay's is
+never taken: out of the log's pose phase after the halt, it compares only the poses before it.
+The silence as it was (the only halt replayed before) was that for ``stall=2.0:0.095`` (seed
+4, instant bus): its firmware's first frames after it were no poses, the replay's poses named
+none of the log's after it, and a log with ODOM_POSE_X raised 10 mm there PASSed. The silence
+as it is stays only when no trial names them all (or the log has no pose after it).
 """
 
 from __future__ import annotations
@@ -34,9 +40,10 @@ import numpy.typing as npt
 from odocan.firmware.clock import LOST_TIME_PERIODS
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.analysis import Tolerance
-from odocan.host.judge.replay_compare import departures, versus_log
+from odocan.host.judge.replay_compare import departures, onboard_by_tick, versus_log
 from odocan.host.judge.replay_lives import FIRMWARE_NODE, LifePlan
 from odocan.host.judge.replay_track import EncoderTrack
+from odocan.host.protocol.e2e import check_frames
 from odocan.sim import contract
 from odocan.sim.mcu import HW_RX_FIFO_FRAMES
 
@@ -92,13 +99,17 @@ def fit_halts(frames: FrameArrays, accepted: npt.NDArray[np.bool_], track: Encod
     for k, silence in enumerate(plan.halts):
         cut = _next_halt_position(track, plan, k, len(frames))
         head, head_accepted = frames.select(slice(0, cut)), accepted[:cut]
+        after = {t for t in onboard_by_tick(head, head_accepted) if t >= silence[1]}
         best: tuple[tuple[int, int], LifePlan] | None = None
         for halt in halt_candidates(silence):
             for held in fifo_contents(frames, track, halt):
                 tried = _with_halt(plan, k, halt, held)
-                vs = versus_log(head, head_accepted, replay(head, tried))
-                score = _score(vs, tolerance)
-                if score[0] > 0 and (best is None or score > best[0]):
+                replayed = replay(head, tried)
+                named = set(onboard_by_tick(replayed, check_frames(replayed)[1]))
+                if not after or not after <= named:
+                    continue  # out of the log's pose phase after it: compares none there
+                score = _score(versus_log(head, head_accepted, replayed), tolerance)
+                if best is None or score > best[0]:
                     best = (score, tried)
         if best is not None:
             plan = best[1]
@@ -107,8 +118,7 @@ def fit_halts(frames: FrameArrays, accepted: npt.NDArray[np.bool_], track: Encod
 
 def _score(vs: dict[str, Any], tolerance: Tolerance) -> tuple[int, int]:
     """How well a trial reproduced the log: 2 all its poses identical, 1 within tolerance,
-    0 departing; then how many poses were compared (a halt that puts the replay out of the
-    log's pose phase after it compares none there)."""
+    0 departing; then how many poses were compared."""
     samples = int(vs["samples"])
     if not samples:
         return (0, 0)
