@@ -38,7 +38,7 @@ def _replayed(log: Path, capsys: pytest.CaptureFixture[str]) -> tuple[int, dict[
 def test_every_stall_of_the_grid_is_replayed_identically_and_a_tamper_after_it_fails(
     seed: int, bus: list[str], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    wrong = []
+    wrong: list[tuple[object, ...]] = []
     for at_s in STARTS_S:
         for dur_s in DURATIONS_S:
             log = tmp_path / f"s{at_s}_{dur_s}.log"

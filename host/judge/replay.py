@@ -190,10 +190,7 @@ class LockstepReplay:
         t0 = float(frames.timestamp_s[enc.index[0]])
         self.loop.start_s = t0 - phase_ticks * TICK_S
         self.loop.run_to(phase_ticks)
-        truth_id = contract.database().get_message_by_name("SIM_TRUTH").frame_id
-        fed = set(feed.truth.tolist())  # a truth frame left off is not fed held either
-        held = {p: t + phase_ticks for p, t in self.held.items()
-                if p in fed or int(frames.can_id[p]) != truth_id}
+        held = self._held_fed(frames, feed, phase_ticks)
         events = _events(enc.index, feed.truth, held)
         shift_s = clock_steps_s(frames.timestamp_s)
         due: int | None = None  # the tick whose encoder frame is on the bus, not yet run
@@ -203,8 +200,8 @@ class LockstepReplay:
         try:
             with stop_on_signals(stop) if own else nullcontext():
                 for position, which in events:
-                    if which == -2:  # held by the halted board's FIFO: after the tick before
-                        self.loop.run_to(held[position])
+                    # held by a halted board's FIFO: fed after the tick before the halt ran
+                    self.loop.run_to(held.get(position, 0))
                     if which >= 0:  # an encoder frame: first run the ticks before its own
                         if stop.stop_requested:
                             break
@@ -231,6 +228,15 @@ class LockstepReplay:
                                    round(self.ticks * TICK_S, 6), round(asked_s, 6))
             if self.fed:  # none: the caller's one line says so
                 print(f"interrupted after {self.ticks * TICK_S:g} s of the log", file=sys.stderr)
+
+    def _held_fed(self, frames: FrameArrays, feed: ReplayInput,
+                  phase_ticks: int) -> dict[int, int]:
+        """``held``, its ticks ``phase_ticks`` later, less the truth frames not fed (a log cut
+        mid-drive: its truth left off the replayed bus, held frames too)."""
+        truth_id = contract.database().get_message_by_name("SIM_TRUTH").frame_id
+        fed = set(feed.truth.tolist())
+        return {p: t + phase_ticks for p, t in self.held.items()
+                if p in fed or int(frames.can_id[p]) != truth_id}
 
     def _drain(self) -> None:
         deliver(self.loop.host_bus, self.listeners)
