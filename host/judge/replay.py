@@ -232,11 +232,12 @@ class LockstepReplay:
     def _held_fed(self, frames: FrameArrays, feed: ReplayInput,
                   phase_ticks: int) -> dict[int, int]:
         """``held``, its ticks ``phase_ticks`` later, less the truth frames not fed (a log cut
-        mid-drive: its truth left off the replayed bus, held frames too)."""
+        mid-drive: its truth left off the replayed bus, held frames too) and those past the
+        end of ``frames`` (a prefix of the log, tried)."""
         truth_id = contract.database().get_message_by_name("SIM_TRUTH").frame_id
         fed = set(feed.truth.tolist())
-        return {p: t + phase_ticks for p, t in self.held.items()
-                if p in fed or int(frames.can_id[p]) != truth_id}
+        return {p: t + phase_ticks for p, t in self.held.items() if p < len(frames.can_id)
+                and (p in fed or int(frames.can_id[p]) != truth_id)}
 
     def _drain(self) -> None:
         deliver(self.loop.host_bus, self.listeners)
