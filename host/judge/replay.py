@@ -62,6 +62,7 @@ from odocan.host.judge.replay_compare import (
     starts_mid_drive,
     versus_log,
 )
+from odocan.host.judge.replay_halts import fit_halts
 from odocan.host.judge.replay_lives import LifePlan, fit_first_prime, judge_lives, plan_lives
 from odocan.host.judge.replay_track import EncoderTrack
 from odocan.host.outputs import OutputError
@@ -157,6 +158,7 @@ class LockstepReplay:
         self.fed = 0  # encoder frames fed to the firmware
         self.halted: set[int] = set()  # ticks the board runs none (``replay_lives``)
         self.resets: dict[int, bool] = {}  # encoder frame number -> reset after it is sent
+        self.held: dict[int, int] = {}  # log position -> tick: fed once the ticks before ran
 
     @property
     def ticks(self) -> int:
@@ -188,7 +190,8 @@ class LockstepReplay:
         t0 = float(frames.timestamp_s[enc.index[0]])
         self.loop.start_s = t0 - phase_ticks * TICK_S
         self.loop.run_to(phase_ticks)
-        events = _events(enc.index, feed.truth)
+        held = self._held_fed(frames, feed, phase_ticks)
+        events = _events(enc.index, feed.truth, held)
         shift_s = clock_steps_s(frames.timestamp_s)
         due: int | None = None  # the tick whose encoder frame is on the bus, not yet run
         own = stop is None
@@ -197,6 +200,8 @@ class LockstepReplay:
         try:
             with stop_on_signals(stop) if own else nullcontext():
                 for position, which in events:
+                    # held by a halted board's FIFO: fed after the tick before the halt ran
+                    self.loop.run_to(held.get(position, 0))
                     if which >= 0:  # an encoder frame: first run the ticks before its own
                         if stop.stop_requested:
                             break
@@ -223,6 +228,16 @@ class LockstepReplay:
                                    round(self.ticks * TICK_S, 6), round(asked_s, 6))
             if self.fed:  # none: the caller's one line says so
                 print(f"interrupted after {self.ticks * TICK_S:g} s of the log", file=sys.stderr)
+
+    def _held_fed(self, frames: FrameArrays, feed: ReplayInput,
+                  phase_ticks: int) -> dict[int, int]:
+        """``held``, its ticks ``phase_ticks`` later, less the truth frames not fed (a log cut
+        mid-drive: its truth left off the replayed bus, held frames too) and those past the
+        end of ``frames`` (a prefix of the log, tried)."""
+        truth_id = contract.database().get_message_by_name("SIM_TRUTH").frame_id
+        fed = set(feed.truth.tolist())
+        return {p: t + phase_ticks for p, t in self.held.items() if p < len(frames.can_id)
+                and (p in fed or int(frames.can_id[p]) != truth_id)}
 
     def _drain(self) -> None:
         deliver(self.loop.host_bus, self.listeners)
@@ -266,10 +281,15 @@ def clock_steps_s(timestamp_s: npt.NDArray[np.float64]) -> npt.NDArray[np.float6
     return np.concatenate(([0.0], np.cumsum(steps)))
 
 
-def _events(encoders: IntArray, truth: IntArray) -> list[tuple[int, int]]:
-    """(position in the log, k) in log order: k the encoder frame's number, -1 for truth."""
+def _events(encoders: IntArray, truth: IntArray,
+            held: dict[int, int] | None = None) -> list[tuple[int, int]]:
+    """(position in the log, k) in log order: k the encoder frame's number, -1 for truth, -2
+    for a frame a halted board's FIFO held (``LockstepReplay.held``; a truth frame only when
+    truth is fed)."""
+    held = held or {}
     events = [(int(p), k) for k, p in enumerate(encoders.tolist())]
-    events += [(int(p), -1) for p in truth.tolist()]
+    events += [(int(p), -1) for p in truth.tolist() if int(p) not in held]
+    events += [(p, -2) for p in held]
     events.sort()
     return events
 
@@ -342,20 +362,36 @@ def unreplayable(report: dict[str, Any]) -> list[str]:
 
 
 def _replayed_head(frames: FrameArrays, profile: RobotProfile, integrator: str,
-                   plan: LifePlan) -> FrameArrays:
-    """The replayed bus of ``frames``, a prefix of a log whose firmware powered up in it, under
-    ``plan`` (unrecorded, no truth): a candidate of ``replay_lives.fit_first_prime``."""
+                   plan: LifePlan, phase: int = 0, truth: bool = False) -> FrameArrays:
+    """The replayed bus of ``frames``, a prefix of a log, under ``plan`` (unrecorded; its
+    truth frames fed when ``truth``, ``phase`` ticks first): a candidate of
+    ``replay_lives.fit_first_prime`` or ``replay_halts.fit_halts``."""
     collector = FrameCollector()
     feed = ReplayInput.from_log(frames)
     replay = LockstepReplay(firmware_params(profile, integrator), [collector],
                             f"odocan-replay-{next(_REPLAY_CHANNELS)}")
     try:
-        replay.halted = plan.halted_ticks(feed.encoders)
-        replay.resets = plan.resets
-        replay.run(frames, replace(feed, truth=feed.truth[:0]))
+        _apply(replay, plan, feed.encoders, phase)
+        replay.run(frames, feed if truth else replace(feed, truth=feed.truth[:0]), phase)
     finally:
         replay.close()
     return collector.arrays()
+
+
+def _first_change(plan: LifePlan, encoders: EncoderTrack) -> int | None:
+    """The tick of the log's second firmware life or first stall, whichever comes first (None:
+    neither): the replay's pose phase is the first life's before it (a stall of an odd number
+    of ticks shifts the firmware's own pose phase; a longer part after it outvoted the part
+    before, whose poses the replay then paired none of)."""
+    ticks = [int(encoders.tick[s]) for s in plan.starts[1:2]] + [h[0] for h in plan.halts[:1]]
+    return min(ticks, default=None)
+
+
+def _apply(replay: LockstepReplay, plan: LifePlan, encoders: EncoderTrack, phase: int) -> None:
+    """Set ``replay`` to live ``plan`` (its ticks ``phase`` later): halts, resets, held frames."""
+    replay.halted = {t + phase for t in plan.halted_ticks(encoders)}
+    replay.resets = plan.resets
+    replay.held = dict(plan.held)
 
 
 def replay_and_analyze(
@@ -388,10 +424,12 @@ def replay_and_analyze(
                 frames, feed.accepted, feed.encoders, plan_lives(frames, feed.accepted,
                                                                  feed.encoders), tolerance,
                 lambda head, tried: _replayed_head(head, profile, integrator, tried))
-            second = int(feed.encoders.tick[plan.starts[1]]) if len(plan.starts) > 1 else None
-            phase = 0 if plan.powered else pose_phase_ticks(frames, feed.accepted, second)
-            replay.halted = {t + phase for t in plan.halted_ticks(feed.encoders)}
-            replay.resets = plan.resets
+            phase = 0 if plan.powered else pose_phase_ticks(frames, feed.accepted,
+                                                            _first_change(plan, feed.encoders))
+            plan = fit_halts(frames, feed.accepted, feed.encoders, plan, tolerance,
+                             lambda head, tried: _replayed_head(
+                                 head, profile, integrator, tried, phase, truth_compared))
+            _apply(replay, plan, feed.encoders, phase)
             if not stop.stop_requested:
                 replay.run(frames, feed if truth_compared else replace(feed, truth=feed.truth[:0]),
                            phase, stop)

@@ -70,6 +70,9 @@ class LifePlan:
     # the first life's priming frame is known (``fit_first_prime``): compared from (0, 0, 0)
     # there, not re-anchored as a log cut mid-drive
     primed_known: bool = False
+    # (log position, first halted tick): a frame of another node the halted board's receive
+    # FIFO held (``replay_halts``), fed once the tick before that halt has run
+    held: tuple[tuple[int, int], ...] = ()
 
     @property
     def trivial(self) -> bool:
@@ -83,7 +86,8 @@ class LifePlan:
         after = self.resets[first] and frame > 0
         resets = {k: v for k, v in self.resets.items() if k != first}
         resets[frame - 1 if after else frame] = after
-        return LifePlan([frame, *self.starts[1:]], self.powered, self.halts, resets, True)
+        return LifePlan([frame, *self.starts[1:]], self.powered, self.halts, resets, True,
+                        self.held)
 
     def halted_ticks(self, track: EncoderTrack) -> set[int]:
         """The ticks the board runs none (before the first power-up, and each stall)."""
