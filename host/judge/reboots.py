@@ -122,23 +122,36 @@ def split_lives(frames: FrameArrays, decoder: BulkDecoder) -> list[Life]:
 def stalled_first(frames: FrameArrays, decoder: BulkDecoder, encoders: npt.NDArray[np.intp],
                   position: int, limit: int) -> bool:
     """Whether the firmware booted by the summary at ``position`` stalled before its first page
-    of E2E counts (before its first pose or after it: ``stalls.silent_between`` on its
-    ODOM_STATUS frames whose CRC holds and its ODOM_POSE_Y from the summary to that page, or to
-    ``limit``, the next boot, while the encoder frames, accepted at ``encoders``, went on on
-    time). A stalled MCU's receive FIFO overran frames it never counted, so that page cannot
-    name the frame it primed on (``counted_start`` lands hundreds of frames late); its
-    summary's rule stands. Issue #11: reset with its FIFO cleared, halted 600 ticks from 2 ticks
-    after (one pose before the stall), the life started 593 frames late and the correct firmware
-    FAILed by 42 mm."""
-    pages = decoder.select(frames, "ODOM_STATUS")
-    stop = min([limit, *(int(p) for p in encoder_count_pages(frames, decoder)[0]
-                         if position < p < limit)])
-    status = pages[(pages >= position) & (pages <= stop)]
+    of E2E counts (before its first pose or after it): ``stalls.silent_between`` on its
+    ODOM_STATUS frames whose CRC holds and its ODOM_POSE_Y from the summary to that page or its
+    first pose, the later (``told_by``), while the encoder frames, accepted at ``encoders``,
+    went on on time. A stalled MCU's receive FIFO overran frames it never counted, so that page
+    cannot name the frame it primed on (``counted_start`` lands hundreds of frames late); its
+    summary's rule stands. Issue #11: reset with its FIFO cleared, halted 600 ticks from 2
+    ticks after (one pose before the stall), the life started 593 frames late and the correct
+    firmware FAILed by 42 mm."""
     ys = decoder.select(frames, "ODOM_POSE_Y")
-    ys = ys[(ys > position) & (ys < stop)]
-    alive = np.sort(np.concatenate((status[crc_holds(frames, decoder, status)], ys)))
+    ys = ys[(ys > position) & (ys < limit)]
+    if not len(ys):
+        return False  # no pose in its life: nothing to judge from its start
+    stop = told_by(position, limit, encoder_count_pages(frames, decoder)[0], ys)
+    status = decoder.select(frames, "ODOM_STATUS")
+    status = status[(status >= position) & (status <= stop)]
+    alive = np.sort(np.concatenate((status[crc_holds(frames, decoder, status)],
+                                    ys[ys <= stop])))
     return silent_between(frames.timestamp_s[alive], frames.timestamp_s[encoders],
                           contract_cycle_s(decoder, "WHEEL_ENCODERS"))
+
+
+def told_by(position: int, limit: int, pages: npt.NDArray[np.int64],
+            ys: npt.NDArray[np.intp]) -> int:
+    """Up to where a stall tells the life booted at ``position`` (``stalled_first``): its first
+    count page or its first pose (ODOM_POSE_Y ``ys``), the later (a stall before the first pose
+    after a page of its first tick still does), else ``limit`` (the next boot)."""
+    paged = pages[(pages > position) & (pages < limit)]
+    if not len(paged) or not len(ys):
+        return limit
+    return max(int(paged[0]), int(ys[0]))
 
 
 def summary_start(position: int, uptime_s: int, state: str, encoders: npt.NDArray[np.intp]) -> int:
