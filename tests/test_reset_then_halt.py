@@ -40,7 +40,7 @@ from odocan.host.judge.analysis import HEADING_LSB_RAD, POSITION_LSB_M, analyze
 from odocan.sim.board import TICK_S
 from odocan.sim.scenarios import get_scenario
 from tests.fault_rig import FaultRig
-from tests.test_first_second_reboot import _decoded, _written, _wrong
+from tests.test_first_second_reboot import _decoded, _reencoded, _written, _wrong
 from tests.test_reprime_count_second_life import _after_reprime, _encoders, _path
 from tests.test_stall_before_first_pose_after_reboot import _live
 from tests.test_stall_beyond_window import PMIR, _end_verdicts
@@ -160,4 +160,32 @@ def test_a_pose_off_after_the_resume_fails_every_judge(
     assert _analyze_verdicts(messages, tmp_path / "wrong.log") == (False, 1)
     monitor, bridge, end_s = _live(messages)
     assert monitor.health(end_s)["state"] == "POSE WRONG"
+    assert _end_verdicts(bridge) == ("FAIL", "FAIL")
+
+
+def _distance_off(messages: tuple[can.Message, ...], from_s: float, bias_m: float
+                  ) -> tuple[can.Message, ...]:
+    """ODOM_TWIST's DISTANCE ``bias_m`` longer from bus time ``from_s`` on (re-sealed)."""
+    out = []
+    for m in messages:
+        if m.arbitration_id == fr.ODOM_TWIST_ID and m.timestamp >= from_s:
+            signals = _decoded(m)
+            signals["DISTANCE"] = round((signals["DISTANCE"] + bias_m) % 65.536, 3)
+            m = _reencoded(m, signals, fr.ODOM_TWIST_DATA_IDS)
+        out.append(m)
+    return tuple(out)
+
+
+@pytest.mark.parametrize("start", ["whole", "from reset"])
+def test_a_distance_off_after_the_resume_fails_the_fleet_as_the_bridge(
+        start: str, tmp_path: Path) -> None:
+    """DISTANCE 20 mm long from the resume on (the poses right): ``analyze`` FAILs it, the
+    monitor says DISTANCE WRONG, the bridge's end verdict FAILs, and the fleet's now too
+    (before: PASS, ODOM_TWIST said beside its verdict; the disagreement the helper saw)."""
+    lag, halted = FOUND[0][1:]
+    wrong = _logged(_distance_off(drive("circle", lag, halted), (AT + lag + halted) * TICK_S,
+                                  0.020), start)
+    assert _analyze_verdicts(wrong, tmp_path / "long.log")[0] is False
+    monitor, bridge, end_s = _live(wrong)
+    assert monitor.health(end_s)["state"] == "DISTANCE WRONG"
     assert _end_verdicts(bridge) == ("FAIL", "FAIL")
