@@ -235,12 +235,7 @@ def test_frame_zero_moved_with_its_pages_no_judge_fails_the_correct_firmware(
     (``powerup.heard_by_tick``: the halt held the page's tick 3 s past its bound) and
     ``analyze`` started the reference there: FAIL by 29.8 mm / 15.8 mrad while the live judges
     PASSed. Now the halt vetoes the bound (``stallpowerup.log_power_up``) and the life is
-    judged from each frame it may have primed on (``primedon``): PASS from frame 1. Live, the
-    same bound proved frame 0 too (PASS, the 5 counts absorbed by the stall's placement); it
-    no longer does after a stall before the first pose (``sources.SourceWatch.on_page``: that
-    bound FAILed a firmware reset and halted a tick after it primed, by 6 mm,
-    ``tests/test_reset_then_halt.py``), and the stall's rule cannot prove it (frame 0 moved):
-    unproven, UNJUDGED, never a FAIL."""
+    judged from each frame it may have primed on (``primedon``): PASS from frame 1."""
     messages = frame_zero_moved(_messages())
     path = _written(messages, tmp_path / "right.log")
     analysis = analyze(read_log(path), PMIR, "exact")
@@ -254,7 +249,7 @@ def test_frame_zero_moved_with_its_pages_no_judge_fails_the_correct_firmware(
     assert monitor.health(end_s)["state"] != "POSE WRONG"
     for tracker in (monitor.tracker, bridge.tracker):
         assert tracker.wrongs.as_dict()["episodes"] == 0
-    assert _end_verdicts(bridge) == ("UNJUDGED", "UNJUDGED")
+    assert _end_verdicts(bridge) == ("PASS", "PASS")
 
 
 @pytest.mark.parametrize("from_pose", [0, 1])
@@ -262,17 +257,10 @@ def test_frame_zero_moved_with_its_pages_a_wrong_firmware_fails_every_judge(
         tmp_path: Path, from_pose: int) -> None:
     """X 1 m off from pose ``from_pose`` on, frame 0 moved, the pages kept: off from either
     frame it may have primed on, ``analyze`` FAILs it (whole and streamed: the stream judges
-    it whole); the live judges, whose start is unproven (the test above), never PASS it: both
-    end verdicts UNJUDGED (they FAILed it on the tick bound's proof, which no longer holds
-    after a stall)."""
+    it whole), the live judges too (POSE WRONG, both end verdicts)."""
     messages = frame_zero_moved(_wrong(_messages(), 0, 10_000, from_pose))
-    path = _written(messages, tmp_path / "wrong.log")
-    analysis = analyze(read_log(path), PMIR, "exact")
-    assert not analysis.passed
+    analysis, _ = _fails_every_judge(messages, tmp_path / "wrong.log")
     assert analysis.report["onboard_vs_reference"]["max_position_error_beyond_allowance_m"] > 0.5
-    assert main(["analyze", str(path), "--robot", "pmir", "--integrator", "exact",
-                 "--stream", "always"]) == 1
-    assert _end_verdicts(_live(messages)[1]) == ("UNJUDGED", "UNJUDGED")
 
 
 def test_frame_zero_moved_without_a_stall_no_false_fail(tmp_path: Path) -> None:
