@@ -123,9 +123,7 @@ class SourceWatch:
         firmware primed on frame k (``powerup.primed_after``): ``Lives.primed_late``. The tick
         bound's count is no evidence after a stall (``stallpowerup.stalled_before_page``: the
         halt held the page's tick past it; issue #11: 11 frames from the first met ENC_E2E_OK
-        11 by chance, and the correct firmware, primed a frame later, was DISTANCE WRONG, or
-        POSE WRONG by 6 mm when it stalled before its first pose over a moving robot). A stall
-        at power-up over a robot at rest is proven by the stall itself (``livefirst``)."""
+        11 by chance, and the correct firmware, primed a frame later, was DISTANCE WRONG)."""
         if not self.page_pending:  # heard, or a reboot came first: nothing to count
             return False
         heard = (tracker.enc_seq + 1, pose_named_live(tracker))
@@ -146,9 +144,8 @@ class SourceWatch:
         ok = int(signals["ENC_E2E_OK"])
         bound_s = tick_bound_s(int(signals["COUNTER"]), self.summary_times, STATUS_COUNTER_MODULO,
                                STATUS_CYCLE_MS)
-        stalled = tracker.stall.stalls or tracker.first.stalled_from is not None
-        by_tick = (None if bound_s is None or stalled  # a stall before the page: its tick
-                   else heard_before_live(tracker, bound_s, heard[0]))  # came past the bound
+        by_tick = (None if bound_s is None or tracker.stall.stalls  # a stall before the page:
+                   else heard_before_live(tracker, bound_s, heard[0]))  # the bound held past it
         spanned = (ok + int(signals.get("ENC_E2E_LOST", 0))) & 0xFFFF  # accepted or lost
         if {ok, spanned} & {heard[0] & 0xFFFF, heard[1], by_tick}:
             return True
