@@ -48,7 +48,6 @@ import numpy as np
 
 from odocan.host.judge.livewindow import window_encoders
 from odocan.host.judge.powerup import holds_first_cycle
-from odocan.host.judge.samples import FloatArray
 from odocan.host.judge.stallpowerup import INIT, UNPROVEN
 from odocan.host.judge.stalls import first_after_stall
 from odocan.host.protocol import busfacts
@@ -161,31 +160,15 @@ class FirstStall:
     def primed(self, tracker: PoseTracker, t_s: float) -> int | None:
         """``stalls.first_after_stall`` over the tracker's window for a sample whose
         ODOM_POSE_Y came at ``t_s``: the encoder frame (seq) the firmware could first have
-        primed on after a silence, None when it was not silent. The silence ends at the first
-        pose half sent after the firmware's last ODOM_STATUS (``_first_pose_s``), whether or
-        not it made a sample."""
+        primed on after a silence, None when it was not silent."""
         talked = self.talked_before(t_s)
         if talked is None or not len(tracker.window):
             return None
         ys = tracker.pairs.halves["y"]  # the pose halves sent before it are alive too
         sent_s = ys.col("t_s") if len(ys) else np.zeros(0)
-        first_s = _first_pose_s(sent_s, talked[0], t_s)
-        alive_s = np.sort(np.concatenate(([talked[0]], sent_s[sent_s < first_s], self.told_s)))
-        at = first_after_stall(first_s, window_encoders(tracker.window), alive_s)
+        alive_s = np.sort(np.concatenate(([talked[0]], sent_s, self.told_s)))
+        at = first_after_stall(t_s, window_encoders(tracker.window), alive_s)
         return None if at is None else int(tracker.window.col("seq")[at])
-
-
-def _first_pose_s(sent_s: FloatArray, talked_s: float, t_s: float) -> float:
-    """The bus time of the first ODOM_POSE_Y sent after ``talked_s`` (the firmware's last
-    ODOM_STATUS), ``t_s`` (the sample's own) at the latest. A firmware resumed after a stall
-    sends first the pose of its FIFO's last frame, which ENC_COUNTER cannot resolve (no
-    sample: ``livehalves`` leaves it out) when it is more than a COUNTER cycle old: the sample
-    after it is the first, and the silence ended at that half. Issue #11: reset with its FIFO
-    cleared, halted 3 s from the tick after; its silence, read up to that half's successor,
-    was no stall: the reference ran fine from the power-up through the merged step, and the
-    correct firmware was POSE WRONG by 0.3 mm."""
-    after = sent_s[(sent_s > talked_s) & (sent_s <= t_s)]
-    return float(after.min()) if len(after) else t_s
 
 
 def left_out_first(tracker: PoseTracker, pose: FramePose, t_s: float, queued: bool) -> bool:

@@ -144,8 +144,9 @@ class SourceWatch:
         ok = int(signals["ENC_E2E_OK"])
         bound_s = tick_bound_s(int(signals["COUNTER"]), self.summary_times, STATUS_COUNTER_MODULO,
                                STATUS_CYCLE_MS)
-        by_tick = (None if bound_s is None or tracker.stall.stalls  # a stall before the page:
-                   else heard_before_live(tracker, bound_s, heard[0]))  # the bound held past it
+        stalled = tracker.stall.stalls and tracker.first.stalled_from is None  # after a pose
+        by_tick = (None if bound_s is None or stalled  # a stall before the page: its tick came
+                   else heard_before_live(tracker, bound_s, heard[0]))  # past the bound
         spanned = (ok + int(signals.get("ENC_E2E_LOST", 0))) & 0xFFFF  # accepted or lost
         if {ok, spanned} & {heard[0] & 0xFFFF, heard[1], by_tick}:
             return True
