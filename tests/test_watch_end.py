@@ -175,9 +175,11 @@ def test_a_distance_wrong_in_the_watchs_last_twists_fails_the_monitor(
 
 
 def test_the_fleets_report_judges_the_twists_waiting_at_its_end(tmp_path: Path) -> None:
-    """The same drive through a fleet robot's telemetry: its report's ``distance`` (beside the
-    pose verdict) has the last twists judged, wrong (before: no ``distance`` in the report, and
-    the bridge's status said ``passed`` at the end)."""
+    """The same drive through a fleet robot's telemetry: its report's ``distance`` has the
+    last twists judged, wrong (before: no ``distance`` in the report, and the bridge's status
+    said ``passed`` at the end), and its verdict FAILs on it as the bridge's end verdict does
+    (before: PASS, the right pose's, with DISTANCE said beside it; issue #11: the fleet PASSed
+    what the bridge FAILed, ``tests/test_reset_then_halt.py``)."""
     drive = short_drive()
     synth = _synth(KOBUKI, drive, off_by(2, len(drive[0]) - 30))
     telemetry = RobotTelemetry(ROBOT, Geometry.of(KOBUKI), "exact",
@@ -186,7 +188,8 @@ def test_the_fleets_report_judges_the_twists_waiting_at_its_end(tmp_path: Path) 
     for msg in can.LogReader(str(synth.write(tmp_path / "late.log"))):
         telemetry.feed(msg)
     entry = watched_verdict(telemetry, 0, None)
-    assert entry["verdict"] == "PASS", entry  # the pose is right
+    assert entry["verdict"] == "FAIL", entry  # the pose is right, DISTANCE wrong
+    assert entry["reason"].startswith("ODOM_TWIST DISTANCE off"), entry
     assert not telemetry.status()[1]["distance"]["passed"]  # (the retained status's)
     assert not entry["distance"]["passed"], entry["distance"]
 

@@ -30,8 +30,9 @@ frame (``Life.boot``), with E2E sequences starting afresh (a reboot is not frame
   stamps, which a recorder may have delayed (every one 15..50 ms late: 1..5 frames late);
   not when the first pose after the summary does not count on from it (the bus lost the new
   power-up pose: the one named was the old firmware's, ``bootnamed.first_after``).
-* except when the new firmware stalled before its first pose (``stalled_first``): its count page
-  misses the frames its halted MCU's FIFO overran, so the summary's rule stands.
+* except when the new firmware stalled before its first count page (``stalled_first``: before
+  its first pose or after it): that page misses the frames its halted MCU's FIFO overran, so
+  the summary's rule stands.
 
 A life with no on-board sample (a reboot at the very end) is reported, not compared.
 
@@ -73,7 +74,7 @@ from odocan.host.judge.liveconfig import config_text
 from odocan.host.judge.primed import counted_start
 from odocan.host.judge.samples import ENC_E2E_PAGE, AnalysisError, contract_cycle_s
 from odocan.host.judge.sources import SourceWatch, two_sources_text
-from odocan.host.judge.stalls import stalled_before
+from odocan.host.judge.stalls import silent_between
 from odocan.host.protocol import busfacts
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.protocol.e2e import check_frames
@@ -128,21 +129,37 @@ def split_lives(frames: FrameArrays, decoder: BulkDecoder) -> list[Life]:
 
 def stalled_first(frames: FrameArrays, decoder: BulkDecoder, encoders: npt.NDArray[np.intp],
                   position: int, limit: int) -> bool:
-    """Whether the firmware booted by the summary at ``position`` stalled before its first pose
-    (``stalls.stalled_before`` on the life up to ``limit``, the next boot: silent for
-    ``SILENCE_CYCLES`` cycles after its last ODOM_STATUS whose CRC holds while the encoder
-    frames, accepted at ``encoders``, went on on time). A stalled MCU's receive FIFO overran
-    frames it never counted, so its first page of E2E counts cannot name the frame it primed on
-    (``counted_start`` lands hundreds of frames late); its summary's rule stands."""
+    """Whether the firmware booted by the summary at ``position`` stalled before its first page
+    of E2E counts (before its first pose or after it): ``stalls.silent_between`` on its
+    ODOM_STATUS frames whose CRC holds and its ODOM_POSE_Y from the summary to that page or its
+    first pose, the later (``told_by``), while the encoder frames, accepted at ``encoders``,
+    went on on time. A stalled MCU's receive FIFO overran frames it never counted, so that page
+    cannot name the frame it primed on (``counted_start`` lands hundreds of frames late); its
+    summary's rule stands. Issue #11: reset with its FIFO cleared, halted 600 ticks from 2
+    ticks after (one pose before the stall), the life started 593 frames late and the correct
+    firmware FAILed by 42 mm."""
     ys = decoder.select(frames, "ODOM_POSE_Y")
     ys = ys[(ys > position) & (ys < limit)]
     if not len(ys):
-        return False
+        return False  # no pose in its life: nothing to judge from its start
+    stop = told_by(position, limit, encoder_count_pages(frames, decoder)[0], ys)
     status = decoder.select(frames, "ODOM_STATUS")
-    status = status[(status >= position) & (status < ys[0])]
-    alive_s = frames.timestamp_s[status[crc_holds(frames, decoder, status)]]
-    return stalled_before(float(frames.timestamp_s[ys[0]]), frames.timestamp_s[encoders],
-                          contract_cycle_s(decoder, "WHEEL_ENCODERS"), alive_s)
+    status = status[(status >= position) & (status <= stop)]
+    alive = np.sort(np.concatenate((status[crc_holds(frames, decoder, status)],
+                                    ys[ys <= stop])))
+    return silent_between(frames.timestamp_s[alive], frames.timestamp_s[encoders],
+                          contract_cycle_s(decoder, "WHEEL_ENCODERS"))
+
+
+def told_by(position: int, limit: int, pages: npt.NDArray[np.int64],
+            ys: npt.NDArray[np.intp]) -> int:
+    """Up to where a stall tells the life booted at ``position`` (``stalled_first``): its first
+    count page or its first pose (ODOM_POSE_Y ``ys``), the later (a stall before the first pose
+    after a page of its first tick still does), else ``limit`` (the next boot)."""
+    paged = pages[(pages > position) & (pages < limit)]
+    if not len(paged) or not len(ys):
+        return limit
+    return max(int(paged[0]), int(ys[0]))
 
 
 def summary_start(position: int, uptime_s: int, state: str, encoders: npt.NDArray[np.intp]) -> int:

@@ -124,7 +124,10 @@ class SourceWatch:
         count, else before it; or up to the frame the latest pose before that names); or with
         its ENC_E2E_LOST added (``powerup.counted_only_the_log``). Once. Else, when it counts
         the frames heard less the first k, all before the first ODOM_STATUS frame heard, the
-        firmware primed on frame k (``powerup.primed_after``): ``Lives.primed_late``."""
+        firmware primed on frame k (``powerup.primed_after``): ``Lives.primed_late``. The tick
+        bound's count is no evidence after a stall (``stallpowerup.stalled_before_page``: the
+        halt held the page's tick past it; issue #11: 11 frames from the first met ENC_E2E_OK
+        11 by chance, and the correct firmware, primed a frame later, was DISTANCE WRONG)."""
         if not self.page_pending:  # heard, or a reboot came first: nothing to count
             return False
         heard = (tracker.enc_seq + 1, pose_named_live(tracker))
@@ -145,7 +148,9 @@ class SourceWatch:
         ok = int(signals["ENC_E2E_OK"])
         bound_s = tick_bound_s(int(signals["COUNTER"]), self.summary_times, STATUS_COUNTER_MODULO,
                                STATUS_CYCLE_MS)
-        by_tick = None if bound_s is None else heard_before_live(tracker, bound_s, heard[0])
+        stalled = tracker.stall.stalls and tracker.first.stalled_from is None  # after a pose
+        by_tick = (None if bound_s is None or stalled  # a stall before the page: its tick came
+                   else heard_before_live(tracker, bound_s, heard[0]))  # past the bound
         spanned = (ok + int(signals.get("ENC_E2E_LOST", 0))) & 0xFFFF  # accepted or lost
         if {ok, spanned} & {heard[0] & 0xFFFF, heard[1], by_tick}:
             return True

@@ -32,8 +32,8 @@ from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.powerup import holds_first_cycle, starts_at_power_up
 from odocan.host.judge.primedon import FRAMES_KEY, candidates
 from odocan.host.judge.primedrange import primed_range_event
-from odocan.host.judge.samples import Encoders, FloatArray, Poses
-from odocan.host.judge.stalls import first_after_stall
+from odocan.host.judge.samples import ENC_E2E_PAGE, Encoders, FloatArray, Poses
+from odocan.host.judge.stalls import first_after_stall, silent_between
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.sim.robot import RobotProfile
 
@@ -107,10 +107,15 @@ def log_power_up(frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: 
     Then only an exact count (the frames before the page, or the pose before it) proves the
     power-up, else the stall's rule: frames 0 .. lo unmoved, or unproven, said, with each
     frame's start (``primedon``: the life judged from each); the count page's late priming
-    too, judged from each frame it allows (``primedrange``)."""
+    too, judged from each frame it allows (``primedrange``). A firmware that primed, then
+    halted before its first count page (``stalled_before_page``) sent that page a stall past
+    the bound too: the bound is no evidence either (issue #11: reset with its FIFO cleared, one
+    pose, halted 600 ticks; the bound's 11 frames from the log's first met ENC_E2E_OK 11 by
+    chance, the reference started a frame early and FAILed the correct firmware by 5 mm)."""
     lo = primed_by(frames, accepted, decoder, enc, *times_s)
     if lo is None:
-        if starts_at_power_up(frames, accepted, decoder, onboard):
+        if starts_at_power_up(frames, accepted, decoder, onboard, by_tick=not stalled_before_page(
+                frames, accepted, decoder, enc, times_s[1])):
             return True, []
         return False, primed_range_event(  # its count page: primed on frame k or before
             frames, accepted, decoder, enc, float(np.min(times_s[0])), judged)
@@ -161,3 +166,20 @@ def _pose_half_times(frames: FrameArrays, accepted: npt.NDArray[np.bool_],
             return None
         times.append(rows["timestamp_s"][accepted[rows["index"]]])
     return np.sort(np.concatenate(times))
+
+
+def stalled_before_page(frames: FrameArrays, accepted: npt.NDArray[np.bool_],
+                        decoder: BulkDecoder, enc: Encoders, alive_s: FloatArray) -> bool:
+    """Whether the firmware (its accepted ODOM_STATUS frames' bus times ``alive_s``, its pose
+    halves) was silent ``SILENCE_CYCLES`` cycles or more while the encoder frames went on
+    before its first accepted page of WHEEL_ENCODERS E2E counts (``stalls.silent_between``)."""
+    halves = _pose_half_times(frames, accepted, decoder)
+    try:
+        page = decoder.decode_page(frames, "ODOM_STATUS", ENC_E2E_PAGE)
+    except DecodeError:
+        return False
+    paged = page["timestamp_s"][accepted[page["index"]]]
+    if halves is None or not len(paged):
+        return False
+    alive = np.sort(np.concatenate((alive_s, halves)))
+    return silent_between(alive[alive <= paged[0]], enc.timestamp_s, enc.cycle_s)

@@ -147,6 +147,21 @@ def stalled_before(sent_s: float, enc_t_s: FloatArray, cycle_s: float | None,
     return first_after_stall(sent_s, enc, alive_s) is not None
 
 
+def silent_between(alive_s: FloatArray, enc_t_s: FloatArray, cycle_s: float | None) -> bool:
+    """Whether a firmware alive at the bus times ``alive_s`` (sorted: its ODOM_STATUS and pose
+    frames) was silent ``SILENCE_CYCLES`` cycles or more between two of them while the encoder
+    frames (bus times ``enc_t_s``) went on, on time (``silent``): it stalled there, whether
+    before its first pose or after it (``reboots.stalled_first``: a stall before its first
+    count page, which then misses the frames its FIFO overran)."""
+    if cycle_s is None or len(alive_s) < 2:
+        return False
+    n = np.arange(len(enc_t_s), dtype=np.int64)
+    enc = Encoders(n, n, n, n, n, enc_t_s, cycle_s)
+    lo = np.searchsorted(enc_t_s, alive_s[:-1]).astype(np.int64)
+    hi = np.searchsorted(enc_t_s, alive_s[1:]).astype(np.int64)
+    return bool(np.any(silent(np.diff(alive_s), frames_on_time(enc, lo, hi), cycle_s)))
+
+
 def primed_first(sent_s: float, enc: Encoders, alive_s: FloatArray,
                  pose_sent_s: FloatArray) -> bool:
     """A rebooted firmware's life (its frames from its boot summary) whose first sample, sent

@@ -6,9 +6,10 @@ bus order as in the whole log. Its life starts at the summary, at the latest acc
 frame before it (UPTIME 0, not INIT), or at the encoder frame its first page of WHEEL_ENCODERS
 E2E counts names (``primed.counted_start``: ENC_E2E_OK + ENC_E2E_LOST - 1 COUNTER steps back
 from that page's latest encoder frame, when the page comes before the next reboot), except when
-the new firmware stalled before its first pose (``reboots.stalled_first``: its page misses the
-frames its halted MCU's FIFO overran). Carried: the watch, the positions, COUNTERs and bus times
-of the last 2^16 accepted encoder frames (ENC_E2E_OK is a wrapping u16: no page names one
+the new firmware stalled before its first count page or its first pose (``reboots
+.stalled_first``: its page misses the frames its halted MCU's FIFO overran; the firmware's signs
+of life are carried for it, the last 2^16). Carried: the watch, the positions, COUNTERs and
+bus times of the last 2^16 accepted encoder frames (ENC_E2E_OK is a wrapping u16: no page names one
 further back), the reboot still waiting for its first count page, and per reboot whose first
 pose is not told yet its last ODOM_STATUS (CRC holding) and that pose (``_track``). A reboot's
 start is final at its first count page when its first pose came before it, else at that pose
@@ -53,7 +54,7 @@ from odocan.host.judge.primed import counted_start
 from odocan.host.judge.reboots import SUMMARY_PAGE, mark_two_sources
 from odocan.host.judge.samples import ENC_E2E_PAGE, AnalysisError, contract_cycle_s
 from odocan.host.judge.sources import SourceWatch, two_sources_text
-from odocan.host.judge.stalls import stalled_before
+from odocan.host.judge.stalls import silent_between, stalled_before
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 
 ENCODERS_KEPT = 1 << 16  # accepted encoder frames remembered (ENC_E2E_OK is a u16)
@@ -86,7 +87,8 @@ class _Boot:
     counted: int | None = None  # ``primed.counted_start`` of that page
     talked_s: float | None = None  # its last ODOM_STATUS (CRC holding) before its first pose
     pose: tuple[int, float] | None = None  # its first ODOM_POSE_Y: log position, bus time
-    stalled: bool | None = None  # ``reboots.stalled_first`` (None: not told yet)
+    stalled: bool | None = None  # stalled before its first pose (None: not told yet)
+    page_at: int | None = None  # its first count page's position in the log
 
 
 @dataclass
@@ -103,6 +105,9 @@ class StreamLives:
         default_factory=lambda: np.zeros(0, dtype=np.int64))
     _enc_t: npt.NDArray[np.float64] = field(  # the bus time of each of ``_encoders``
         default_factory=lambda: np.zeros(0, dtype=np.float64))
+    _alive: tuple[npt.NDArray[np.int64], npt.NDArray[np.float64]] = field(  # positions, bus
+        default_factory=lambda: (np.zeros(0, np.int64), np.zeros(0)))  # times of the frames
+    # that say the firmware ran (``reboots.stalled_first``: ODOM_STATUS whose CRC holds, poses)
     _tracking: list[_Boot] = field(default_factory=list)  # reboots before their first pose
     _waiting: _Boot | None = None  # the last reboot, before its first count page
     _boots: list[tuple[_Boot, int]] = field(default_factory=list)  # with their final start
@@ -141,6 +146,7 @@ class StreamLives:
         events = sorted(self._deferred + self._boot_events(chunk) + self._page_events(chunk),
                         key=lambda event: event[0])
         self._corroborate(chunk)
+        self._carry_alive(chunk)
         self._track(chunk)
         waits = self._ahead[0].position if self._ahead is not None else None
         self._deferred = [] if waits is None else [e for e in events if e[0] > waits]
@@ -149,7 +155,17 @@ class StreamLives:
         self._encoders = self._encoders[-ENCODERS_KEPT:]
         self._counters = self._counters[-ENCODERS_KEPT:]
         self._enc_t = self._enc_t[-ENCODERS_KEPT:]
+        self._alive = (self._alive[0][-ENCODERS_KEPT:], self._alive[1][-ENCODERS_KEPT:])
         self._offset += len(chunk)
+
+    def _carry_alive(self, chunk: FrameArrays) -> None:
+        """The chunk's ODOM_STATUS frames whose CRC holds and ODOM_POSE_Y frames, carried (the
+        last 2^16: a page further on names no start, ``ENCODERS_KEPT``)."""
+        status = self.decoder.select(chunk, "ODOM_STATUS")
+        ys = self.decoder.select(chunk, "ODOM_POSE_Y")
+        at = np.sort(np.concatenate((status[crc_holds(chunk, self.decoder, status)], ys)))
+        self._alive = (np.concatenate((self._alive[0], at.astype(np.int64) + self._offset)),
+                       np.concatenate((self._alive[1], chunk.timestamp_s[at])))
 
     def _corroborate(self, chunk: FrameArrays) -> None:
         """The reboots whose power-up pose named a frame (``_Boot.naming``) and the chunk's first
@@ -223,7 +239,7 @@ class StreamLives:
         if boot is None or (page is not None and boot.paged):  # its first page only
             return
         if page is not None:
-            boot.paged = True
+            boot.paged, boot.page_at = True, page[0]
             boot.counted = counted_start((self._encoders, self._counters), page[0], *page[1])
             if boot.pose is None or boot.pose[0] > page[0]:  # whether it stalled before
                 return  # its first pose: told at that pose, unless a reboot comes first
@@ -260,17 +276,26 @@ class StreamLives:
                     boot.pose = (stop, float(chunk.timestamp_s[stop - self._offset]))
             if boot.pose is not None and boot.stalled is None and bool(
                     (self._enc_t >= boot.pose[1]).any()):
-                boot.stalled = self._stalled(boot, None)
+                boot.stalled = self._silent_before_pose(boot)
         self._tracking = [boot for boot in self._tracking if boot.stalled is None]
 
     def _stalled(self, boot: _Boot, limit: int | None) -> bool:
         """``reboots.stalled_first`` for ``boot`` (its life up to ``limit``), on the carried
-        encoder frames."""
+        encoder frames and signs of life: silent before its first pose, or from its summary to
+        the later of its first count page and that pose (``reboots.told_by``)."""
         if boot.pose is None or (limit is not None and boot.pose[0] >= limit):
             return False  # no pose in its life
-        if boot.stalled is not None:
-            return boot.stalled
-        if boot.talked_s is None:
+        if boot.stalled:
+            return True
+        stop = (np.iinfo(np.int64).max if limit is None else limit) if boot.page_at is None \
+            else max(boot.page_at, boot.pose[0])
+        at, t_s = self._alive
+        return silent_between(t_s[(at >= boot.position) & (at <= stop)], self._enc_t,
+                              contract_cycle_s(self.decoder, "WHEEL_ENCODERS"))
+
+    def _silent_before_pose(self, boot: _Boot) -> bool:
+        """Whether ``boot`` stalled before its first pose (its last ODOM_STATUS before it)."""
+        if boot.pose is None or boot.talked_s is None:
             return False
         return stalled_before(boot.pose[1], self._enc_t,
                               contract_cycle_s(self.decoder, "WHEEL_ENCODERS"),

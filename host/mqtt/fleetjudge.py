@@ -127,7 +127,8 @@ def watched_verdict(
     """One bridged robot's verdict when the watch ends: what its live judge still holds judged
     first (the frames held, ``livehold``; ``livegapseen.end_of_watch``: a held choice made, a
     new start's held samples judged), then ``judge_robot``, then the stretches between the
-    loop's halts (``overload``)."""
+    loop's halts (``overload``), then ODOM_TWIST's judges (issue #11: a DISTANCE the bridge
+    FAILed was said beside a fleet PASS)."""
     tracker = telemetry.tracker
     telemetry.end_watch()  # frames held judged, then what still waits (host.judge.watchend)
     verdict = judge_robot(tracker.vs_reference, tracker.vs_truth, frames_dropped=frames_dropped,
@@ -136,6 +137,11 @@ def watched_verdict(
         verdict = {**verdict, "verdict": "FAIL", "reason": _two_sources(conflict, tracker)}
     elif verdict["verdict"] in ("PASS", "FAIL") and halted is not None:
         verdict = after_halts(verdict, halted, tracker, telemetry.stretches)
+    # ODOM_TWIST wrong (DISTANCE in some life, or its speeds) FAILs as the bridge's end verdict
+    # does (``watchverdict.failures``); before, the fleet PASSed what the bridge FAILed
+    twisted = telemetry.distance.verdict()[:1] + telemetry.twist.verdict()[:1]
+    if verdict["verdict"] == "PASS" and twisted:
+        verdict = {**verdict, "verdict": "FAIL", "reason": "; ".join(twisted)}
     # a PASS resting on an unbounded start (livereprime) or an unproven one (livefirst)
     unbounded = unbounded_why(tracker) or unproven_why(tracker) or coarse_why(telemetry.kept)
     if verdict["verdict"] == "PASS" and unbounded:

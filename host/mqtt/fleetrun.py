@@ -18,7 +18,7 @@ the fleet's frames offered to it each tick), runs for ``duration_s`` and returns
                             "pose_vs_truth": {...} | null,
                             "halt_stretches": {...} (a robot the loop halted: haltstretch),
                             "distance": {...}, "twist": {...} (ODOM_TWIST judged live, as
-                            the status's; said beside the verdict, not part of it),
+                            the status's; wrong, a PASS becomes FAIL, as the bridge's),
                             "verdict": "PASS" | "FAIL" | "UNJUDGED" | null, "reason": ...}, ...}}
 ```
 
