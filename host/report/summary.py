@@ -25,6 +25,7 @@ from odocan.host.judge.finalstate import final_text
 from odocan.host.judge.samples import POSITION_LSB_M
 from odocan.host.outputs import check_writable, replaced
 from odocan.host.protocol.e2e_silence import lost_text, silence_caption
+from odocan.host.report.judgedfacts import judged_fact
 from odocan.host.stopped import mark_stopped, partial_verdict, stopped_text
 from odocan.sim.exceptions import ConfigurationError
 
@@ -160,13 +161,8 @@ def print_summary(
     twist = report.get("onboard_twist_vs_reference") or {"passed": True}
     distance = report.get("onboard_distance_vs_reference") or {"passed": True}
     pose_met = _pose_within(report, tolerance)
-    for kept in kept_failures(report):  # a set-pose that moved what it kept: a FAIL of its own
-        console.print(f"[{style}]{verdict}[/{style}]: {kept}", soft_wrap=True)
-        verdict, style = "otherwise", "bold" if pose_met and twist["passed"] else style
-    conflict = report.get("two_sources")
-    if conflict:  # a FAIL of its own; the pose before it is judged as usual
-        console.print(f"[{style}]{verdict}[/{style}]: {conflict['detail']}", soft_wrap=True)
-        verdict, style = "before it", "bold" if pose_met and twist["passed"] else style
+    verdict, style = _own_lines(report, console, (verdict, style), pose_met and twist["passed"],
+                                pose_met and twist["passed"] and distance["passed"])
     pose = (
         f"on-board vs reference within "
         f"{tolerance.position_m * 1e3:.4g} mm and {tolerance.heading_rad * 1e3:.4g} mrad"
@@ -182,6 +178,30 @@ def print_summary(
         line = "; ".join([pose + ("" if pose_met else ": not met"), *failed])
     line = "; ".join([line, *kept_unjudged(report)])
     console.print(f"[{style}]{verdict}[/{style}]: {line}", soft_wrap=True)
+
+
+def _own_lines(report: dict[str, Any], console: Console, said: tuple[str, str], met: bool,
+               all_met: bool) -> tuple[str, str]:
+    """The verdicts of their own before the pose line (a set-pose that moved what it kept, two
+    sources on one ID, too few poses judged), printed; the pose line's word and style after
+    them (``said``: before them; ``met``: the pose and twist criteria are; ``all_met``: the
+    distance too)."""
+    verdict, style = said
+    for kept in kept_failures(report):  # a set-pose that moved what it kept: a FAIL of its own
+        console.print(f"[{style}]{verdict}[/{style}]: {kept}", soft_wrap=True)
+        verdict, style = "otherwise", "bold" if met else style
+    conflict = report.get("two_sources")
+    if conflict:  # a FAIL of its own; the pose before it is judged as usual
+        console.print(f"[{style}]{verdict}[/{style}]: {conflict['detail']} "
+                      f"({conflict['frames_not_judged']} frames from there not judged)",
+                      soft_wrap=True)
+        verdict, style = "before it", "bold" if met else style
+    unjudged = report.get("unjudged")
+    if unjudged:  # too few poses judged (judgedfloor): UNJUDGED when nothing else failed
+        word = "UNJUDGED" if all_met and verdict == "FAIL" else verdict
+        console.print(f"[{style}]{word}[/{style}]: {unjudged['detail']}", soft_wrap=True)
+        verdict, style = "otherwise", "bold" if met else style
+    return verdict, style
 
 
 def kept_unjudged(report: dict[str, Any]) -> list[str]:
@@ -280,6 +300,7 @@ def _facts(report: dict[str, Any]) -> list[tuple[str, str]]:
     if report.get("reference_start"):
         facts.append(("start", _START_TEXT.get(report["reference_start"],
                                                str(report["reference_start"]))))
+    facts.extend(fact for fact in (judged_fact(report),) if fact)
     if truth.get("distance_travelled_m") is not None:
         facts.append(("distance", f"{truth['distance_travelled_m']:.3f} m travelled"))
     reboots = report.get("reboots") or []
