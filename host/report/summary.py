@@ -25,7 +25,7 @@ from odocan.host.judge.finalstate import final_text
 from odocan.host.judge.samples import POSITION_LSB_M
 from odocan.host.outputs import check_writable, replaced
 from odocan.host.protocol.e2e_silence import lost_text, silence_caption
-from odocan.host.report.judgedfacts import judged_fact
+from odocan.host.report.judgedfacts import judged_fact, placed_fact
 from odocan.host.stopped import mark_stopped, partial_verdict, stopped_text
 from odocan.sim.exceptions import ConfigurationError
 
@@ -300,7 +300,7 @@ def _facts(report: dict[str, Any]) -> list[tuple[str, str]]:
     if report.get("reference_start"):
         facts.append(("start", _START_TEXT.get(report["reference_start"],
                                                str(report["reference_start"]))))
-    facts.extend(fact for fact in (judged_fact(report),) if fact)
+    facts.extend(fact for fact in (placed_fact(report), judged_fact(report)) if fact)
     if truth.get("distance_travelled_m") is not None:
         facts.append(("distance", f"{truth['distance_travelled_m']:.3f} m travelled"))
     reboots = report.get("reboots") or []
