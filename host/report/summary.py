@@ -23,7 +23,7 @@ from odocan.host.jsonutil import write_report
 from odocan.host.judge.analysis import Analysis, Tolerance
 from odocan.host.judge.finalstate import final_text
 from odocan.host.judge.samples import POSITION_LSB_M
-from odocan.host.outputs import check_writable, replaced
+from odocan.host.outputs import OutputError, check_writable, replaced
 from odocan.host.protocol.e2e_silence import lost_text, silence_caption
 from odocan.host.report.judgedfacts import judged_fact, placed_fact
 from odocan.host.stopped import mark_stopped, partial_verdict, stopped_text
@@ -100,26 +100,34 @@ def check_output_paths(args: argparse.Namespace) -> None:
 
 
 def finish(analysis: Analysis, args: argparse.Namespace, *, title: str) -> int:
-    """Print the summary, then write ``--report`` and ``--plot``; 0 when passed, 1 when not.
+    """Print the summary, then write ``--plot`` and ``--report``; 0 when passed, 1 when not.
 
     The summary comes first so that an output that cannot be written (an ``OutputError``
-    naming its path, exit 2) never loses the verdict."""
+    naming its path, exit 2) never loses the verdict. The report comes last, so that it can
+    say that the plot failed (``output_failed``, ``passed`` false: the command exits 2, as for a
+    failed ``--log`` recording, ``as_written``): a CI step reading it must not see a PASS the
+    command did not give (with ``ulimit -f`` the plot failed after the report said PASS)."""
     from rich.console import Console
 
     console = Console(file=sys.stdout, highlight=False)
     analysis.passed = mark_stopped(analysis.report)
     print_summary(analysis.report, args.tolerance, console, title=title)
     sys.stdout.flush()
-    for option, path in (("--report", args.report), ("--plot", args.plot)):
-        if path is None:
-            continue
-        if option == "--report":
-            write_report(path, as_written(analysis.report))
-            continue
+    failed = None
+    if args.plot is not None:
         from odocan.host.report.plots import plot_analysis  # matplotlib only when asked
 
-        with replaced(path, option) as target:  # a full disk: an older plot there kept
-            plot_analysis(analysis, target, tolerance=args.tolerance)
+        try:
+            with replaced(args.plot, "--plot") as target:  # a full disk: an older plot kept
+                plot_analysis(analysis, target, tolerance=args.tolerance)
+        except OutputError as exc:
+            failed = exc
+    if args.report is not None:
+        report = as_written(analysis.report)
+        write_report(args.report, report if failed is None else {
+            **report, "passed": False, "output_failed": str(failed)})
+    if failed is not None:
+        raise failed
     return 0 if analysis.passed else 1
 
 
