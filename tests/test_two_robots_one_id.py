@@ -218,3 +218,26 @@ def test_the_live_judges_name_the_two_robots(tmp_path: Path) -> None:
     assert verdict.verdict == "FAIL"
     assert "two sources on one ID" in verdict.reason
     assert "two sources" in [e["kind"] for e in bridge.events]
+
+
+def test_replay_does_not_judge_two_robots(tmp_path: Path,
+                                          capsys: pytest.CaptureFixture[str]) -> None:
+    """``odocan replay`` of two robots merged: the replayed firmware cannot be compared with the
+    log's poses (whose are they?), UNJUDGED, exit 1, naming the two sources; each robot's own
+    log still replays to a PASS. Real runs (``odocan run``: the replay needs MOTOR_CMD)."""
+    a_log, b_log = _run(tmp_path / "a.log", 1), _run(tmp_path / "b.log", 2)
+    merged = tmp_path / "two.log"
+    lines = a_log.read_text().splitlines(keepends=True) + \
+        b_log.read_text().splitlines(keepends=True)
+    lines.sort(key=lambda line: float(line.split()[0].strip("()")))
+    merged.write_text("".join(lines))
+    assert main(["replay", str(a_log), "--robot", "kobuki"]) == 0
+    capsys.readouterr()
+    assert main(["replay", str(merged), "--robot", "kobuki"]) == 1
+    assert "UNJUDGED: two sources on one ID: two ODOM_POSE_X streams" in capsys.readouterr().out
+
+
+def _run(path: Path, seed: int) -> Path:
+    assert main(["run", "--robot", "kobuki", "--duration", "2", "--seed", str(seed),
+                 "--log", str(path)]) == 0
+    return path
