@@ -213,6 +213,8 @@ def test_the_live_judges_name_the_two_robots(tmp_path: Path) -> None:
     assert monitor.tracker.wrongs.count == 0
     assert monitor.sources.conflict_from_s is not None
     assert monitor.sources.conflict_from_s < 0.1
+    whole = analyze(read_log(path), PMIR).report["two_sources"]  # the same rule, vectorised
+    assert monitor.sources.conflict_from_s == pytest.approx(whole["t_s"], abs=1e-9)
     bridge.end_watch()
     verdict = end_verdict(bridge)
     assert verdict.verdict == "FAIL"

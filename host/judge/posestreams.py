@@ -51,7 +51,6 @@ if TYPE_CHECKING:
     from odocan.host.protocol.decode import BulkDecoder
 
 
-
 @dataclass(frozen=True)
 class Conflict:
     """Where the frames of two senders of one pose message were told apart: the log position and
