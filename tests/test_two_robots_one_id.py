@@ -193,19 +193,20 @@ def test_a_second_robot_powered_up_later_is_cut_alike_whole_and_streamed(tmp_pat
 
 
 def test_the_live_judges_name_the_two_robots(tmp_path: Path) -> None:
-    """The monitor and the bridge fed the merged log (A 50 mm wrong): CONFLICT while both answer
-    (never OK), no POSE WRONG blamed on either, the end verdicts FAIL naming the two sources."""
+    """The monitor and the bridge fed the merged log (A 50 mm wrong): CONFLICT once a window of
+    pose frames tells it, never OK after, no POSE WRONG blamed on either, the end verdicts FAIL
+    naming the two sources."""
     path, _, _ = _two_robots(tmp_path, a_wrong=True)
     monitor = BusMonitor(PMIR, "exact")
     bridge = RobotTelemetry("r", Geometry.of(PMIR), "exact", counter_bits=PMIR.counter_bits)
-    states = set()
+    states: list[tuple[float, str]] = []
     for msg in can.LogReader(str(path)):
         monitor.feed(msg, now_s=msg.timestamp)
         bridge.feed(msg)
-        if msg.timestamp > 0.2:
-            states.add(monitor.health(msg.timestamp)["state"])
-    assert "CONFLICT" in states
-    assert not states & {"OK", "POSE WRONG"}
+        states.append((msg.timestamp, monitor.health(msg.timestamp)["state"]))
+    told_s = next(t for t, state in states if state == "CONFLICT")
+    assert told_s < 1.0  # a window of ODOM_POSE_X frames (32 at 50 Hz) after B's first
+    assert not {state for t, state in states if t >= told_s} & {"OK", "POSE WRONG"}
     end_watch(monitor.tracker, monitor.distance)
     fails = failures(monitor.tracker, monitor.distance, monitor.twist, monitor.sources)
     assert fails

@@ -17,8 +17,9 @@ if TYPE_CHECKING:
     from odocan.host.judge.tracking import PoseTracker
 
 WATCHED: Final = ("ODOM_POSE_X",)  # the pose message the judges watch (X and HEADING)
-WINDOW_FRAMES: Final = 16  # CRC-right frames of one message looked over
-SIGNATURES: Final = 4  # signatures within the window that no one sender makes
+WINDOW_FRAMES: Final = 32  # CRC-right frames of one message looked over
+SIGNATURES: Final = 12  # signatures within the window that no one sender makes (two make ~16;
+# one sender's late frames reordered on the bus, ``--faults delay``, made 4 within 16)
 RECENT: Final = 4  # frames before the previous one a frame may continue (twosenders.RECENT)
 COUNTER_MASK: Final = 0x0F  # the Profile 2 COUNTER (byte 1, low nibble)
 CONFLICT_HOLD_S: Final = 2.0  # CONFLICT shown this long after the last window (sources')

@@ -14,12 +14,14 @@ frame, mod 16; two senders interleaved break that at nearly every frame, by the 
 one of the ``RECENT`` frames before the previous one but not the previous one). One sender makes
 a signature only when it restarts its COUNTER (a reboot: one each) or when 12 or more of its
 frames in a row are lost (a lap: one each), so ``SIGNATURES`` within ``WINDOW_FRAMES`` CRC-right
-frames of ODOM_POSE_X (``livestreams.WATCHED``, the live judges' too: four reboots or laps
-within 16 frames heard, none of one sender's lives) is two sources. Exact duplicates (a frame
-received twice; two robots standing at the same pose) are one pose and no signature. ODOM_POSE_Y
-is not watched (the live judges hear each pose message's CRC by its own route; two firmwares
-whose X frames are equal while their Y differ are not told). The encoder frames are not watched:
-a forger's twins there are ``twins``' business (allowed: they must not fail a correct firmware).
+frames of ODOM_POSE_X (``livestreams.WATCHED``, the live judges' too: 12 within 32, where two
+interleaved senders make about 16 and one sender's frames delayed and reordered on the bus,
+``--faults delay``, made 4 within 16: ``tests/test_live_jitter_lockout.py``) is two sources.
+Exact duplicates (a frame received twice; two robots standing at the same pose) are one pose and
+no signature. ODOM_POSE_Y is not watched (the live judges hear each pose message's CRC by its
+own route; two firmwares whose X frames are equal while their Y differ are not told). The
+encoder frames are not watched: a forger's twins there are ``twins``' business (allowed: they
+must not fail a correct firmware).
 
 The verdict is the FAIL of two sources (``reboots.mark_two_sources``, the frames from the first
 signature of the window not judged); the frames before it are judged as usual."""
