@@ -16,27 +16,25 @@ takes the lockstep fleet's frames as its transport queues them (``(t, id, payloa
   with the reference of that very encoder frame: ``pose``, ``reference`` and ``error`` at most
   ``publish_hz`` times per second (``error.pose_vs_reference``: the firmware's arithmetic;
   ``error.pose_wrong``: beyond ``analyze``'s limit, ``host.judge.livefit.pose_wrong``;
-  ``error.since_last``: the worst of the samples since the previous ``error`` when one was wrong,
-  a hold's batch released at once included, ``host.mqtt.errorbatch``),
-  the first ``publish_phase_s`` of bus time after the first sample (a fleet spreads its robots'
-  publications over the ticks of a period);
+  ``error.since_last``: the worst sample since the previous ``error`` when one was wrong, a hold's
+  batch included, ``host.mqtt.errorbatch``), the first ``publish_phase_s`` after the first sample
+  (a fleet spreads its robots' publications over a period's ticks);
 * ``SIM_TRUTH``'s three parts of one encoder frame make ``truth``, compared with the reference of
   that frame (``error.reference_vs_truth``, the latest: what odometry itself cannot know); the
   latest ``truth`` goes out with the next ``pose`` (so a robot's telemetry of a period leaves in
   one socket write), or alone at most ``publish_hz`` times a second while no pose was published
   for two periods;
-* ``ODOM_STATUS`` pages and ``ODOM_ACK`` answers feed ``status`` and ``cmd/result`` (enums by
-  their DBC names: ``"state": "OK"``); every STATE change and ERROR_MASK bit newly set
+* ``ODOM_STATUS`` pages and ``ODOM_ACK`` answers feed ``status`` and ``cmd/result`` (enums by their
+  DBC names: ``"state": "OK"``); every STATE change and ERROR_MASK bit newly set
   (``host.judge.statuslatch``), every set-pose applied (``host.judge.livesetpose``, which the
   reference follows), every config the firmware applies, whoever sent it, or loses at a reboot
-  (``host.judge.liveconfig``, the monitor's follower) and every counter restart it re-primes
-  on (``counter_restart``, a motor controller's told by CTRL_UPTIME, as analyze names it) is
-  an event: ``status`` carries the
-  latest ``STATUS_EVENTS`` and ``latched_errors`` (every bit seen set), retained, so a short
-  DEGRADED is never lost (not a QoS-1 publication each); likewise ``pose_wrongs``, the judge's
-  own POSE WRONG episodes latched (``host.judge.posewrongs``), ``distance``, ODOM_TWIST
-  DISTANCE judged (``host.judge.livedistance``, latched), and ``twist``, its LINEAR_VEL and
-  ANGULAR_VEL judged (``host.judge.livetwist``, latched: ``passed`` false is TWIST WRONG).
+  (``host.judge.liveconfig``, the monitor's follower) and every counter restart it re-primes on
+  (``counter_restart``, a motor controller's told by CTRL_UPTIME, as analyze names it) is an event:
+  ``status`` carries the latest ``STATUS_EVENTS`` and ``latched_errors`` (every bit seen set),
+  retained, so a short DEGRADED is never lost (not a QoS-1 publication each); likewise
+  ``pose_wrongs``, the judge's POSE WRONG episodes latched (``host.judge.posewrongs``),
+  ``distance``, ODOM_TWIST DISTANCE judged (``host.judge.livedistance``, latched), and ``twist``,
+  LINEAR_VEL and ANGULAR_VEL judged (``host.judge.livetwist``, latched: false is TWIST WRONG).
 
 Headings: ``heading_rad`` wrapped to (-pi, pi] and ``heading_unwrapped_rad`` cumulative, on
 ``pose``, ``reference`` and ``truth`` (SIM_TRUTH's [0, 2 pi) made cumulative at the reference's
