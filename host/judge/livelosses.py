@@ -59,7 +59,8 @@ class LiveAllowance:
     """The allowance per lossy span and every sample's error beyond it."""
 
     def __init__(self) -> None:
-        self.lost_page: tuple[int, int] | None = None  # ENC_E2E_LOST, latest frame then
+        # ENC_E2E_LOST, the latest frame then, ENC_E2E_OK (None: unknown)
+        self.lost_page: tuple[int, int, int | None] | None = None
         self.spans: list[tuple[int, float]] = []  # (first frame, m) per lossy span or twin
         self._revisable: deque[tuple[int, float, float]] = deque()  # (frame, m, t s) since
         self._in_order = True  # ``_revisable`` by frame (then settled from its head)
@@ -188,7 +189,7 @@ class LiveAllowance:
         ENC_E2E_LOST counted from 0 there, so its first page's growth beyond the gaps since
         that frame is a lossy span too (``losses.firmware_losses``' power-up page)."""
         if self.lost_page is None:
-            self.lost_page = (0, seq)
+            self.lost_page = (0, seq, 1)
             self.placed, self._first_spans = None, []
 
     def at_m(self, seq: int) -> float:
@@ -203,11 +204,13 @@ class LiveAllowance:
         return max([self._beyond_settled_m, *recent])
 
     def on_page(self, lost: int, upto: int, window: Columns | None, sampled: set[int],
-                steps_of: tuple[Geometry, int, str | None]) -> None:
+                steps_of: tuple[Geometry, int, str | None], ok: int | None = None) -> None:
         """ODOM_STATUS's ENC_E2E_LOST ``lost`` with encoder frame ``upto`` the latest; with a
         ``window`` (a reference running): a span from the previous page's frame where it grew
-        beyond the gaps (``sampled``: frames a sample names, which the firmware had)."""
-        before, self.lost_page = self.lost_page, (lost, upto)
+        beyond the gaps (``sampled``: frames a sample names, which the firmware had); ``ok``:
+        its ENC_E2E_OK (u16) then, which unwraps a growth of 256 or more
+        (``losses.unwrapped_lost``)."""
+        before, self.lost_page = self.lost_page, (lost, upto, ok)
         if before is None or window is None or not len(window):
             return
         if (lost - before[0]) & 0xFF == 0 and _quiet(window, before[1]):
@@ -221,8 +224,9 @@ class LiveAllowance:
             return  # no loss told, and no sender step of 0 (each >= 1: no negative gap)
         enc = window_encoders(window)
         sent = enc.seq
+        grown_ok = None if ok is None or before[2] is None else np.array((ok - before[2]) & 0xFFFF)
         n = int(lost_beyond_gaps(np.array(before[0]), np.array(lost), sent[i0], sent[i1],
-                                 np.array(i1 - i0)))
+                                 np.array(i1 - i0), ok_growth=grown_ok))
         geometry, bits, integrator = steps_of
         if n > 0 and integrator is not None:
             steps = OneSteps.of_firmware(enc, geometry, bits, integrator)

@@ -106,13 +106,22 @@ class StreamLosses:
             if power_up:  # ENC_E2E_LOST counted from 0 on the primed frame (sequence 0)
                 upto, seq, lost, made = (np.concatenate(([0], a)) for a in (upto, seq, lost, made))
             excess = lost_beyond_gaps(lost[:-1], lost[1:], seq[:-1], seq[1:], np.diff(upto),
-                                      at_most=upto[1:] - made[:-1])
+                                      at_most=upto[1:] - made[:-1],
+                                      ok_growth=self._ok_growth(power_up))
             spans = [(int(made[k]), int(upto[k + 1]), int(excess[k]))
                      for k in np.flatnonzero(excess > 0)]
         tail = self._pages[-1][0] if self._pages else 0
         if self._overflow_after:
             spans.append((tail, n_enc - 1, n_enc - 1 - tail))
         return spans
+
+    def _ok_growth(self, power_up: bool) -> IntArray | None:
+        """ENC_E2E_OK's growth between consecutive pages (``losses._ok_growth``)."""
+        if self._ok is None:
+            return None
+        ok = np.array(([1] if power_up else []) + self._ok, dtype=np.int64)
+        growth: IntArray = np.diff(ok) & 0xFFFF
+        return growth
 
     def ok_spans(self, power_up: bool = False) -> list[tuple[int, int, int]]:
         """``losses.firmware_ok_spans`` of the life fed (``power_up``: ENC_E2E_OK 1 at the
