@@ -218,6 +218,8 @@ class PoseTracker:
         self.reprime.quiet.since = 0  # the firmware talked (``reprimereplay.QuietFrames``)
         if signals is not None:
             self.reprime.on_status(signals, t_s)
+            if "LOST_FRAMES" in signals:  # FRAME_TOTALS: the bound of a lost count's laps
+                self.losses.lost_total = int(signals["LOST_FRAMES"])
 
     def take_samples(self) -> list[Sample]:
         """The on-board samples settled since the last call, in the order settled."""
