@@ -84,22 +84,7 @@ def named_plain(halves: deque[tuple[float, ...]], columns: Columns, pos: int) ->
     else:
         if not columns.whole:
             return None  # the walk may go on before the rows kept: let match_encoder judge
-    return int(window[j][0]) if back == -offset and not _flooded(window, j) else -1
-
-
-def _flooded(window: deque[tuple[float, ...]], j: int) -> bool:
-    """``samples.flooded_out``'s rule on the rows: the frame a COUNTER lap before row ``j``
-    (negative index) came less than ``HALF_LAP`` cycles before it (a flood that overflowed the
-    firmware's mailbox: the name may be any of the flood's frames of that COUNTER); False when
-    the rows kept do not reach it. On time the row 16 back is that frame (one compare)."""
-    seq, t_s = window[j][0], window[j][3]
-    k = j - ENC_COUNTER_LAP
-    while k < j and k < -len(window):
-        k += 1
-    while k < j and window[k][0] < seq - ENC_COUNTER_LAP:
-        k += 1
-    return (k < j and window[k][0] == seq - ENC_COUNTER_LAP
-            and t_s - window[k][3] < HALF_LAP * CYCLE_S)
+    return int(window[j][0]) if back == -offset else -1
 
 
 def plain_half(halves: deque[tuple[float, ...]], pos: int) -> tuple[float, float] | None:

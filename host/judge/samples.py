@@ -248,8 +248,6 @@ def match_encoder(
     found = np.minimum(np.searchsorted(enc.seq, target), len(enc.seq) - 1)
     before = (enc.index[found] < index[has]) | (not causal)  # not integrated before it came
     result[np.flatnonzero(has)] = np.where((enc.seq[found] == target) & before, found, -1)
-    if causal and enc.cycle_s is not None:
-        result = flooded_out(result, enc, enc.cycle_s)
     if own_counter is not None and enc.cycle_s is not None:
         result = _held(result, enc_counter, own_counter, timestamp_s, enc.cycle_s)
         result = lapped_out(result, enc.seq, latest_seq(enc, index))
@@ -301,25 +299,6 @@ def latest_seq(enc: Encoders, index: IntArray) -> IntArray:
     none = np.iinfo(np.int64).min // 2
     seq: IntArray = np.where(latest >= 0, enc.seq[np.maximum(latest, 0)], none)
     return seq
-
-
-def flooded_out(named: IntArray, enc: Encoders, cycle_s: float) -> IntArray:
-    """``named`` with -1 where the encoder frame a COUNTER lap before the one named came less
-    than ``HALF_LAP`` cycles before it on the bus: a flood (a sender that paused and then
-    sent its backlog back to back, ~300 frames in a few ms after a 3 s SIGSTOP) overflowed the
-    firmware's mailbox, which keeps the first frames and drops the rest, so the frame of that
-    COUNTER it named may be any of the flood's (the latest on the bus, 84 frames after the one
-    it had after a 1 s pause: 397 mm off a correct firmware). On time they are 16 cycles
-    apart, never less than 9 where a name is resolved (-8..+7 from the latest frame)."""
-    if not np.any(named >= 0):
-        return named
-    at = np.maximum(named, 0)
-    before = np.searchsorted(enc.seq, enc.seq[at] - ENC_COUNTER_LAP)
-    inside = np.minimum(before, len(enc.seq) - 1)
-    lap = (named >= 0) & (enc.seq[inside] == enc.seq[at] - ENC_COUNTER_LAP)
-    close = enc.timestamp_s[at] - enc.timestamp_s[inside] < HALF_LAP * cycle_s
-    kept: IntArray = np.where(lap & close, -1, named)
-    return kept
 
 
 def lapped_out(named: IntArray, seq: IntArray, latest: IntArray) -> IntArray:
