@@ -353,8 +353,10 @@ def _analyze_life(
     else:  # the log's first life: a stall at power-up vetoes the page's tick bound
         power_up, unproven = log_power_up(frames, accepted, decoder, onboard, enc,
                                           (sent_s, alive_s), (robot, integrator))
+    losses = firmware_losses(frames, accepted, decoder, enc, power_up and start_pose is None)
     ref_all = build_reference(enc, onboard, robot, integrator, power_up=power_up, cut=backlog,
                          max_wheel_speed_mm_s=max_wheel_speed_mm_s, breaks=stalls,
+                         lossy=[first for first, _, _ in losses],
                          slack_m=tolerance.position_m, start_pose=start_pose,
                          reprime_lost=power_up_lost(frames, accepted, decoder, enc, stalls),
                          seen=(seen := chosen_seen(  # an evidenceless ambiguous gap
@@ -374,7 +376,6 @@ def _analyze_life(
     vs_truth, truth_series = versus_truth(onboard, truth, ref_all)
     vs_truth["distance_travelled_m"] = float(ref.distance_m[-1])
     twist = check_twist(frames, accepted, decoder, enc, robot)
-    losses = firmware_losses(frames, accepted, decoder, enc, power_up and start_pose is None)
     placed = life_placements(first, stalls, onboard.enc, ref_all.start, ref_all.stall_reprimes)
     allowance = loss_allowance(enc, robot, integrator, losses, onboard.enc, onboard.enc, placed)
     vs_ref["loss_allowance_m"] = float(np.max(allowance, initial=0.0))

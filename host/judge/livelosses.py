@@ -42,6 +42,7 @@ from collections.abc import Iterable
 from itertools import pairwise
 
 import numpy as np
+import numpy.typing as npt
 
 from odocan.host.judge.livepose import MARKS_KEPT
 from odocan.host.judge.livewindow import ENC_WINDOW, Columns, window_encoders
@@ -59,7 +60,10 @@ class LiveAllowance:
     """The allowance per lossy span and every sample's error beyond it."""
 
     def __init__(self) -> None:
-        self.lost_page: tuple[int, int] | None = None  # ENC_E2E_LOST, latest frame then
+        # ENC_E2E_LOST, the latest frame then, ENC_E2E_OK and the latest LOST_FRAMES (None:
+        # unknown)
+        self.lost_page: tuple[int, int, int | None, int | None] | None = None
+        self.lost_total: int | None = None  # LOST_FRAMES of the latest FRAME_TOTALS page
         self.spans: list[tuple[int, float]] = []  # (first frame, m) per lossy span or twin
         self._revisable: deque[tuple[int, float, float]] = deque()  # (frame, m, t s) since
         self._in_order = True  # ``_revisable`` by frame (then settled from its head)
@@ -188,7 +192,7 @@ class LiveAllowance:
         ENC_E2E_LOST counted from 0 there, so its first page's growth beyond the gaps since
         that frame is a lossy span too (``losses.firmware_losses``' power-up page)."""
         if self.lost_page is None:
-            self.lost_page = (0, seq)
+            self.lost_page = (0, seq, 1, 0)
             self.placed, self._first_spans = None, []
 
     def at_m(self, seq: int) -> float:
@@ -203,11 +207,15 @@ class LiveAllowance:
         return max([self._beyond_settled_m, *recent])
 
     def on_page(self, lost: int, upto: int, window: Columns | None, sampled: set[int],
-                steps_of: tuple[Geometry, int, str | None]) -> None:
+                steps_of: tuple[Geometry, int, str | None], ok: int | None = None) -> None:
         """ODOM_STATUS's ENC_E2E_LOST ``lost`` with encoder frame ``upto`` the latest; with a
         ``window`` (a reference running): a span from the previous page's frame where it grew
-        beyond the gaps (``sampled``: frames a sample names, which the firmware had)."""
-        before, self.lost_page = self.lost_page, (lost, upto)
+        beyond the gaps (``sampled``: frames a sample names, which the firmware had); ``ok``:
+        its ENC_E2E_OK (u16) then, which unwraps a growth of 256 or more up to the growth of
+        LOST_FRAMES (``lost_total``) since the previous page (``losses.unwrapped_lost``; the
+        latest FRAME_TOTALS page heard, not the first after this one: a bound never above
+        the whole log's)."""
+        before, self.lost_page = self.lost_page, (lost, upto, ok, self.lost_total)
         if before is None or window is None or not len(window):
             return
         if (lost - before[0]) & 0xFF == 0 and _quiet(window, before[1]):
@@ -222,7 +230,8 @@ class LiveAllowance:
         enc = window_encoders(window)
         sent = enc.seq
         n = int(lost_beyond_gaps(np.array(before[0]), np.array(lost), sent[i0], sent[i1],
-                                 np.array(i1 - i0)))
+                                 np.array(i1 - i0), ok_growth=_growth(ok, before[2]),
+                                 total_growth=_growth(self.lost_total, before[3])))
         geometry, bits, integrator = steps_of
         if n > 0 and integrator is not None:
             steps = OneSteps.of_firmware(enc, geometry, bits, integrator)
@@ -239,6 +248,11 @@ class LiveAllowance:
             return self._placed_before
         latest = self.placed[0], upto + 1 if self.placed[1] is None else self.placed[1]
         return [*self._placed_before, latest]
+
+
+def _growth(now: int | None, then: int | None) -> npt.NDArray[np.int64] | None:
+    """A u16 count's growth from ``then`` to ``now`` (None: either unknown)."""
+    return None if now is None or then is None else np.array((now - then) & 0xFFFF)
 
 
 def _quiet(window: Columns, first: int) -> bool:

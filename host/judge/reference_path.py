@@ -5,6 +5,7 @@ and stalls (``host.judge.analysis`` module docstring, step 4)."""
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -24,6 +25,7 @@ from odocan.host.judge.ctrlrestart import (
     young_counts,
 )
 from odocan.host.judge.cutreprime import Backlog, cut_reprime
+from odocan.host.judge.fitsegments import fit_segments
 from odocan.host.judge.gapfill import gap_allowance_at
 from odocan.host.judge.gapseen import NOTHING, Seen
 from odocan.host.judge.lossgate import beyond_width
@@ -88,6 +90,7 @@ def build_reference(
     seen: Seen = NOTHING,
     reprime_lost: dict[int, int] | None = None,
     cut: Backlog | None = None,
+    lossy: Sequence[int] = (),
 ) -> Reference:
     """Integrate the encoder deltas from the first on-board sample on; the position placed
     again after gaps and after the stalls' ``breaks`` (within ``breaks.bound_offsets``' bound,
@@ -97,7 +100,9 @@ def build_reference(
     prove it took (``host.judge.gapseen``): a gap it missed too, a stall over which it took
     exactly the log's frames, is placed with no allowance. ``reprime_lost``: the re-primes'
     ENC_E2E_LOST by break (``reprimecount.power_up_lost``); ``cut``: a set-pose's life whose
-    first sample names a backlog frame (``cutreprime``: its re-prime may come after the APPLY)."""
+    first sample names a backlog frame (``cutreprime``: its re-prime may come after the APPLY);
+    ``lossy``: the frames the firmware's loss spans start after (``losses.firmware_losses``),
+    where a fitted start's samples end (``fitsegments``)."""
     bits = min(robot.counter_bits, WIRE_COUNTER_BITS)
     exact_at_first = power_up or start_pose is not None
     e0 = 0 if exact_at_first else int(onboard.enc[0])  # at power-up: pose 0 at the first frame
@@ -132,8 +137,8 @@ def build_reference(
         starts[inside] = True
     segment = np.cumsum(starts)
     x0, y0, h0, exact = (*start_pose, True) if start_pose is not None else _start_pose(
-        onboard, _Relative(rel_x[at], rel_y[at], rel_h[at], segment[at]), power_up=power_up
-    )
+        onboard, _Relative(rel_x[at], rel_y[at], rel_h[at], fit_segments(starts, lossy, e0)[at]),
+        power_up=power_up)
     cos0, sin0 = math.cos(h0), math.sin(h0)
     x_m = x0 + cos0 * rel_x - sin0 * rel_y
     y_m = y0 + sin0 * rel_x + cos0 * rel_y

@@ -155,7 +155,9 @@ class _Halves:
                        {k: v[keep] for k, v in self.values.items()})
 
 
-RECENT_ENCODERS = 16  # encoder frames kept from the chunks before: ENC_COUNTER names -8..+7
+# encoder frames kept from the chunks before: ENC_COUNTER names -8..+7, and the one a lap
+# before the frame named tells a flood (``samples.flooded_out``)
+RECENT_ENCODERS = 32
 
 
 def known_encoders(known: dict[str, np.ndarray], cycle_s: float | None) -> Encoders:
@@ -266,6 +268,8 @@ class StreamPoses:
         cycle_s = contract_cycle_s(self.decoder, "WHEEL_ENCODERS")
         if self.causal and cycle_s is not None and len(halves.index):
             g, seq = self._held(name, halves, g, seq, cycle_s)
+            newest = known["seq"][np.maximum(latest[:cut], 0)]  # samples.lapped_out
+            g = np.where((g >= 0) & (latest[:cut] >= 0) & (newest - seq >= LAP), -1, g)
         self.unmatched += int(np.count_nonzero(g < 0))
         self._keep_first(name, halves, g, seq)
         if cut == len(halves.index):

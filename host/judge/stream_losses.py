@@ -41,6 +41,7 @@ from odocan.host.judge.samples import (
     contract_cycle_s,
     queued_frames,
 )
+from odocan.host.protocol.busfacts import TOTALS_PAGE
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 
 
@@ -59,6 +60,7 @@ class StreamLosses:
     _last_enc_t: float = -math.inf  # the time of the last of them
     _pages: list[tuple[int, int, int, float]] = field(default_factory=list)  # upto, seq, lost, t
     _ok: list[int] | None = field(default_factory=list)  # their ENC_E2E_OK (None: no signal)
+    _totals: list[tuple[float, int]] = field(default_factory=list)  # FRAME_TOTALS: t, LOST
     _summaries_t: list[float] = field(default_factory=list)  # accepted page 0 times
     _summaries_upto: list[int] = field(default_factory=list)  # encoder frames stamped <= each
     _in_order: bool = True  # no summary stamped before an encoder frame of an earlier chunk
@@ -82,6 +84,7 @@ class StreamLosses:
                 self._ok += page["ENC_E2E_OK"][keep].astype(np.int64).tolist()
             else:
                 self._ok = None
+        self._add_totals(chunk, accepted)
         reported = overflow_reported_after(chunk, accepted, self.decoder,
                                             int(index[-1]) if len(index) else -1)
         self._overflow_after = reported if len(index) else (self._overflow_after or reported)
@@ -106,13 +109,50 @@ class StreamLosses:
             if power_up:  # ENC_E2E_LOST counted from 0 on the primed frame (sequence 0)
                 upto, seq, lost, made = (np.concatenate(([0], a)) for a in (upto, seq, lost, made))
             excess = lost_beyond_gaps(lost[:-1], lost[1:], seq[:-1], seq[1:], np.diff(upto),
-                                      at_most=upto[1:] - made[:-1])
+                                      at_most=upto[1:] - made[:-1],
+                                      ok_growth=self._ok_growth(power_up),
+                                      total_growth=self._total_growth(power_up))
             spans = [(int(made[k]), int(upto[k + 1]), int(excess[k]))
                      for k in np.flatnonzero(excess > 0)]
         tail = self._pages[-1][0] if self._pages else 0
         if self._overflow_after:
             spans.append((tail, n_enc - 1, n_enc - 1 - tail))
         return spans
+
+    def _ok_growth(self, power_up: bool) -> IntArray | None:
+        """ENC_E2E_OK's growth between consecutive pages (``losses._ok_growth``)."""
+        if self._ok is None:
+            return None
+        ok = np.array(([1] if power_up else []) + self._ok, dtype=np.int64)
+        growth: IntArray = np.diff(ok) & 0xFFFF
+        return growth
+
+    def _add_totals(self, chunk: FrameArrays, accepted: npt.NDArray[np.bool_]) -> None:
+        """The chunk's accepted FRAME_TOTALS pages' times and LOST_FRAMES."""
+        try:
+            totals = self.decoder.decode_page(chunk, "ODOM_STATUS", TOTALS_PAGE)
+        except DecodeError:
+            return
+        if "LOST_FRAMES" in totals and len(totals["index"]):
+            keep = totals["index"][accepted[totals["index"]]]
+            lost = totals["LOST_FRAMES"][accepted[totals["index"]]].astype(np.int64)
+            self._totals += zip(chunk.timestamp_s[keep].tolist(), lost.tolist(), strict=True)
+
+    def _total_growth(self, power_up: bool) -> IntArray | None:
+        """``losses._total_growth`` by the pages' times (None: no FRAME_TOTALS page)."""
+        if not self._totals:
+            return None
+        t = np.array([a for a, _ in self._totals])
+        total = np.array([b for _, b in self._totals], dtype=np.int64)
+        page_t = np.array([p[3] for p in self._pages])
+        before = np.searchsorted(t, page_t, side="right") - 1
+        after = np.minimum(np.searchsorted(t, page_t), len(t) - 1)
+        low = np.where(before >= 0, total[np.maximum(before, 0)], -1)
+        high = total[after]
+        if power_up:
+            low, high = np.concatenate(([0], low)), np.concatenate(([high[0]], high))
+        growth: IntArray = np.where(low[:-1] >= 0, (high[1:] - low[:-1]) & 0xFFFF, 0)
+        return growth
 
     def ok_spans(self, power_up: bool = False) -> list[tuple[int, int, int]]:
         """``losses.firmware_ok_spans`` of the life fed (``power_up``: ENC_E2E_OK 1 at the

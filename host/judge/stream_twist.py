@@ -36,10 +36,13 @@ from odocan.host.judge.compare import (
 )
 from odocan.host.judge.samples import Encoders, IntArray, _held, contract_cycle_s, match_encoder
 from odocan.host.judge.stream import known_encoders
+from odocan.host.protocol.busfacts import ENC_COUNTER_LAP
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.sim.robot import RobotProfile
 
-RECENT_ENCODERS = 16  # encoder frames kept: a twist frame names -8..+7 from the latest
+# encoder frames kept: a twist frame names -8..+7 from the latest, and the one a lap before
+# the frame named tells a flood (``samples.flooded_out``)
+RECENT_ENCODERS = 32
 KEEP_STEPS = 32  # steps kept whole below the latest encoder frame: more than a frame can name
 
 Band = tuple[float, float, float]  # lowest, highest per-step speed, widest gap slack
@@ -97,8 +100,9 @@ class StreamTwist:
     _enc_count: int = 0
     _recent: dict[str, np.ndarray] = field(default_factory=dict)  # g, index, counter, seq, t
     _pending: dict[str, np.ndarray] = field(default_factory=dict)  # this chunk's twist frames
-    # the last twist frame: ENC_COUNTER, COUNTER, time, encoder frame named (-1: none)
-    _last_row: tuple[int, int, float, int] | None = None
+    # the last twist frame: ENC_COUNTER, COUNTER, time, encoder frame named (-1: none), its
+    # sequence number
+    _last_row: tuple[int, int, float, int, int] | None = None
     _last_enc: Encoders | None = None  # the last accepted encoder frame (one element)
     _steps: dict[str, np.ndarray] = field(default_factory=dict)  # g, v, w, gap_v, gap_w
     _running_max: int = -1  # of every E named so far (-1 for a frame naming none)
@@ -205,30 +209,40 @@ class StreamTwist:
         if not p or len(p["index"]) == 0:
             return
         n = len(p["index"])
-        e = np.full(n, -1, dtype=np.int64)
+        e, seq = np.full(n, -1, dtype=np.int64), np.full(n, -1, dtype=np.int64)
+        latest = np.full(n, np.iinfo(np.int64).min // 2, dtype=np.int64)
         cycle_s = contract_cycle_s(self.decoder, "WHEEL_ENCODERS")
         if len(known["seq"]):
             at = match_encoder(known_encoders(known, cycle_s), p["index"], p["enc_counter"],
                                p["t"])
             e = np.where(at >= 0, known["g"][np.maximum(at, 0)], -1).astype(np.int64)
+            seq = np.where(at >= 0, known["seq"][np.maximum(at, 0)], -1).astype(np.int64)
+            before = np.searchsorted(known["index"], p["index"]) - 1
+            latest = np.where(before >= 0, known["seq"][np.maximum(before, 0)], latest)
         if cycle_s is not None:
-            e = self._held(e, cycle_s)
+            e, seq = self._held(e, seq, cycle_s)
+            e = np.where((e >= 0) & (latest - seq >= ENC_COUNTER_LAP), -1, e)  # lapped_out
         if self.on_distance is not None:
             self.on_distance(e, p["distance"], p["t"])
         self._take_all(e, p["linear"], p["angular"], p["t"])
         self._pending = {}
 
-    def _held(self, e: npt.NDArray[np.int64], cycle_s: float) -> npt.NDArray[np.int64]:
-        """``samples._held`` over the waiting frames, the last frame before carried in front
-        (its ENC_COUNTER, COUNTER, time and encoder frame named)."""
+    def _held(self, e: npt.NDArray[np.int64], seq: npt.NDArray[np.int64], cycle_s: float
+              ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+        """``samples._held`` over the waiting frames (``e``, their sequence numbers ``seq``),
+        the last frame before carried in front (its ENC_COUNTER, COUNTER, time and encoder
+        frame named with its sequence number)."""
         p = self._pending
         ec, own, t = p["enc_counter"], p["counter"], p["t"]
         if self._last_row is not None:
-            e0, c0, t0, n0 = self._last_row
-            ec, own, t, e = np.r_[e0, ec], np.r_[c0, own], np.r_[t0, t], np.r_[n0, e]
-        held = _held(e, ec, own, t, cycle_s)
-        self._last_row = (int(ec[-1]), int(own[-1]), float(t[-1]), int(held[-1]))
-        return held[len(held) - len(p["index"]):]
+            e0, c0, t0, n0, s0 = self._last_row
+            ec, own, t = np.r_[e0, ec], np.r_[c0, own], np.r_[t0, t]
+            e, seq = np.r_[n0, e], np.r_[s0, seq]
+        run_start = _held(np.arange(len(e), dtype=np.int64), ec, own, t, cycle_s)
+        e, seq = e[run_start], seq[run_start]
+        self._last_row = (int(ec[-1]), int(own[-1]), float(t[-1]), int(e[-1]), int(seq[-1]))
+        cut = len(e) - len(p["index"])
+        return e[cut:], seq[cut:]
 
     def _take_all(self, e: npt.NDArray[np.int64], linear: FloatArray,
                   angular: FloatArray, t_s: FloatArray) -> None:

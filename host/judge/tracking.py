@@ -218,6 +218,8 @@ class PoseTracker:
         self.reprime.quiet.since = 0  # the firmware talked (``reprimereplay.QuietFrames``)
         if signals is not None:
             self.reprime.on_status(signals, t_s)
+            if "LOST_FRAMES" in signals:  # FRAME_TOTALS: the bound of a lost count's laps
+                self.losses.lost_total = int(signals["LOST_FRAMES"])
 
     def take_samples(self) -> list[Sample]:
         """The on-board samples settled since the last call, in the order settled."""
@@ -329,12 +331,13 @@ class PoseTracker:
 
     # --- encoder frames the firmware lost that the bus carried (host.judge.livelosses) ---
 
-    def on_enc_lost(self, lost: int) -> None:
-        """ODOM_STATUS page E2E_WHEEL_ENCODERS: the firmware's ENC_E2E_LOST (u8); a span of
-        allowance where it grew beyond the bus's gaps (``LiveAllowance.on_page``)."""
+    def on_enc_lost(self, lost: int, ok: int | None = None) -> None:
+        """ODOM_STATUS page E2E_WHEEL_ENCODERS: the firmware's ENC_E2E_LOST (u8) and ENC_E2E_OK
+        (u16, None: unknown); a span of allowance where it grew beyond the bus's gaps
+        (``LiveAllowance.on_page``)."""
         window = self.window if self.raw.odometry is not None else None
         self.losses.on_page(lost, self.enc_seq, window, self.pairs.sampled,
-                            (self.geometry, self.counter_bits, self.integrator))
+                            (self.geometry, self.counter_bits, self.integrator), ok)
         self.losses.settle(self.enc_seq, self.fast_path)  # later spans start at this frame
 
     def allowance_m(self, seq: int | None = None) -> float:
@@ -431,7 +434,7 @@ class PoseTracker:
         whatever the first pose said (``analyze``'s rule); then ``on_enc_lost``."""
         self.lives.on_counts(ok, lost, proven)
         self.reprime.counted()  # a re-prime at power-up waited for the proof (livereprime)
-        self.on_enc_lost(lost)
+        self.on_enc_lost(lost, ok)
 
     def set_geometry(self, geometry: Geometry, counter_bits: int) -> None:
         """New robot parameters (a config command); the reference restarts at the next pose."""
