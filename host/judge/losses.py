@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from collections.abc import Collection, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -143,8 +144,16 @@ def _total_growth(frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder:
     at, total = totals["index"][keep], totals["LOST_FRAMES"][keep].astype(np.int64)
     if len(at) == 0:
         return np.zeros(max(len(index) - (0 if power_up else 1), 0), dtype=np.int64)
-    before = np.searchsorted(at, index, side="right") - 1
-    after = np.minimum(np.searchsorted(at, index), len(at) - 1)
+    return totals_growth(at, total, index, power_up)
+
+
+def totals_growth(at: npt.NDArray[Any], total: IntArray, pages: npt.NDArray[Any],
+                  power_up: bool) -> IntArray:
+    """``_total_growth`` from the FRAME_TOTALS pages' places ``at`` (sorted, at least one) and
+    LOST_FRAMES ``total`` to the ENC_E2E pages' places ``pages`` (log positions or bus times
+    alike: the streamed judge passes times)."""
+    before = np.searchsorted(at, pages, side="right") - 1
+    after = np.minimum(np.searchsorted(at, pages), len(at) - 1)
     low = np.where(before >= 0, total[np.maximum(before, 0)], -1)
     high = total[after]
     if power_up:

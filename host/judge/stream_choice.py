@@ -33,26 +33,25 @@ def stream_above_bytes(suffix: str) -> float:
 def whole_rss_mb(path: str | Path) -> float | None:
     """About the max RSS (MB) the whole-log path takes on ``path`` (``WHOLE_RSS_MB``'s fit for
     its format, the most memory-hungry one's when not measured); None when it cannot be read."""
-    try:
-        size_mb = Path(path).stat().st_size / 1e6
-    except OSError:
-        return None
-    base, per_mb = WHOLE_RSS_MB.get(Path(path).suffix.lower(), max(WHOLE_RSS_MB.values(),
-                                                                  key=lambda fit: fit[1]))
-    return base + per_mb * size_mb
+    return _fitted_rss_mb(path, 1.0)
 
 
 def refused_rss_mb(path: str | Path) -> float | None:
     """About the most max RSS (MB) ``odocan analyze`` takes on ``path`` when the stream refused
     it (``WHOLE_RSS_MB``'s fit, its slope ``REFUSED_SLOPE_OVER_WHOLE`` times steeper); None when
     it cannot be read."""
+    return _fitted_rss_mb(path, REFUSED_SLOPE_OVER_WHOLE)
+
+
+def _fitted_rss_mb(path: str | Path, slope_factor: float) -> float | None:
+    """``WHOLE_RSS_MB``'s fit for ``path``'s format, its slope times ``slope_factor``."""
     try:
         size_mb = Path(path).stat().st_size / 1e6
     except OSError:
         return None
     base, per_mb = WHOLE_RSS_MB.get(Path(path).suffix.lower(), max(WHOLE_RSS_MB.values(),
                                                                   key=lambda fit: fit[1]))
-    return base + REFUSED_SLOPE_OVER_WHOLE * per_mb * size_mb
+    return base + slope_factor * per_mb * size_mb
 
 
 def streams(path: str | Path, mode: str = "auto") -> bool:

@@ -30,6 +30,7 @@ from odocan.host.judge.losses import (
     placement_accounted,
     stall_placements,
     step_vector,
+    totals_growth,
     worst_runs_m,
 )
 from odocan.host.judge.lossgate import Gate, gated_counts
@@ -144,15 +145,7 @@ class StreamLosses:
             return None
         t = np.array([a for a, _ in self._totals])
         total = np.array([b for _, b in self._totals], dtype=np.int64)
-        page_t = np.array([p[3] for p in self._pages])
-        before = np.searchsorted(t, page_t, side="right") - 1
-        after = np.minimum(np.searchsorted(t, page_t), len(t) - 1)
-        low = np.where(before >= 0, total[np.maximum(before, 0)], -1)
-        high = total[after]
-        if power_up:
-            low, high = np.concatenate(([0], low)), np.concatenate(([high[0]], high))
-        growth: IntArray = np.where(low[:-1] >= 0, (high[1:] - low[:-1]) & 0xFFFF, 0)
-        return growth
+        return totals_growth(t, total, np.array([p[3] for p in self._pages]), power_up)
 
     def ok_spans(self, power_up: bool = False) -> list[tuple[int, int, int]]:
         """``losses.firmware_ok_spans`` of the life fed (``power_up``: ENC_E2E_OK 1 at the
