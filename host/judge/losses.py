@@ -151,7 +151,9 @@ def totals_growth(at: npt.NDArray[Any], total: IntArray, pages: npt.NDArray[Any]
                   power_up: bool) -> IntArray:
     """``_total_growth`` from the FRAME_TOTALS pages' places ``at`` (sorted, at least one) and
     LOST_FRAMES ``total`` to the ENC_E2E pages' places ``pages`` (log positions or bus times
-    alike: the streamed judge passes times)."""
+    alike: the streamed judge passes times); none for no page (a life cut before its first)."""
+    if len(pages) == 0:
+        return np.zeros(0, dtype=np.int64)
     before = np.searchsorted(at, pages, side="right") - 1
     after = np.minimum(np.searchsorted(at, pages), len(at) - 1)
     low = np.where(before >= 0, total[np.maximum(before, 0)], -1)
