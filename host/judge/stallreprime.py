@@ -12,9 +12,10 @@ Judged with the heading exact, the correct firmware FAILed every judge (1619 mm 
 after a 6 s stall).
 
 Where the firmware says so itself (``nearthreshold.Resets.told``: its ERROR_MASK's sticky
-COUNTER_RESET clear on the last summary before the stall, set on the first summary after it)
-and the stall was long enough for its bound to reach the ambiguous step (``possible``), the
-reference re-primes where the firmware did, as at a counter restart (``reference_path._reprime``:
+COUNTER_RESET clear on the last summary before the stall, set on the first made after the frame
+it re-primed on: the first after the stall, or the next one, ``said_reset``) and the stall
+was long enough for its bound to reach the ambiguous step (``possible``), the reference
+re-primes where the firmware did, as at a counter restart (``reference_path._reprime``:
 no step into the frame re-primed on): its steps from the last frame the firmware took before
 the stall (``f``) to the frame it re-primed on (``r``) are left out, so its heading and position
 are re-placed there, and the stall's placement keeps the merge allowance of the frames up to
@@ -115,12 +116,13 @@ def latched(mask: IntArray, i: int) -> bool:
     return bool(mask[i] & COUNTER_RESET_BIT) and bool(mask[i + 1] & COUNTER_RESET_BIT)
 
 
-def reprimed_across(mask: IntArray, i: int, stall_s: float, cycle_s: float,
+def reprimed_across(resets: Resets, i: int, stall_s: float, cycle_s: float,
                     least: int | None) -> bool:
     """Whether the firmware re-primed across its summaries ``i``, ``i + 1`` (``stall_s``
-    apart): said there after a stall that could bring it (``possible``, ``said_reset``), or
-    its word latched before a stall that surely brought it (``certain``, ``latched``)."""
-    return ((possible(stall_s, cycle_s, least) and said_reset(mask, i))
+    apart): said after a stall that could bring it (``possible``, ``said_reset``), or its
+    word latched before a stall that surely brought it (``certain``, ``latched``)."""
+    mask = resets.mask
+    return ((possible(stall_s, cycle_s, least) and said_reset(mask, i, resets.sent_s))
             or (certain(stall_s, cycle_s, least) and latched(mask, i)))
 
 
@@ -133,7 +135,7 @@ def any_declared(resets: Resets, cycle_s: float, least: int | None) -> bool:
     across (``reprimed_across``): the streamed judge then takes one more pass over the life
     (``stream_reprime``)."""
     gaps = np.diff(resets.sent_s)
-    return any(reprimed_across(resets.mask, k, float(g), cycle_s, least)
+    return any(reprimed_across(resets, k, float(g), cycle_s, least)
                for k, g in enumerate(gaps.tolist()))
 
 
@@ -161,7 +163,7 @@ def declared_at(break_s: dict[int, float], cycle_s: float, e0: int, resets: Rese
         if i is None:
             continue
         stall_s = float(resets.sent_s[i + 1] - resets.sent_s[i])
-        if reprimed_across(resets.mask, i, stall_s, cycle_s, least):
+        if reprimed_across(resets, i, stall_s, cycle_s, least):
             out[b - e0] = stall_s
     return out
 
@@ -181,10 +183,21 @@ def around(sent_s: FloatArray, b_s: float) -> int | None:
     return lo + int(np.argmax(np.diff(sent_s[lo : hi + 1])))
 
 
-def said_reset(mask: IntArray, i: int) -> bool:
+def said_reset(mask: IntArray, i: int, sent_s: FloatArray | None = None) -> bool:
     """The firmware's word across summaries ``i`` and ``i + 1``: COUNTER_RESET clear on the
-    first, set on the second (``nearthreshold.Resets.told``'s reading for a stall)."""
-    return not mask[i] & COUNTER_RESET_BIT and bool(mask[i + 1] & COUNTER_RESET_BIT)
+    first, set on the first made after the frame it re-primed on (``nearthreshold.Resets.told``'s
+    reading for a stall): ``i + 1``, or ``i + 2`` (``sent_s``: the summaries' bus times) when
+    ``i + 1`` said nothing yet and ``i + 2`` followed it without a silence. The resumed firmware
+    takes the frames its FIFO kept on its first tick and the frame it re-primes on the tick
+    after; its first summary is made on that first tick when the stall ends on a summary tick
+    (issue #11: every ``--faults stall=T:DUR``, whole tenths of a second, on kobuki 2 s, on pmir
+    6 s): read there alone, the correct firmware FAILed by 825 mm / 2288 mrad."""
+    if mask[i] & COUNTER_RESET_BIT:
+        return False
+    if mask[i + 1] & COUNTER_RESET_BIT:
+        return True
+    return (sent_s is not None and i + 2 < len(mask) and bool(mask[i + 2] & COUNTER_RESET_BIT)
+            and float(sent_s[i + 2] - sent_s[i + 1]) <= SUMMARY_S + 2 * LATE_S)
 
 
 def stall_reprimes(declared: dict[int, float], onboard: Poses, e0: int,
