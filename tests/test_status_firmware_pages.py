@@ -1,5 +1,5 @@
 """``status.firmware``: the firmware's last ODOM_STATUS page of each name, every signal but the
-page's CHECKSUM, COUNTER and PAGE by its lower-case name, enums by their DBC names.
+page's CHECKSUM, COUNTER and PAGE by its lower-case name, enums by their DBC names, CRCs as 0x….
 
 The bridge names the pages when ``status`` reads them (once a second), no longer per page
 heard (20 a second per robot), so the telemetry keeps each page's raw signals: here, after
@@ -31,6 +31,8 @@ def _page(data: bytes) -> tuple[str, dict[str, Any]]:
     decoded = cast(Mapping[str, Any], message.decode(data, decode_choices=True))
     fields = {name.lower(): str(v) if isinstance(v, NamedSignalValue) else v
               for name, v in decoded.items() if name not in SKIPPED}
+    for name in [n for n in fields if n.endswith("_crc")]:  # docs/mqtt.md: 0x and 8 hex digits
+        fields[name] = f"0x{int(fields[name]):08X}"
     return str(decoded["PAGE"]).lower(), fields
 
 
