@@ -73,7 +73,7 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
-from odocan.host.judge.distfall import Falls, fall_times
+from odocan.host.judge.distfall import Falls, any_tied, fall_times
 from odocan.host.judge.latefall import continues_twice, fell_late
 from odocan.host.protocol import busfacts
 from odocan.host.protocol.busfacts import ENC_COUNTER_MASK
@@ -105,11 +105,11 @@ REPEAT_S = POSE_CYCLE_MS / 4000  # a summary this close after the one before: a 
 # (start bus times, latest COUNTERs, starts breaking the sequence) of pose runs, per summary
 Runs = tuple[npt.NDArray[np.float64], npt.NDArray[np.int64], npt.NDArray[np.bool_]]
 Latest = tuple[npt.NDArray[np.float64], npt.NDArray[np.int64]]  # bus times, COUNTERs
-POSE_PERIOD_S = POSE_CYCLE_MS / POSE_FRAMES_PER_CYCLE / 1000  # one pose frame to the next: 20 ms
+POSE_PERIOD_S = busfacts.POSE_PERIOD_S  # one pose frame to the next: 20 ms
 # a pose of COUNTER 0 this much sooner than one life's next COUNTER 0 could come breaks the
 # sequence (stamps of one life's poses taken to be this exact: a quarter of a pose cycle)
 SEQUENCE_SLACK_S = POSE_CYCLE_MS / 4000
-STATUS_CYCLE_S = STATUS_CYCLE_MS / 1000  # one summary to the next: 100 ms
+STATUS_CYCLE_S = busfacts.STATUS_CYCLE_S  # one summary to the next: 100 ms
 # a fall this long after a summary at most may tie to it (``tied_to_boot``: by the next summary)
 FALL_AFTER_S = max(BOOT_WINDOW_S, STATUS_CYCLE_S + SEQUENCE_SLACK_S)
 TWIST_COUNTERS = POSE_COUNTER_LAP  # the falls read at any COUNTER: ``tied_to_boot`` picks
@@ -247,11 +247,8 @@ def fell_around(falls: Falls, summary_s: float) -> bool:
     """Whether a twist's DISTANCE fell (``distfall.fall_times``, bus times in order) where it
     ties to a power-up tick at the summary at ``summary_s`` (``tied_to_boot``):
     ``boot_ahead``'s ``fell``. Live, told at the next summary, a cycle on."""
-    times_s = falls.times_s
-    first = int(np.searchsorted(times_s, summary_s - BOOT_WINDOW_S))
-    last = int(np.searchsorted(times_s, summary_s + FALL_AFTER_S, side="right"))
-    return any(tied_to_boot(float(times_s[k]), int(falls.counters[k]), summary_s)
-               for k in range(first, last))
+    return any_tied(falls, summary_s - BOOT_WINDOW_S, summary_s + FALL_AFTER_S,
+                    lambda t_s, counter, _before_s: tied_to_boot(t_s, counter, summary_s))
 
 
 def tied_to_run(t_s: float, counter: int, summary_s: float) -> bool:
@@ -272,11 +269,8 @@ def fell_in_run(falls: Falls, summary_s: float) -> bool:
     """Whether a twist's DISTANCE fell (``distfall.fall_times``, bus times in order) where it
     is the pose run's before the summary at ``summary_s`` (``tied_to_run``): ``boot_tick``'s
     ``fell``, read when the summary is heard (live: ``distfall.fell_within``)."""
-    times_s = falls.times_s
-    first = int(np.searchsorted(times_s, summary_s - BOOT_WINDOW_S))
-    last = int(np.searchsorted(times_s, summary_s, side="right"))
-    return any(tied_to_run(float(times_s[k]), int(falls.counters[k]), summary_s)
-               for k in range(first, last))
+    return any_tied(falls, summary_s - BOOT_WINDOW_S, summary_s,
+                    lambda t_s, counter, _before_s: tied_to_run(t_s, counter, summary_s))
 
 
 def restarts_small(counter: int, t_s: float, before: tuple[float, int] | None) -> bool:

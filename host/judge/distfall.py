@@ -70,6 +70,18 @@ def no_falls() -> Falls:
     return Falls(np.zeros(0, np.float64), np.zeros(0, np.int64), np.zeros(0, np.float64))
 
 
+def any_tied(falls: Falls, from_s: float, to_s: float,
+             tied: Callable[[float, int, float], bool]) -> bool:
+    """Whether a fall heard from ``from_s`` to ``to_s`` (both included) ties to a boot summary:
+    ``tied`` of its bus time, COUNTER and the bus time of the twist before it (the windows and
+    ties of ``bootticks.fell_around``, ``fell_in_run``, ``latefall.fell_late``)."""
+    times_s = falls.times_s
+    first = int(np.searchsorted(times_s, from_s))
+    last = int(np.searchsorted(times_s, to_s, side="right"))
+    return any(tied(float(times_s[k]), int(falls.counters[k]), float(falls.befores_s[k]))
+               for k in range(first, last))
+
+
 def joined(first: Falls, then: Falls) -> Falls:
     """The falls of two stretches of a log in order (a stream's chunks)."""
     return Falls(*(np.concatenate((a, b)) for a, b in zip(first, then, strict=True)))

@@ -29,13 +29,10 @@ restart a reference, and the correct firmware still FAILs there.
 
 from __future__ import annotations
 
-import numpy as np
-
-from odocan.host.judge.distfall import Falls
+from odocan.host.judge.distfall import Falls, any_tied
 from odocan.host.protocol import busfacts
 
-STATUS_CYCLE_S = busfacts.STATUS_CYCLE_MS / 1000  # one summary to the next: 100 ms
-POSE_PERIOD_S = busfacts.POSE_CYCLE_MS / busfacts.POSE_FRAMES_PER_CYCLE / 1000  # 20 ms
+STATUS_CYCLE_S, POSE_PERIOD_S = busfacts.STATUS_CYCLE_S, busfacts.POSE_PERIOD_S  # 100, 20 ms
 SLACK_S = busfacts.POSE_CYCLE_MS / 4000  # a quarter of a pose cycle (``bootticks``' slack)
 LATE_SUMMARIES = 2  # the fall is read at the second summary after the boot summary
 LATE_FALL_S = LATE_SUMMARIES * STATUS_CYCLE_S + SLACK_S  # 205 ms: by that summary
@@ -57,11 +54,8 @@ def fell_late(falls: Falls, summary_s: float, until_s: float) -> bool:
     """Whether a twist's DISTANCE fell (``distfall.fall_times``, bus times in order) where it
     ties late to the summary at ``summary_s`` (``tied_late``), heard by ``until_s`` (the second
     summary after it, where the live judges read it)."""
-    times_s = falls.times_s
-    first = int(np.searchsorted(times_s, summary_s, side="right"))
-    last = int(np.searchsorted(times_s, min(until_s, summary_s + LATE_FALL_S), side="right"))
-    return any(tied_late(float(times_s[k]), int(falls.counters[k]), float(falls.befores_s[k]),
-                         summary_s) for k in range(first, last))
+    return any_tied(falls, summary_s, min(until_s, summary_s + LATE_FALL_S),
+                    lambda t_s, counter, before_s: tied_late(t_s, counter, before_s, summary_s))
 
 
 def continues_twice(summary_s: float, t_s: float, uptime_s: int, counter: int) -> bool:

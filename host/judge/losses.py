@@ -121,7 +121,12 @@ def _ok_growth(page: dict[str, IntArray], keep: npt.NDArray[np.bool_], power_up:
     1 at the primed frame); None without the signal."""
     if "ENC_E2E_OK" not in page:
         return None
-    ok = page["ENC_E2E_OK"][keep].astype(np.int64)
+    return ok_growth_of(page["ENC_E2E_OK"][keep].astype(np.int64), power_up)
+
+
+def ok_growth_of(ok: IntArray, power_up: bool) -> IntArray:
+    """ENC_E2E_OK's values ``ok`` (u16, in page order) as growths between consecutive pages
+    (``power_up``: from 1 at the primed frame). Shared with ``host.judge.stream_losses``."""
     if power_up:
         ok = np.concatenate(([1], ok))
     growth: IntArray = np.diff(ok) & 0xFFFF

@@ -26,6 +26,7 @@ from odocan.host.judge.losses import (
     heading_steps,
     lost_beyond_gaps,
     ok_count_spans,
+    ok_growth_of,
     overflow_reported_after,
     placement_accounted,
     stall_placements,
@@ -124,9 +125,7 @@ class StreamLosses:
         """ENC_E2E_OK's growth between consecutive pages (``losses._ok_growth``)."""
         if self._ok is None:
             return None
-        ok = np.array(([1] if power_up else []) + self._ok, dtype=np.int64)
-        growth: IntArray = np.diff(ok) & 0xFFFF
-        return growth
+        return ok_growth_of(np.array(self._ok, dtype=np.int64), power_up)
 
     def _add_totals(self, chunk: FrameArrays, accepted: npt.NDArray[np.bool_]) -> None:
         """The chunk's accepted FRAME_TOTALS pages' times and LOST_FRAMES."""
