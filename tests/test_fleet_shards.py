@@ -246,7 +246,7 @@ def test_aggregate_takes_the_worst_worker_and_failures_name_every_threshold() ->
     assert report["bridge"]["frames_in"] == 20
     assert [w["first_robot"] for w in report["workers"]] == ["robot001", "robot003"]
     assert failures(report, 0.05) == [
-        "1 of 4 robots pose vs reference out of tolerance (robot004: why 3)"]
+        "1 of 4 robots failed their verdict (robot004: why 3)"]
     assert failures(report, 0.001)[0] == "deadline_miss_ratio 0.0300 > --max-miss-ratio 0.001"
     passing = aggregate([_worker(0, 0.0, ["PASS"]), _worker(1, 0.0, ["PASS"])])
     assert failures(passing, 0.001) == []
@@ -317,7 +317,7 @@ def test_a_wrong_pose_fails_the_run_and_says_why(
     assert code == 1
     assert "200 ticks, deadline_miss_ratio 0.0000 " in out[0], out[0]  # none skipped
     assert out[1] == "poses: 2 FAIL"
-    assert out[2].startswith("FAIL: 2 of 2 robots pose vs reference out of tolerance (robot001:")
+    assert out[2].startswith("FAIL: 2 of 2 robots failed their verdict (robot001:")
 
 
 def test_a_port_in_use_is_one_error_line(capsys: pytest.CaptureFixture[str]) -> None:

@@ -391,7 +391,7 @@ def failures(report: dict[str, Any], max_miss_ratio: float) -> list[str]:
     if ratio > max_miss_ratio:
         out.append(f"deadline_miss_ratio {ratio:.4f} > --max-miss-ratio {max_miss_ratio:g}")
     robots = report["per_robot"]
-    for verdict, what in (("FAIL", "pose vs reference out of tolerance"),
+    for verdict, what in (("FAIL", "failed their verdict"),
                           ("UNJUDGED", "not judged")):
         names = [name for name, r in robots.items() if r.get("verdict") == verdict]
         if names:
