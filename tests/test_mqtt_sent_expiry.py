@@ -128,4 +128,6 @@ def test_a_stopped_bridge_refuses_the_stamped_command_it_read_late(
         _, err = bridge.communicate(timeout=60)
     print(f"\nstopped {STOP_S:g} s, expiry {EXPIRY_S:g} s: {results}")
     assert results["stamped"] == "expired", err
+    assert "the bridge's process was stopped for " in err, err  # not "commands read meanwhile"
+    assert "event loop did not run" not in err, err
     assert set(results) == {"plain", "v5", "stamped"}
