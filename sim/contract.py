@@ -10,9 +10,10 @@ import os
 from collections.abc import Iterator
 from contextlib import contextmanager
 from functools import cache
-from importlib import resources
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
+
+from odocan.sim import SHIPPED_DBC
 
 if TYPE_CHECKING:  # imported when the DBC is read: odocan analyze reads a plan of it instead
     from typing import Protocol
@@ -28,9 +29,7 @@ if TYPE_CHECKING:  # imported when the DBC is read: odocan analyze reads a plan 
 
         def get_message_by_name(self, name: str) -> _CycleMessage: ...
 
-# Package data: dbc/ ships inside the odocan package (an installed wheel unpacks it to files).
-_DEFAULT_DBC = Path(str(resources.files("odocan").joinpath("dbc", "odocan.dbc")))
-DBC_PATH = Path(os.environ.get("ODOCAN_DBC", _DEFAULT_DBC))
+DBC_PATH = Path(os.environ.get("ODOCAN_DBC", SHIPPED_DBC))
 # The DBC at DBC_PATH as read already (``read_as``), for the cycle times (None: by cantools)
 _read: CycleSource | None = None
 

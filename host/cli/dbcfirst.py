@@ -48,13 +48,17 @@ def follow_named_dbc(argv: list[str], command: str | None) -> None:
     path = named_dbc(argv) if command in DBC_COMMANDS else None
     if path is None or any(name in sys.modules for name in READERS_OF_THE_DBC):
         return
-    from odocan.host.protocol.dbcfacts import judge_facts
+    from odocan.host.protocol.dbcfacts import judge_facts, missing_signals
     from odocan.host.protocol.dbcplan import load_plan
+    from odocan.sim import SHIPPED_DBC
 
     try:
-        judge_facts(load_plan(Path(path)))  # parses, and holds every fact the judges read
+        plan = load_plan(Path(path))
+        judge_facts(plan)  # parses, and holds every fact the judges read
     except Exception:
         return
+    if missing_signals(plan, load_plan(SHIPPED_DBC)) is not None:
+        return  # the judges read the signals by name, some at import: the command refuses it
     os.environ[DBC_ENV] = str(Path(path).resolve())
 
 

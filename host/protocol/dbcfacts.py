@@ -199,3 +199,19 @@ def first_difference(named: DatabaseSpec, loaded: DatabaseSpec) -> str | None:
         if message in names and (its := read(named)) != (mine := read(loaded)):
             return f"{message} {what} {its} vs {mine}"
     return None
+
+
+def missing_signals(named: DatabaseSpec, shipped: DatabaseSpec) -> str | None:
+    """The first message ``named`` defines without every signal ``shipped`` (odocan's own DBC)
+    gives it, said as ``MESSAGE lacks SIGNAL, ...``; None when none lacks one. The judges read
+    the signals by name: a lacking one was a ``KeyError`` deep in a judge (an outside trial: a
+    DBC without ODOM_POSE_Y's TURNS, exit 1 and a traceback, read by CI as a FAIL)."""
+    names = {m.name: m for m in named.messages}
+    for message in shipped.messages:
+        if message.name not in names:
+            continue  # the command refuses a DBC lacking a message it needs
+        have = {signal.name for signal in names[message.name].signals}
+        lacking = [signal.name for signal in message.signals if signal.name not in have]
+        if lacking:
+            return f"{message.name} lacks {', '.join(lacking)}"
+    return None

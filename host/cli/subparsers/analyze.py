@@ -465,8 +465,15 @@ def load_judges_dbc(path: Path) -> cantools.database.can.Database:
     """``load_dbc``, refused (one line) when the judges of this process hold another DBC's bus
     facts (``host.cli.dbcfirst``)."""
     from odocan.host.cli.dbcfirst import require_judges_follow
+    from odocan.host.protocol.dbcfacts import DbcFactError, missing_signals
+    from odocan.sim import SHIPPED_DBC
+    from odocan.sim.contract import database
 
     db = load_dbc(path)
+    lacking = missing_signals(db, database(SHIPPED_DBC))
+    if lacking is not None:
+        raise DbcFactError(f"--dbc {path}: {lacking}, which odocan's judges read (its DBC: "
+                           f"{SHIPPED_DBC})")
     require_judges_follow(db, path)
     return db
 
@@ -484,7 +491,7 @@ def load_dbc(path: Path) -> cantools.database.can.Database:
     except OSError as exc:
         raise ConfigurationError(f"cannot read DBC {path}: {exc.strerror or exc}") from None
     except Exception as exc:  # cantools raises ParseError, UnsupportedDatabaseFormatError, ...
-        raise ConfigurationError(f"malformed DBC {path}: {_first_line(exc)}") from None
+        raise ConfigurationError(f"malformed DBC {path}: {_one_line(exc)}") from None
     if not regular:
         raise ConfigurationError(f"cannot read DBC {path}: not a regular file")
     if not isinstance(db, cantools.database.can.Database):
@@ -492,6 +499,7 @@ def load_dbc(path: Path) -> cantools.database.can.Database:
     return db
 
 
-def _first_line(exc: BaseException) -> str:
-    text = str(exc).strip() or type(exc).__name__
-    return text.splitlines()[0]
+def _one_line(exc: BaseException) -> str:
+    """cantools' message on one line: its detail is on the lines after the first ("unused VAL_
+    entries in DBC:" then which)."""
+    return " ".join(str(exc).split()) or type(exc).__name__
