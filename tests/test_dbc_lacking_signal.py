@@ -23,8 +23,10 @@ from odocan.sim import SHIPPED_DBC
 from tests.test_cli_run import assert_usage_error
 
 ROOT = Path(__file__).resolve().parents[1]
-SIGNALS = [(m.frame_id, m.name, s.name) for m in cantools.database.load_file(SHIPPED_DBC).messages
-           for s in m.signals if not s.is_multiplexer]
+SHIPPED = cantools.database.load_file(SHIPPED_DBC)
+assert isinstance(SHIPPED, cantools.database.can.Database)
+SIGNALS = [(m.frame_id, m.name, s.name) for m in SHIPPED.messages for s in m.signals
+           if not s.is_multiplexer]
 
 
 def _without(frame_id: int, signal: str, path: Path) -> Path:
