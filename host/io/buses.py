@@ -90,7 +90,7 @@ def add_fault_argument(parser: argparse.ArgumentParser) -> None:
         "babble=RATE[:ID[:T:DUR]],busoff=T:DUR,seed=N (babble's RATE: frames/s on the wire; "
         "seed: default --seed where the command has one, else 0); odocan run only, the "
         "firmware MCU's own: stall=T:DUR (halted from T s for DUR s), reboot=T[:DUR] (reset "
-        "at T s, DUR s of boot); docs/bus.md, 'Faults on the bus'",
+        "at T s, DUR s of boot), each repeatable; docs/bus.md, 'Faults on the bus'",
     )
 
 
