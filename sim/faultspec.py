@@ -34,14 +34,17 @@ Every key is optional, comma-separated::
                     waiting in its receive FIFO lost; DUR s of boot time (default 0) during
                     which it runs nothing and its CAN controller, not yet set up, takes no
                     frame. stall and reboot act on the firmware (the MCU), not on a bus handle:
-                    only the lockstep rig (``odocan run``) injects them (``sim.mcufaults``)
+                    only the lockstep rig (``odocan run``) injects them (``sim.mcufaults``);
+                    both may be given any number of times (a HIL bench's script of hangs and
+                    resets: ``stall=2:1,stall=6:0.5,reboot=9,reboot=14:0.3``)
     seed=N          the seed of every random draw (the same seed gives the same faults);
                     without it, the command's ``--seed`` (``parse(text, seed=...)``), else 0
 
 P in [0, 1]; LEN >= 1; MS >= 0; 1 <= BITS <= 64; RATE >= 0 frames/s; 0 <= ID <= 0x1FFFFFFF;
-T, DUR >= 0 s (a bus-off's and a stall's DUR > 0). Each key is given at most once (one bus-off,
-one stall, one reboot); a stall and a reboot may not overlap (the reset's instant and boot time
-within the halt: give them apart). A frame
+T, DUR >= 0 s (a bus-off's and a stall's DUR > 0). Each key but stall and reboot is given at
+most once (one bus-off); the MCU's episodes, kept in time order, may not overlap nor touch (a
+reset's instant or boot time within a halt, two halts that are one: give them apart), save a
+reset at the very end of a halt (a watchdog's, ``stall=3:2,reboot=5``). A frame
 suffers at most one of drop, burst, dup, delay, flip: one uniform draw per frame is split into
 intervals of those widths (``exclusive_edges``: each has exactly its probability; their sum must
 be <= 1). ``sim.faults.FaultInjectingBus`` injects what a spec says.
@@ -49,6 +52,7 @@ be <= 1). ``sim.faults.FaultInjectingBus`` injects what a spec says.
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass, replace
 from typing import Any
@@ -91,8 +95,8 @@ class FaultSpec:
     babble_id: int | None = None  # None: random IDs
     babble_window: BusOff | None = None  # None: from the first frame, for ever
     busoff: BusOff | None = None
-    stall: BusOff | None = None  # the MCU halted from at_s for duration_s
-    reboot: BusOff | None = None  # the MCU reset at at_s, booting for duration_s
+    stalls: tuple[BusOff, ...] = ()  # the MCU halted from at_s for duration_s, in time order
+    reboots: tuple[BusOff, ...] = ()  # the MCU reset at at_s, booting for duration_s, in order
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -127,23 +131,27 @@ class FaultSpec:
         _check_int("seed", self.seed, None, None, "N")
 
     def _check_mcu(self) -> None:
-        """stall and reboot: finite times >= 0, a stall of some length, no overlap."""
+        """stall and reboot: finite times >= 0, a stall of some length, no two overlapping or
+        touching (module docstring); both kept in time order, so that the same episodes in any
+        order are the same spec (the same bytes, the same canonical text)."""
         for key in MCU_KEYS:
-            episode = getattr(self, key)
-            if episode is not None:
+            for episode in getattr(self, f"{key}s"):
                 _check_float(key, episode.at_s, "T")
                 _check_float(key, episode.duration_s, "DUR")
-        if self.stall is not None and self.stall.duration_s == 0:
-            raise _fail("stall", f"{_num(self.stall.at_s)}:0",
-                        "DUR must be > 0 s (a stall of no length; leave stall out)")
-        if self.stall is not None and self.reboot is not None:
-            stall, reboot = self.stall, self.reboot
-            if (reboot.at_s < stall.at_s + stall.duration_s
-                    and stall.at_s <= reboot.at_s + reboot.duration_s):
+                if key == "stall" and episode.duration_s == 0:
+                    raise _fail("stall", f"{_num(episode.at_s)}:0",
+                                "DUR must be > 0 s (a stall of no length; leave stall out)")
+            object.__setattr__(self, f"{key}s", tuple(sorted(getattr(self, f"{key}s"),
+                                                             key=lambda e: e.at_s)))
+        episodes = mcu_episodes(self)
+        for (key, one), (then, other) in itertools.pairwise(episodes):
+            end_s = one.at_s + one.duration_s
+            watchdog = key == "stall" and then == "reboot" and other.at_s == end_s
+            if other.at_s <= end_s and not watchdog:
                 raise ConfigurationError(
-                    f"faults: stall={_episode_text(stall)} and "
-                    f"reboot={_episode_text(reboot, 'reboot')} "
-                    "overlap (the reset or its boot time within the halt): give them apart")
+                    f"faults: {key}={_episode_text(one, key)} and "
+                    f"{then}={_episode_text(other, then)} overlap or touch (a reset or its boot "
+                    "time within a halt, two halts that are one): give them apart")
 
     @classmethod
     def parse(cls, text: str, *, seed: int = 0) -> FaultSpec:
@@ -161,10 +169,13 @@ class FaultSpec:
                 raise ConfigurationError(f"faults: {item!r}: expected KEY=VALUE")
             if key not in _KEYS:
                 raise ConfigurationError(f"faults: unknown key {key!r} (known: {', '.join(_KEYS)})")
-            if key in seen:
+            if key in seen and key not in MCU_KEYS:  # a script of hangs and resets: any number
                 raise ConfigurationError(f"faults: {key} given twice")
             seen.add(key)
-            values.update(_parse_value(key, value))
+            if key in MCU_KEYS:
+                values[f"{key}s"] = (*values.get(f"{key}s", ()), _parse_value(key, value)[key])
+            else:
+                values.update(_parse_value(key, value))
         return cls(**values)
 
     @property
@@ -175,12 +186,12 @@ class FaultSpec:
     @property
     def mcu_active(self) -> bool:
         """True when the firmware's MCU stalls or reboots (``sim.mcufaults``)."""
-        return self.stall is not None or self.reboot is not None
+        return bool(self.stalls or self.reboots)
 
     def bus_part(self) -> FaultSpec:
         """What a bus handle injects (``FaultInjectingBus``): this spec without the MCU's
         stall and reboot."""
-        return replace(self, stall=None, reboot=None)
+        return replace(self, stalls=(), reboots=())
 
     def __str__(self) -> str:
         """The canonical ``--faults`` text (``parse(str(spec)) == spec``)."""
@@ -195,10 +206,10 @@ class FaultSpec:
             items.append(f"flip={_num(self.flip)}:{self.flip_bits}")
         if self.babble:
             items.append(f"babble={_babble_text(self)}")
-        for key in ("busoff", *MCU_KEYS):
-            episode = getattr(self, key)
-            if episode is not None:
-                items.append(f"{key}={_episode_text(episode, key)}")
+        if self.busoff is not None:
+            items.append(f"busoff={_episode_text(self.busoff)}")
+        for key in MCU_KEYS:
+            items += [f"{key}={_episode_text(e, key)}" for e in getattr(self, f"{key}s")]
         items.append(f"seed={self.seed}")
         return ",".join(items)
 
@@ -341,16 +352,22 @@ def _parse_babble(value: str) -> dict[str, Any]:
     return fields
 
 
-def mcu_text(spec: FaultSpec, key: str) -> str:
-    """``key=...`` of the MCU episode ``key`` (stall, reboot) of ``spec``, as ``--faults``
-    writes it."""
-    return f"{key}={_episode_text(getattr(spec, key), key)}"
+def mcu_episodes(spec: FaultSpec) -> list[tuple[str, BusOff]]:
+    """Every stall and reboot of ``spec`` as (key, episode), in time order (a reset at a halt's
+    very end after the halt)."""
+    return sorted([(key, e) for key in MCU_KEYS for e in getattr(spec, f"{key}s")],
+                  key=lambda pair: (pair[1].at_s, pair[0] == "reboot"))
+
+
+def mcu_text(key: str, episode: BusOff) -> str:
+    """``key=...`` of an MCU episode (stall, reboot), as ``--faults`` writes it."""
+    return f"{key}={_episode_text(episode, key)}"
 
 
 def mcu_refused(spec: FaultSpec) -> ConfigurationError:
     """The one-line refusal of stall or reboot where no rig steps the MCU (a bus handle, a live
     node's ``--faults``): silently dropped, a CI job would believe it tested a hang."""
-    keys = ", ".join(k for k in MCU_KEYS if getattr(spec, k) is not None)
+    keys = ", ".join(k for k in MCU_KEYS if getattr(spec, f"{k}s"))
     return ConfigurationError(
         f"faults: {keys}: the firmware MCU's faults, injected by the lockstep rig only (odocan "
         "run); on a live bus, SIGSTOP/SIGCONT or restart the firmware process")
@@ -368,5 +385,5 @@ def _check_id_width(value: str, text: str, can_id: int) -> None:
                     f"29-bit ID write its 8 hex digits (0x{can_id:08X})")
 
 
-__all__ = ["FAULT_KINDS", "MCU_KEYS", "BusOff", "FaultSpec", "exclusive_edges", "mcu_refused",
-           "mcu_text"]
+__all__ = ["FAULT_KINDS", "MCU_KEYS", "BusOff", "FaultSpec", "exclusive_edges", "mcu_episodes",
+           "mcu_refused", "mcu_text"]

@@ -14,16 +14,20 @@ frame. The rig (``sim.rig.LockstepRig``) and the tests' ``FaultRig`` both step t
 Episodes are in the rig's simulated time and fall on ticks: a tick k (its start at k x 10 ms) is
 halted when T <= k x 10 ms < T + DUR; the reset happens at the start of the first tick at or
 after T, before any node's frames of that tick, so the new firmware's first tick takes that
-tick's encoder frame. Nothing here draws a random number: the same spec, the same ticks.
+tick's encoder frame. A run may have any number of stalls and reboots, in time order, the
+firmware running at least one tick between two (a watchdog's reset may come at the tick a halt
+ends). Nothing here draws a random number: the same spec, the same ticks.
 """
 
 from __future__ import annotations
 
+import bisect
+import itertools
 import math
 
 from odocan.sim.board import TICK_S, FirmwareBoard
 from odocan.sim.exceptions import ConfigurationError
-from odocan.sim.faultspec import BusOff, FaultSpec, mcu_text
+from odocan.sim.faultspec import BusOff, FaultSpec, mcu_episodes, mcu_text
 
 
 def tick_at(t_s: float) -> int:
@@ -32,39 +36,39 @@ def tick_at(t_s: float) -> int:
     return math.ceil(round(t_s / TICK_S, 6))
 
 
-def _ticks(episode: BusOff | None) -> range:
+def _ticks(episode: BusOff) -> range:
     """The ticks starting within [at_s, at_s + duration_s)."""
-    if episode is None:
-        return range(0)
     return range(tick_at(episode.at_s), tick_at(episode.at_s + episode.duration_s))
 
 
 class McuFaults:
-    """The stall and reboot of a ``FaultSpec`` applied to a board, tick by tick.
+    """The stalls and reboots of a ``FaultSpec`` applied to a board, tick by tick.
 
     Call ``before_nodes(board, k)`` at the start of tick k (before any node sends) and run the
     board's tick only when ``runs(k)``."""
 
     def __init__(self, spec: FaultSpec) -> None:
-        self.halted = _ticks(spec.stall)
-        self.reset_tick = None if spec.reboot is None else tick_at(spec.reboot.at_s)
-        self.booting = _ticks(spec.reboot)  # from the reset: no tick, no frame taken
-        # Spans whose frames the controller never takes: the reset and its boot time; and a
+        _check_apart(spec)
+        self.halted = [_ticks(stall) for stall in spec.stalls]
+        self.reset_ticks = {tick_at(reboot.at_s) for reboot in spec.reboots}
+        self.booting = [_ticks(reboot) for reboot in spec.reboots]  # no tick, no frame taken
+        # Spans whose frames the controller never takes: each reset and its boot time; and a
         # stall from the first tick, a late power-up (the firmware never ran to set the
         # controller up: as the tests' power-up delay, ``FaultRig.halted`` and a drained FIFO;
         # taken into the FIFO, its whole backlog reached a firmware that never ran, at once).
         self.dark: list[tuple[int, int]] = []  # (first, last): ticks its FIFO is emptied at
-        if self.reset_tick is not None:
-            self.dark.append((self.reset_tick, self.booting.stop))
-        if self.halted and self.halted.start == 0:
-            self.dark.append((0, self.halted.stop))
-        self.frames_lost = 0  # frames the reset and the boot time took from the receive FIFO
+        self.dark += [(tick_at(r.at_s), boot.stop) for r, boot in zip(spec.reboots, self.booting,
+                                                                     strict=True)]
+        self.dark += [(0, halt.stop) for halt in self.halted if halt.start == 0]
+        idle = sorted(self.halted + self.booting, key=lambda span: span.start)  # apart
+        self._idle_starts, self._idle_stops = [s.start for s in idle], [s.stop for s in idle]
+        self.frames_lost = 0  # frames the resets and the boot times took from the receive FIFO
 
     def before_nodes(self, board: FirmwareBoard, k: int) -> None:
-        """At the start of tick ``k``: the reset when due (RAM lost), and while the MCU resets,
+        """At the start of tick ``k``: a reset when due (RAM lost), and while the MCU resets,
         boots or has not yet powered up, the frames its controller did not take (sent since
         its last tick) lost."""
-        if k == self.reset_tick:
+        if k in self.reset_ticks:
             board.reboot()
         if not any(first <= k <= last for first, last in self.dark):
             return
@@ -73,7 +77,24 @@ class McuFaults:
 
     def runs(self, k: int) -> bool:
         """True when the MCU runs its tick ``k`` (neither halted nor booting)."""
-        return k not in self.halted and k not in self.booting
+        at = bisect.bisect_right(self._idle_starts, k) - 1  # the last span started by k
+        return at < 0 or k >= self._idle_stops[at]
+
+
+def _check_apart(spec: FaultSpec) -> None:
+    """Episodes apart in seconds (``FaultSpec``) may still meet on the 10 ms ticks they fall on
+    (``stall=2:1.004,stall=3.005:1``: one halt of ticks 200..400): refused in one line, as two
+    episodes that would be judged as one. The firmware must run a tick between two (a reset
+    may still come at the tick a halt ends: a watchdog's)."""
+    pairs = mcu_episodes(spec)
+    for (key, one), (then, other) in itertools.pairwise(pairs):
+        resumes = tick_at(one.at_s + one.duration_s)  # its first tick run again
+        watchdog = key == "stall" and then == "reboot"
+        if tick_at(other.at_s) <= resumes - watchdog:
+            raise ConfigurationError(
+                f"faults: {mcu_text(key, one)} and {mcu_text(then, other)} fall on the same or "
+                f"adjacent {TICK_S * 1000:g} ms ticks (the firmware runs none between them): "
+                "give them apart")
 
 
 def mcu_faults(spec: FaultSpec | None) -> McuFaults | None:
@@ -84,13 +105,14 @@ def mcu_faults(spec: FaultSpec | None) -> McuFaults | None:
 def check_within(spec: FaultSpec | None, run_s: float) -> None:
     """A stall or reboot that ends after the run's ``run_s`` seconds is refused in one line: a
     stall never resumed, or a reset the run never reaches, would be judged as no such fault (a
-    CI job believing it tested a hang it never ran)."""
+    CI job believing it tested a hang it never ran); so are episodes that meet on the ticks
+    (``_check_apart``)."""
     if spec is None:
         return
-    for key in ("stall", "reboot"):
-        episode = getattr(spec, key)
-        if episode is not None and episode.at_s + episode.duration_s >= run_s:
+    for key, episode in mcu_episodes(spec):
+        if episode.at_s + episode.duration_s >= run_s:
             shape = "T + DUR" if episode.duration_s else "T"
             raise ConfigurationError(
-                f"faults: {mcu_text(spec, key)}: {shape} must be before "
+                f"faults: {mcu_text(key, episode)}: {shape} must be before "
                 f"the run's end ({run_s:g} s; --duration)")
+    _check_apart(spec)

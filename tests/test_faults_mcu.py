@@ -70,17 +70,17 @@ def _run(tmp_path: Path, faults: str, firmware: str = "python", name: str = "run
 
 def test_the_keys_parse_print_back_and_go_to_the_firmwares_handle() -> None:
     spec = FaultSpec.parse("stall=3:2,reboot=6:0.5,seed=4")
-    assert (spec.stall, spec.reboot) == (BusOff(3.0, 2.0), BusOff(6.0, 0.5))
+    assert (spec.stalls, spec.reboots) == ((BusOff(3.0, 2.0),), (BusOff(6.0, 0.5),))
     assert FaultSpec.parse(str(spec)) == spec
     assert str(FaultSpec.parse(REBOOT)) == "reboot=4,seed=0"  # no boot time: T alone
-    assert FaultSpec.parse(REBOOT).reboot == BusOff(4.0, 0.0)
+    assert FaultSpec.parse(REBOOT).reboots == (BusOff(4.0, 0.0),)
     assert spec.active
     assert spec.mcu_active
     assert not spec.bus_part().active
     sim_half, fw_half = two_handles(FaultSpec.parse("drop=0.1,stall=3:2"))
-    assert sim_half.stall is None
+    assert sim_half.stalls == ()
     assert sim_half.drop == 0.1
-    assert fw_half.stall == BusOff(3.0, 2.0)
+    assert fw_half.stalls == (BusOff(3.0, 2.0),)
     assert fw_half.drop == 0.1
 
 
@@ -93,7 +93,7 @@ def test_the_keys_parse_print_back_and_go_to_the_firmwares_handle() -> None:
     ("stall=3:0", "DUR must be > 0 s"),
     ("reboot=1:2:3", "expected reboot=T[:DUR]"),
     ("reboot=-4", "T must be a finite number >= 0"),
-    ("stall=1:1,stall=5:1", "stall given twice"),
+    ("stall=1:1,busoff=2:1,busoff=5:1", "busoff given twice"),  # stall and reboot repeat
     ("stall=3:2,reboot=4", "overlap"),  # a reset within the halt
     ("stall=3:2,reboot=2.5:0.5", "overlap"),  # a boot time running into the halt
     ("stall=7:2", f"T + DUR must be before the run's end ({RUN_S:g} s"),  # past the run

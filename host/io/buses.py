@@ -24,7 +24,7 @@ import can
 
 from odocan.sim.exceptions import BusSetupError, ConfigurationError
 from odocan.sim.faults import FaultInjectingBus, FaultSpec
-from odocan.sim.faultspec import mcu_refused
+from odocan.sim.faultspec import mcu_episodes, mcu_refused
 
 UDP_PORT_BASE, UDP_PORT_SPAN = 20000, 10000  # derived udp_multicast ports: 20000..29999
 UDP_DEFAULT_GROUP = "ff15:7079:7468:6f6e:6465:6d6f:6d63:6173"  # python-can's default channel
@@ -90,7 +90,7 @@ def add_fault_argument(parser: argparse.ArgumentParser) -> None:
         "babble=RATE[:ID[:T:DUR]],busoff=T:DUR,seed=N (babble's RATE: frames/s on the wire; "
         "seed: default --seed where the command has one, else 0); odocan run only, the "
         "firmware MCU's own: stall=T:DUR (halted from T s for DUR s), reboot=T[:DUR] (reset "
-        "at T s, DUR s of boot); docs/bus.md, 'Faults on the bus'",
+        "at T s, DUR s of boot), each repeatable; docs/bus.md, 'Faults on the bus'",
     )
 
 
@@ -116,11 +116,10 @@ def check_fault_limits(spec: FaultSpec) -> None:
         ("babble", spec.babble, BABBLE_MAX_PER_S, "RATE frames/s"),
         ("delay", spec.delay_ms, DELAY_MAX_MS, "MS"),
     ]
-    for key in ("busoff", "stall", "reboot"):  # the episodes: a day at most
-        episode = getattr(spec, key)
-        if episode is not None:
-            limits += [(key, episode.at_s, BUSOFF_MAX_S, "T s"),
-                       (key, episode.duration_s, BUSOFF_MAX_S, "DUR s")]
+    episodes = [("busoff", spec.busoff)] if spec.busoff is not None else []
+    for key, episode in [*episodes, *mcu_episodes(spec)]:  # the episodes: a day at most
+        limits += [(key, episode.at_s, BUSOFF_MAX_S, "T s"),
+                   (key, episode.duration_s, BUSOFF_MAX_S, "DUR s")]
     for key, value, limit, what in limits:
         if not (math.isfinite(value) and value <= limit):
             raise ConfigurationError(
