@@ -105,3 +105,35 @@ def test_many_logs_say_each_refusal(tmp_path: Path, capsys: pytest.CaptureFixtur
     code, _, err = _analyze(capsys, *names, "--stream", "never", "--jobs", jobs)
     assert code == 0
     assert "not streamable" not in err
+
+
+def test_an_apply_just_after_a_reprimed_stall_is_one_line_then_whole(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str],
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """The other refusal kept (issue #11/#13: an APPLY cut the firmware's first pose after a
+    re-primed stall off the life before it, ``acrosscut.STREAM``): under ``always`` one line
+    naming it (before, it said "a set-pose cut ...: judged on the whole log): judged whole");
+    under ``auto`` made to stream, quiet, and both give the whole judge's report."""
+    from odocan.host.judge import acrosscut
+    from tests.test_staged_apply_sweep import TARGETS, drive
+    from tests.test_staged_reboot import _written
+
+    log = _written(drive("spin", 400, 2, TARGETS[0]), tmp_path / "apply.log")
+    code, out, err = _analyze(capsys, str(log), "--stream", "never", "--report", "-")
+    whole = json.loads(out)
+    assert code == 0
+    assert "not streamable" not in err
+    code, out, err = _analyze(capsys, str(log), "--stream", "always", "--report", "-")
+    assert code == 0
+    said = [line for line in err.splitlines() if "not streamable" in line]
+    assert said == [f"odocan analyze: {log}: not streamable ({acrosscut.STREAM}): judged whole, "
+                    f"in up to about {stream_choice.refused_rss_mb(log):.0f} MB of memory (the "
+                    "stream aims under 300 MB)"]
+    assert "judged on the whole log" not in said[0]
+    assert "config" in said[0]
+    assert json.loads(out) == whole
+    monkeypatch.setattr(stream_choice, "stream_above_bytes", lambda suffix: 0.0)
+    code, out, err = _analyze(capsys, str(log), "--report", "-")
+    assert code == 0
+    assert "not streamable" not in err
+    assert json.loads(out) == whole
