@@ -36,6 +36,15 @@ def stream_above_bytes(suffix: str) -> float:
     return max(0.0, (RSS_TARGET_MB / RSS_MARGIN - base) / per_mb) * 1e6
 
 
+def auto_budget() -> str:
+    """What ``--stream auto`` chooses by, in words (``odocan analyze --help``): the whole
+    judge's budget and the sizes above which each format streams."""
+    sizes = ", ".join(f"{suffix} above {stream_above_bytes(suffix) / 1e6:.0f} MB"
+                      for suffix in (".log", ".asc", ".blf"))
+    return (f"{RSS_TARGET_MB / RSS_MARGIN:.0f} MB max RSS by the log's size ({sizes}: an "
+            "hour of any shipped robot streams)")
+
+
 def whole_rss_mb(path: str | Path) -> float | None:
     """About the max RSS (MB) the whole-log path takes on ``path`` (``WHOLE_RSS_MB``'s fit for
     its format, the most memory-hungry one's when not measured); None when it cannot be read."""

@@ -24,11 +24,9 @@ cantools every time.
 exact stuffed length plus the interframe space, over the log's span); a log cannot say when a
 frame was queued, so there is no latency to measure.
 
-Memory: a log whose whole judge would take more than its budget, 250 MB max RSS (the 300 MB
-target over a 1.2 margin), by its size against a bound measured on the shipped robots'
-hour-long drives (``stream_choice.WHOLE_RSS_MB``: .log above 41 MB, about 45 minutes of drive,
-.asc above 62 MB, .blf above 9 MB; an hour of any shipped robot streams), ``--stream always``
-or ``never`` forcing either, and without ``--plot``, ``--parquet``, ``--mcap`` or ``-b``, is
+Memory: a log whose whole judge would pass its 250 MB max-RSS budget by its size
+(``stream_choice.auto_budget``: an hour of any shipped robot; ``--stream always`` or ``never``
+forces either) and without ``--plot``, ``--parquet``, ``--mcap`` or ``-b`` is
 analysed as a stream (``host.judge.stream_analysis``: passes over the file ``--chunk-frames``
 frames at a time, the report bit for bit the whole log's, at about 3x the CPU), in bounded
 memory whatever its size; those four read the whole log (their series and frames), and so does
@@ -72,6 +70,8 @@ MAX_JOBS = 1024
 
 def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Register ``odocan analyze``."""
+    from odocan.host.judge.stream_choice import auto_budget  # pathlib only
+
     parser = subparsers.add_parser(
         "analyze",
         help="check the odometry recorded in CAN logs",
@@ -112,23 +112,12 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
         "--stream", choices=("auto", "always", "never"), default="auto",
         help="analyse the log as a stream in bounded memory (about 180 MB on an hour, about "
         "4x the CPU) or read it whole: auto streams a log whose whole judge would take more "
-        f"than {_budget()}; the report is the same either way. A log the stream cannot judge "
+        f"than {auto_budget()}; the report is the same either way. A log the stream cannot judge "
         "exactly (frame times going back, a burst after a busy bus, a stall before a first "
         "pose, an APPLY just after a re-primed stall) is read whole: quietly under auto, with "
         "one line on stderr under always (default: %(default)s)",
     )
     parser.set_defaults(func=_do_analyze)
-
-
-def _budget() -> str:
-    """``--stream``'s help on auto's choice: the whole judge's budget and the sizes above which
-    each format streams (``stream_choice``: its bound measured on hour-long drives)."""
-    from odocan.host.judge.stream_choice import RSS_MARGIN, RSS_TARGET_MB, stream_above_bytes
-
-    sizes = ", ".join(f"{suffix} above {stream_above_bytes(suffix) / 1e6:.0f} MB"
-                      for suffix in (".log", ".asc", ".blf"))
-    return (f"{RSS_TARGET_MB / RSS_MARGIN:.0f} MB max RSS by the log's size ({sizes}: an "
-            "hour of any shipped robot streams)")
 
 
 def _add_batch_arguments(parser: argparse.ArgumentParser) -> None:
