@@ -17,14 +17,22 @@ import pytest
 
 from odocan.host.cli.app import main
 from odocan.host.judge import stream_choice
-from odocan.host.judge.stream_choice import streams, whole_rss_mb
+from odocan.host.judge.stream_choice import refused_rss_mb, streams, whole_rss_mb
 
 # (format, log MB, the whole judge's max RSS MB measured): kobuki with a config applied at 3 s
 # (seed 3; its first 13, 26, 39 MB and the hour, and the hour through python-can), pmir and
 # kobuki an hour on random (seed 1), pmir an hour on the circle with a 6 s stall half way.
 MEASURED = [(".log", 13.0, 111.8), (".log", 26.0, 172.4), (".log", 39.0, 233.9),
             (".log", 52.74, 307.2), (".asc", 83.84, 316.7), (".blf", 13.99, 316.6),
-            (".log", 55.33, 261.3), (".log", 55.33, 260.2), (".log", 52.69, 259.1)]
+            (".log", 55.33, 261.3), (".log", 55.33, 260.2), (".log", 52.69, 259.1),
+            (".log", 0.0565, 44.9), (".blf", 0.0697, 55.1)]  # short: a drive's, the evidence's
+# (format, log MB, max RSS MB) of logs the stream refused, then judged whole: the hours above
+# (the first pass made to refuse, as a stall before a first pose does), a config APPLY 2 ticks
+# after a re-primed stall (pmir, circle), tests/files' evidence, and the refused logs measured
+# before (bench/stream_stall.py: 12.9 / 26.1 / 52.7 MB, the config's hour).
+REFUSED = [(".log", 55.33, 277.5), (".log", 52.74, 313.7), (".log", 0.0565, 46.0),
+           (".blf", 0.0697, 57.0), (".log", 12.88, 121.0), (".log", 26.13, 165.0),
+           (".log", 52.69, 302.0), (".log", 52.74, 329.0)]
 HOUR_MB = {".log": 52.69, ".asc": 83.84, ".blf": 13.99}  # the smallest hour measured, each
 BUDGET_MB = 250.0
 
@@ -44,6 +52,14 @@ def test_the_bound_lies_over_every_measured_drive(suffix: str, size_mb: float, r
                                                   tmp_path: Path) -> None:
     """Before: 217 MB said for the 307 MB hour (a config applied), 212 for the .asc's 317."""
     said = whole_rss_mb(_sized(tmp_path / f"x{suffix}", size_mb))
+    assert said is not None
+    assert said >= rss_mb
+
+
+@pytest.mark.parametrize(("suffix", "size_mb", "rss_mb"), REFUSED)
+def test_the_refusal_line_says_no_less_than_measured(suffix: str, size_mb: float,
+                                                     rss_mb: float, tmp_path: Path) -> None:
+    said = refused_rss_mb(_sized(tmp_path / f"x{suffix}", size_mb))
     assert said is not None
     assert said >= rss_mb
 

@@ -11,16 +11,17 @@ RSS_TARGET_MB = 300.0  # the max RSS ``odocan analyze`` of one log aims to stay 
 RSS_MARGIN = 1.2  # the whole judge's budget: RSS_TARGET_MB / RSS_MARGIN = 250 MB
 # The whole judge's max RSS (MB, GNU time's %M / 1024) against its log's size (MB), per format:
 # base + per_mb * size, a bound over the shipped robots' hour-long drives (issue #13,
-# ``bench/stream_stall.py``, docs/benchmarks.md). The worst is one long life with a config
-# applied (its PROFILE pages read whole: kobuki, ``--config``), 111.8 / 172.4 / 233.9 /
-# 307.2 MB at 13 / 26 / 39 / 52.7 MB of .log: under 48.0 + 4.92 MB per MB; an hour of pmir or kobuki
-# on ``random`` (55.3 MB) took 260-261 MB, pmir's hour with a 6 s stall (52.7 MB) 259 MB, all
-# under the line. .asc and .blf: the same hour converted by python-can (83.8 MB: 316.7 MB;
-# 14.0 MB: see BLF below), the line through it from the format's small-log base (54.6, 52.2 MB:
-# ``bench/analyze_memory.py --threshold``). Before (one short pmir drive's fit, 2.74 MB per MB
-# of .log), ``auto`` read a 52.7 MB hour whole at 307-326 MB. A log whose line passes the
-# budget streams: above 41 MB of .log (about 45 minutes of the rig's drive), 62 MB of .asc.
-WHOLE_RSS_MB = {".log": (48.0, 4.92), ".asc": (54.6, 3.13), ".blf": (52.2, 21.480)}
+# docs/benchmarks.md). The worst is one long life with a config applied (kobuki,
+# ``bench/stream_stall.py --config``): 111.8 / 172.4 / 233.9 / 307.2 MB at 13 / 26 / 39 /
+# 52.7 MB of .log, under 48.0 + 4.92 MB per MB; an hour of pmir or kobuki on ``random``
+# (55.3 MB) took 260-261 MB, pmir's hour with a 6 s stall (52.7 MB) 259 MB; a short log 46 MB.
+# .asc: that hour through python-can (83.8 MB: 316.7 MB), the line from the small-log base
+# (54.6 MB, ``bench/analyze_memory.py --threshold``). .blf: the old line's 21.5 MB per MB lies
+# over the hour (14.0 MB: 316.6 MB); its base raised from 52.2 to 57.0 MB (a refused 70 kB .blf
+# took 57 MB). Before (one short pmir drive's fit, 65.4 + 2.74 MB per MB of .log), ``auto``
+# read a 52.7 MB hour whole at 307-326 MB. A log whose line passes the budget streams: above
+# 41 MB of .log (about 45 minutes of the rig's drive), 62 MB of .asc, 9 MB of .blf.
+WHOLE_RSS_MB = {".log": (48.0, 4.92), ".asc": (54.6, 3.13), ".blf": (57.0, 21.48)}
 # A log the stream refused (``NotStreamable``) is read whole, after the stream's attempt: its
 # max RSS was up to 1.15x the whole judge's line's slope above the base (refused, before this
 # line: 121, 165, 277, 302, 329 MB at 12.9, 26.1, 52.7, 52.7, 52.7 MB of .log; 1.2x says 124,
@@ -72,7 +73,7 @@ def _fitted_rss_mb(path: str | Path, slope_factor: float) -> float | None:
 def streams(path: str | Path, mode: str = "auto") -> bool:
     """Whether to analyse ``path`` as a stream: ``always``, ``never``, or (``auto``) when the
     whole judge would take more than its budget (``RSS_TARGET_MB / RSS_MARGIN``, 250 MB) for a
-    log that size by ``WHOLE_RSS_MB``'s bound (the streamed path costs about 4x its CPU, and
+    log that size by ``WHOLE_RSS_MB``'s bound (the streamed path costs 4-5x its CPU, and
     about 180 MB on an hour; the report is the same either way)."""
     if mode != "auto":
         return mode == "always"

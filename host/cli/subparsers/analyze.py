@@ -110,8 +110,8 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
     )
     parser.add_argument(
         "--stream", choices=("auto", "always", "never"), default="auto",
-        help="analyse the log as a stream in bounded memory (about 180 MB on an hour, about "
-        "4x the CPU) or read it whole: auto streams a log whose whole judge would take more "
+        help="analyse the log as a stream in bounded memory (about 180 MB on an hour, 4-5x "
+        "the CPU) or read it whole: auto streams a log whose whole judge would take more "
         f"than {auto_budget()}; the report is the same either way. A log the stream cannot judge "
         "exactly (frame times going back, a burst after a busy bus, a stall before a first "
         "pose, an APPLY just after a re-primed stall) is read whole: quietly under auto, with "
