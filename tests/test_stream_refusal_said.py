@@ -16,12 +16,16 @@ import xml.etree.ElementTree as ET
 from functools import cache
 from pathlib import Path
 
+import can
 import pytest
 
 from odocan.host.cli.app import main
 from odocan.host.judge import stream_analysis, stream_choice
 from odocan.host.judge.stream_analysis import NotStreamable, analyze_file
+from odocan.host.protocol.commands import CommandEncoder
+from odocan.sim.board import TICK_S
 from odocan.sim.robot import load
+from odocan.sim.scenarios import get_scenario
 from tests.test_stall_before_first_pose import EVIDENCE
 
 
@@ -105,3 +109,77 @@ def test_many_logs_say_each_refusal(tmp_path: Path, capsys: pytest.CaptureFixtur
     code, _, err = _analyze(capsys, *names, "--stream", "never", "--jobs", jobs)
     assert code == 0
     assert "not streamable" not in err
+
+
+def _config_drive(scenario: str, halted: int, after: int) -> tuple[can.Message, ...]:
+    """``test_staged_apply_sweep.drive``'s re-primed stall, but the APPLY ``after`` ticks after
+    it is a config's (every field staged, pmir's own values, then APPLY, in that tick)."""
+    from tests.fault_rig import FaultRig, open_virtual
+    from tests.test_reprime_apply import AFTER_TICKS, REBOOT
+    from tests.test_staged_reboot import PMIR
+
+    frames = CommandEncoder().build("config", {
+        "counts_per_rev": PMIR.counts_per_rev, "wheel_radius_left_m": PMIR.wheel_radius_left_m,
+        "wheel_radius_right_m": PMIR.wheel_radius_right_m, "wheelbase_m": PMIR.wheelbase_m,
+        "counter_bits": PMIR.counter_bits, "integrator": "exact"}).frames
+    heard: list[can.Message] = []
+    with FaultRig(scenario=get_scenario(scenario, PMIR, duration_s=60.0)) as rig:
+        rig.halted = lambda k: REBOOT < k <= REBOOT + halted
+        tool = open_virtual(rig.channel)
+
+        def host(k: int) -> None:
+            if k == REBOOT:
+                rig.board.reboot()
+                while rig.fw_bus.recv(0) is not None:  # the reset clears the receive FIFO
+                    pass
+            if k == REBOOT + halted + after:
+                for frame in frames:
+                    tool.send(can.Message(arbitration_id=frame.can_id, is_extended_id=False,
+                                          data=frame.data, timestamp=k * TICK_S))
+
+        rig.observers.append(lambda _k, got: heard.extend(got))
+        rig.before_board.append(host)
+        try:
+            rig.run((REBOOT + halted + AFTER_TICKS) * TICK_S)
+        finally:
+            tool.shutdown()
+    return tuple(heard)
+
+
+@pytest.mark.parametrize("apply", ["set-pose", "config"])
+def test_an_apply_just_after_a_reprimed_stall_is_one_line_then_whole(
+        apply: str, tmp_path: Path, capsys: pytest.CaptureFixture[str],
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """The other refusal kept (issue #11/#13: an APPLY, a set-pose's or a config's, cut the
+    firmware's first pose after a re-primed stall off the life before it,
+    ``acrosscut.STREAM``): under ``always`` one line naming it (before, it said "a set-pose
+    cut ...: judged on the whole log): judged whole", for a config's APPLY too); under ``auto``
+    made to stream, quiet; each gives the whole judge's report (a config's: its ACK, PASS)."""
+    from odocan.host.judge import acrosscut
+    from tests.test_staged_apply_sweep import TARGETS, drive
+    from tests.test_staged_reboot import _written
+
+    messages = (drive("spin", 400, 2, TARGETS[0]) if apply == "set-pose"
+                else _config_drive("circle", 400, 2))
+    log = _written(messages, tmp_path / "apply.log")
+    code, out, err = _analyze(capsys, str(log), "--robot", "pmir", "--stream", "never",
+                              "--report", "-")
+    whole = json.loads(out)
+    assert code == 0
+    assert "not streamable" not in err
+    assert apply != "config" or [e["kind"] for e in whole["events"]].count("config") == 1
+    code, out, err = _analyze(capsys, str(log), "--robot", "pmir", "--stream", "always",
+                              "--report", "-")
+    assert code == 0
+    said = [line for line in err.splitlines() if "not streamable" in line]
+    assert said == [f"odocan analyze: {log}: not streamable ({acrosscut.STREAM}): judged whole, "
+                    f"in up to about {stream_choice.refused_rss_mb(log):.0f} MB of memory (the "
+                    "stream aims under 300 MB)"]
+    assert "judged on the whole log" not in said[0]
+    assert "config" in said[0]
+    assert json.loads(out) == whole
+    monkeypatch.setattr(stream_choice, "stream_above_bytes", lambda suffix: 0.0)
+    code, out, err = _analyze(capsys, str(log), "--robot", "pmir", "--report", "-")
+    assert code == 0
+    assert "not streamable" not in err
+    assert json.loads(out) == whole

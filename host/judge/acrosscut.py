@@ -51,8 +51,8 @@ if TYPE_CHECKING:
 
 Word = tuple[FloatArray, IntArray]  # summaries' bus times and ERROR_MASKs
 WINDOW_FRAMES = 512  # log frames the streamed judge reads each side of a cut (``backlog_in``)
-STREAM = ("a set-pose cut the firmware's first pose after a stall from the life before it "
-          "(the pose names a backlog frame): judged on the whole log")
+STREAM = ("an APPLY, a set-pose's or a config's, cut the firmware's first pose after a stall "
+          "off the life before it: the pose names a backlog frame")
 
 
 @dataclass(frozen=True)

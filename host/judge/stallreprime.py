@@ -126,10 +126,6 @@ def reprimed_across(resets: Resets, i: int, stall_s: float, cycle_s: float,
             or (certain(stall_s, cycle_s, least) and latched(mask, i)))
 
 
-STREAM = ("a stall the firmware declared it re-primed after (COUNTER_RESET): judged on the "
-          "whole log (its re-prime's frames chosen by the samples after)")
-
-
 def any_declared(resets: Resets, cycle_s: float, least: int | None) -> bool:
     """Whether two consecutive summaries of ``resets`` are a silence the firmware re-primed
     across (``reprimed_across``): the streamed judge then takes one more pass over the life

@@ -9,7 +9,7 @@ kept sample at or after b (``first``: f and r lie there), and the ``COMPARED`` s
 the stall's placement by the merge allowance of the frames b - 1 .. f only, drops the stall's
 loss placement (``losses.life_placements``) and reports the event at frame r.
 
-Before, the streamed judge refused every life with such a stall (``STREAM``: judged whole, the
+Before, the streamed judge refused every life with such a stall (judged whole, the
 whole log in memory: a firmware hang on an hour's CI drive took the CLI to the whole log's
 300+ MB). Now ``ReprimeTap`` rides one extra pass over the life (``stream_life.life_chunks``,
 only when the firmware's summaries hold such a word: ``stallreprime.any_declared``) and keeps,
@@ -49,7 +49,7 @@ from odocan.host.judge.stream_refusal import NotStreamable
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 
 BEFORE_PAGE = ("a stall the firmware declared it re-primed after, before its first count page "
-               "(its ENC_E2E_LOST may pin the re-prime: reprimecount): judged whole")
+               "(its ENC_E2E_LOST may pin the re-prime: reprimecount)")
 Rows = Callable[[npt.NDArray[np.int64]], dict[str, np.ndarray]]
 Sample = tuple[int, float, float, float, float, float, float]  # enc, x, y, h, rel x, y, h
 

@@ -24,16 +24,17 @@ cantools every time.
 exact stuffed length plus the interframe space, over the log's span); a log cannot say when a
 frame was queued, so there is no latency to measure.
 
-Memory: a log too big for the whole-log path to stay under 300 MB max RSS (its size against
-the path's measured RSS per MB of that format: ``stream_analysis.streams``; ``--stream always``
-or ``never`` forces either) and without ``--plot``, ``--parquet``, ``--mcap`` or ``-b`` is
+Memory: a log whose whole judge would pass its 250 MB max-RSS budget by its size
+(``stream_choice.auto_budget``: an hour of any shipped robot; ``--stream always`` or ``never``
+forces either) and without ``--plot``, ``--parquet``, ``--mcap`` or ``-b`` is
 analysed as a stream (``host.judge.stream_analysis``: passes over the file ``--chunk-frames``
 frames at a time, the report bit for bit the whole log's, at about 3x the CPU), in bounded
 memory whatever its size; those four read the whole log (their series and frames), and so does
 a log the analysis refuses (to explain why in the log's terms) or fails (to look for a wrong
 ``--robot``), or that the stream cannot judge exactly (``stream_analysis.NotStreamable``: frame
-times going back around a stall, frames let out in a burst after a busy bus; an applied
-config's PROFILE pages are read from the stream's spill: ``configs.ConfigPages``).
+times going back around a stall, frames let out in a burst after a busy bus, a stall before
+a life's first pose, an APPLY that cut the first pose after a stall off the life before it; an
+applied config's PROFILE pages are read from the stream's spill: ``configs.ConfigPages``).
 ``odocan analyze LOG…`` chooses the same way for each log (``host.cli.batch.analyze_one``).
 Under ``--stream always`` such a refusal is said on stderr, one line per log naming its reason
 (``refused_line``: the bounded memory asked for is not kept; stdout, ``--report -`` included,
@@ -69,6 +70,8 @@ MAX_JOBS = 1024
 
 def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Register ``odocan analyze``."""
+    from odocan.host.judge.stream_choice import auto_budget  # pathlib only
+
     parser = subparsers.add_parser(
         "analyze",
         help="check the odometry recorded in CAN logs",
@@ -107,12 +110,12 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
     )
     parser.add_argument(
         "--stream", choices=("auto", "always", "never"), default="auto",
-        help="analyse the log as a stream in bounded memory (about 3x the CPU) or read it "
-        "whole: auto streams a log too big for the whole path to stay under 300 MB max RSS; "
-        "the report is the same either way. A log the stream cannot judge exactly (frame "
-        "times going back, a burst after a busy bus, a stall before a first pose) is read "
-        "whole: quietly under auto, with one line on stderr under always "
-        "(default: %(default)s)",
+        help="analyse the log as a stream in bounded memory (about 180 MB on an hour, 4-5x "
+        "the CPU) or read it whole: auto streams a log whose whole judge would take more "
+        f"than {auto_budget()}; the report is the same either way. A log the stream cannot judge "
+        "exactly (frame times going back, a burst after a busy bus, a stall before a first "
+        "pose, an APPLY just after a re-primed stall) is read whole: quietly under auto, with "
+        "one line on stderr under always (default: %(default)s)",
     )
     parser.set_defaults(func=_do_analyze)
 
