@@ -4,8 +4,8 @@ Before, auto chose by a fit of one short pmir drive (2.74 MB of max RSS per MB o
 a 52.7 MB hour of kobuki with a config applied whole at 307-326 MB, past the 300 MB target.
 Now the whole judge's bound (``stream_choice.WHOLE_RSS_MB``) lies over every hour-long drive
 measured (GNU time's max RSS, ``bench/stream_stall.py``; the figures below, docs/benchmarks.md)
-and a log streams when the bound passes the whole judge's budget (250 MB: the 300 MB target
-over a 1.2 margin). The sizes are those of the rig's hour-long logs (sparse files here: the
+and a log streams when the bound passes the whole judge's budget (300 MB: the target, the bound
+being the worst drive measured). The sizes are those of the rig's hour-long logs (sparse files here: the
 choice reads the size alone).
 """
 
@@ -34,7 +34,7 @@ REFUSED = [(".log", 55.33, 277.5), (".log", 52.74, 313.7), (".log", 0.0565, 46.0
            (".blf", 0.0697, 57.0), (".log", 12.88, 121.0), (".log", 26.13, 165.0),
            (".log", 52.69, 302.0), (".log", 52.74, 329.0)]
 HOUR_MB = {".log": 52.69, ".asc": 83.84, ".blf": 13.99}  # the smallest hour measured, each
-BUDGET_MB = 250.0
+BUDGET_MB = 300.0
 
 
 def _sized(path: Path, size_mb: float) -> Path:
@@ -78,5 +78,5 @@ def test_the_help_states_the_budget(capsys: pytest.CaptureFixture[str]) -> None:
     with pytest.raises(SystemExit):
         main(["analyze", "--help"])
     help_text = " ".join(capsys.readouterr().out.split())
-    assert "more than 250 MB max RSS by the log's size (.log above 41 MB" in help_text
+    assert "more than 300 MB max RSS by the log's size (.log above 51 MB" in help_text
     assert "an hour of any shipped robot streams" in help_text

@@ -24,7 +24,7 @@ cantools every time.
 exact stuffed length plus the interframe space, over the log's span); a log cannot say when a
 frame was queued, so there is no latency to measure.
 
-Memory: a log whose whole judge would pass its 250 MB max-RSS budget by its size
+Memory: a log whose whole judge would pass its 300 MB max-RSS budget by its size
 (``stream_choice.auto_budget``: an hour of any shipped robot; ``--stream always`` or ``never``
 forces either) and without ``--plot``, ``--parquet``, ``--mcap`` or ``-b`` is
 analysed as a stream (``host.judge.stream_analysis``: passes over the file ``--chunk-frames``
