@@ -73,8 +73,9 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
-from odocan.host.judge.distfall import Falls, any_tied, fall_times
+from odocan.host.judge.distfall import Falls, any_tied
 from odocan.host.judge.latefall import continues_twice, fell_late
+from odocan.host.judge.navrestart import second_evidence
 from odocan.host.protocol import busfacts
 from odocan.host.protocol.busfacts import ENC_COUNTER_MASK
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
@@ -303,7 +304,7 @@ def ahead_ticks(frames: FrameArrays, decoder: BulkDecoder, positions: npt.NDArra
     their CRC holding: UPTIMEs, COUNTERs, bus times; ``statuses``: ``status_before`` of each)
     at once, their first pose after them in ``frames`` (before the next summary)."""
     where, t_pose, counter = pose_rows(frames, decoder)
-    falls = fall_times(frames, decoder, TWIST_COUNTERS)[0]
+    falls = second_evidence(frames, decoder, TWIST_COUNTERS)[0]  # ``navrestart``
     found = np.zeros(len(positions), dtype=bool)
     if len(where) == 0 or len(positions) == 0:
         return found

@@ -23,12 +23,13 @@ next summary with no more twists counted than the time since the boot summary al
 the summary's broken sequence; the next summary still has to continue the boot summary's
 (``continues_summary``), and live the fall is read then (all those twists heard by a cycle on).
 
-Where no fall shows the reboot stays untold as before: a robot that had not moved (the new pose
-is then no farther from the old reference than the old life drove since its last twist heard,
-a tick or two; standing since power-up, none: the old life's reference is the new one's,
-tests/test_first_second_lost_powerup.py). The new firmware's first 6 to 10 twists lost too (its
+Where no fall shows (a robot that had not moved: the new pose is then no farther from the old
+reference than the old life drove since its last twist heard, a tick or two; standing since
+power-up, none, tests/test_first_second_lost_powerup.py) NAV_STATUS's COUNTER restarting
+may still tell it (``navrestart``). The new firmware's first 6 to 10 twists lost too (its
 first twist heard after the next summary) are read by the summary after (``latefall``); later,
-or once the new life drove farther than the old one had, no fall shows (a false FAIL left).
+or once the new life drove farther than the old one had, no fall shows: NAV_STATUS's COUNTER
+restarting is then the second evidence (``navrestart``, joined with the falls).
 
 Kept cheap live: a judge keeps the latest twists heard (bus time, bytes: ``RECENT_TWISTS``)
 and reads them only when a summary's first pose needs the fall (``fell_within``).

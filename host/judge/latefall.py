@@ -22,8 +22,9 @@ cycle longer (to that second summary) and then withdraw what they judged since i
 cycle sooner; the streamed ``analyze`` holds the events after it across chunks, as before.
 
 Where the first twist heard comes later still, or no longer falls (the new life drove farther than
-the old one had: its first 10 twists lost at tick 32, DISTANCE 99 mm over the old life's 84), the
-reboot stays untold: the summary's evidence alone (one message's sequence broken) does not
+the old one had: its first 10 twists lost at tick 32, DISTANCE 99 mm over the old life's 84),
+NAV_STATUS's COUNTER restarting tells it (``navrestart``, read with the falls by the same ties);
+without that either, the summary's evidence alone (one message's sequence broken) does not
 restart a reference, and the correct firmware still FAILs there.
 """
 

@@ -68,9 +68,9 @@ from odocan.host.judge.bootticks import (
     status_before,
 )
 from odocan.host.judge.breaks import merged_breaks
-from odocan.host.judge.distfall import fall_times
 from odocan.host.judge.gapseen import crc_holds
 from odocan.host.judge.liveconfig import config_text
+from odocan.host.judge.navrestart import second_evidence
 from odocan.host.judge.primed import counted_start
 from odocan.host.judge.samples import ENC_E2E_PAGE, AnalysisError, contract_cycle_s
 from odocan.host.judge.sources import SourceWatch, two_sources_text
@@ -242,7 +242,7 @@ def _watch_summaries(
     counters = page["COUNTER"][good].astype(np.int64)
     poses = poses_before(frames, decoder, positions)[0]  # their ticks' (``bootticks``)
     statuses = status_before(frames, decoder, positions)[0]
-    falls = fall_times(frames, decoder, TWIST_COUNTERS)[0]  # a new life's DISTANCE fell
+    falls = second_evidence(frames, decoder, TWIST_COUNTERS)[0]  # DISTANCE fell, NAV restarted
     booted = boot_ticks(uptimes_s, counters, times_s, poses, statuses, None, falls)
     ahead = ahead_ticks(frames, decoder, positions, uptimes_s, counters, times_s, statuses)
     watch = SourceWatch()

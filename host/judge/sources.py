@@ -44,6 +44,7 @@ from odocan.host.judge.distfall import (
 from odocan.host.judge.latefall import continues_twice, tied_late
 from odocan.host.judge.liveadopted import LATE_REBOOT
 from odocan.host.judge.livegapseen import heard_status
+from odocan.host.judge.navrestart import NAV_MESSAGE, restarted_within
 from odocan.host.judge.powerup import (
     NAMED_SPAN,
     holds_first_cycle,
@@ -113,6 +114,9 @@ class SourceWatch:
     # with no fall yet: the second summary after it reads one (``latefall``, ``told_ahead``)
     twists: deque[tuple[float, bytes]] = field(  # the latest twists heard (bus time, bytes),
         default_factory=lambda: deque(maxlen=RECENT_TWISTS))  # read only at ``hear_pose``
+    nav_ids: tuple[int, ...] | None = None  # NAV_STATUS's E2E DataIDs (``navrestart``)
+    navs: deque[tuple[float, bytes]] = field(  # the latest NAV_STATUS heard (bus time, bytes)
+        default_factory=lambda: deque(maxlen=RECENT_TWISTS))  # read as ``twists`` are
 
     def on_page(self, page: str, signals: dict[str, Any], tracker: PoseTracker) -> bool:
         """An accepted ODOM_STATUS ``page`` (``"summary"``, ``"e2e_wheel_encoders"``, ...):
@@ -215,9 +219,13 @@ class SourceWatch:
     def _fell_in_run(self, summary_s: float) -> bool:
         """Whether a twist kept live fell where it is the pose run's before the summary at
         ``summary_s`` (``bootticks.tied_to_run``)."""
-        return fell_within(self.twist_field, self.twists,
-                           lambda t_s, counter, _before_s: tied_to_run(t_s, counter, summary_s),
-                           TWIST_COUNTERS)
+        return self.evidence(lambda t_s, counter, _before_s: tied_to_run(t_s, counter, summary_s))
+
+    def evidence(self, tied: Callable[[float, int, float], bool]) -> bool:
+        """Whether a twist kept live fell (``distfall.fell_within``) or a NAV_STATUS kept live
+        restarted its sequence (``navrestart.restarted_within``) where ``tied`` takes it."""
+        return (fell_within(self.twist_field, self.twists, tied, TWIST_COUNTERS)
+                or restarted_within(self.nav_ids, self.navs, tied))
 
     def hear_pose(self, t_s: float, counter: int) -> None:
         """An ODOM_POSE_X whose CRC holds, heard at bus time ``t_s`` with E2E ``counter``,
@@ -245,20 +253,16 @@ class SourceWatch:
         told it only with DISTANCE fallen and no fall heard yet waits to the summary after
         (``latefall``: the first twist heard since it fell by then)."""
         late, self.ahead_late = self.ahead_late, None
-        if late is not None and continues_twice(late[0], t_s, uptime_s, counter) and fell_within(
-                self.twist_field, self.twists,
-                lambda t_s, counter, before_s: tied_late(t_s, counter, before_s, late[0]),
-                TWIST_COUNTERS):
+        if late is not None and continues_twice(late[0], t_s, uptime_s, counter) and self.evidence(
+                lambda t_s, counter, before_s: tied_late(t_s, counter, before_s, late[0])):
             self.take_ahead(late[0], late[1])
             return late
         posed, self.ahead_posed = self.ahead_posed, None
         if posed is None or not continues_summary(posed[0], t_s, uptime_s, counter):
             return None
         summary_s = posed[0]  # (``fell_around``)
-        if self.ahead_fall and not fell_within(
-                self.twist_field, self.twists,
-                lambda t_s, counter, _before_s: tied_to_boot(t_s, counter, summary_s),
-                TWIST_COUNTERS):
+        if self.ahead_fall and not self.evidence(
+                lambda t_s, counter, _before_s: tied_to_boot(t_s, counter, summary_s)):
             self.ahead_late = posed  # no fall yet: the next summary reads a late one
             return None
         self.take_ahead(posed[0], posed[1])
@@ -384,6 +388,9 @@ def pose_frame(watch: SourceWatch, message: Message, data: bytes, e2e: Any, t_s:
         if watch.twist_field is None:
             watch.twist_field = distance_field(message, e2e)
         watch.twists.append((t_s, data))
+    elif message.name == NAV_MESSAGE:  # its COUNTER, read as the twists are (``navrestart``)
+        watch.nav_ids = e2e.data_ids if e2e is not None else None
+        watch.navs.append((t_s, data))
 
 
 def start_new_life(tracker: PoseTracker, e2e: E2EMonitor, db: Database,

@@ -47,9 +47,10 @@ from odocan.host.judge.bootticks import (
     poses_before,
     status_before,
 )
-from odocan.host.judge.distfall import Falls, fall_times, joined, no_falls
+from odocan.host.judge.distfall import Falls, joined, no_falls
 from odocan.host.judge.gapseen import crc_holds
 from odocan.host.judge.latefall import continues_twice, fell_late
+from odocan.host.judge.navrestart import Carried, second_evidence
 from odocan.host.judge.primed import counted_start
 from odocan.host.judge.reboots import SUMMARY_PAGE, mark_two_sources
 from odocan.host.judge.samples import ENC_E2E_PAGE, AnalysisError, contract_cycle_s
@@ -128,8 +129,8 @@ class StreamLives:
     _naming: list[_Boot] = field(default_factory=list)  # reboots whose ``naming`` is not told
     _ahead_fall: bool = False  # the ``_ahead`` posed needs a twist's DISTANCE fallen
     _late: bool = False  # ... continued with none yet: the next summary reads a late one
-    _falls: tuple[Falls, tuple[float, int] | None] = field(  # the twists whose DISTANCE fell
-        default_factory=lambda: (no_falls(), None))  # (all kept), the latest twist's
+    _falls: tuple[Falls, Carried | None] = field(  # the twists whose DISTANCE fell, the
+        default_factory=lambda: (no_falls(), None))  # NAV_STATUS restarts (all kept), carried
 
     def feed(self, chunk: FrameArrays, accepted: npt.NDArray[np.bool_]) -> None:
         """Take the next chunk's accepted encoder frames, reboots and count pages."""
@@ -141,7 +142,7 @@ class StreamLives:
         self._enc_t = np.concatenate((self._enc_t, rows["timestamp_s"][keep].astype(np.float64)))
         self._powerups = carried_on(self._powerups,
                                     powerup_poses(chunk, self.decoder, self._offset))
-        falls, twist = fall_times(chunk, self.decoder, TWIST_COUNTERS, self._falls[1])
+        falls, twist = second_evidence(chunk, self.decoder, TWIST_COUNTERS, self._falls[1])
         self._falls = (joined(self._falls[0], falls), twist)  # rare: all kept
         events = sorted(self._deferred + self._boot_events(chunk) + self._page_events(chunk),
                         key=lambda event: event[0])

@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING, Any
 from cantools.database.errors import DecodeError
 
 from odocan.host.judge.distfall import TWIST_MESSAGE, distance_field
+from odocan.host.judge.navrestart import NAV_MESSAGE
 from odocan.host.mqtt.liveroutes import Route
 from odocan.host.protocol.e2e import e2e_messages
 
@@ -56,6 +57,8 @@ def plan_of(telemetry: RobotTelemetry, can_id: int, route: Route,
         telemetry, can_id, route, check or telemetry.e2e.check)
     if route.name == TWIST_MESSAGE:
         return _twist_kept(telemetry, can_id, route, plan)
+    if route.name == NAV_MESSAGE:
+        return _nav_kept(telemetry, can_id, plan)
     if can_id not in telemetry._watched:
         return plan
     watch = telemetry._watch_source
@@ -81,6 +84,21 @@ def _twist_kept(telemetry: RobotTelemetry, can_id: int, route: Route, plan: Plan
         return plan(t_s, data)
 
     return twist_plan
+
+
+def _nav_kept(telemetry: RobotTelemetry, can_id: int, plan: Plan) -> Plan:
+    """NAV_STATUS's plan, each frame kept first (bus time, bytes) for the reboot watch, which
+    reads its COUNTER only when a summary may tell a reboot (``host.judge.navrestart``)."""
+    sources = telemetry.sources
+    config = e2e_messages(telemetry.db).get(can_id)
+    sources.nav_ids = None if config is None else config.data_ids
+    keep = sources.navs.append
+
+    def nav_plan(t_s: float, data: bytes) -> list[Publication]:
+        keep((t_s, data))
+        return plan(t_s, data)
+
+    return nav_plan
 
 
 def _handled(telemetry: RobotTelemetry, can_id: int, route: Route, check: Check) -> Plan:
