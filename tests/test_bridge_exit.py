@@ -119,7 +119,9 @@ def test_the_bridge_exits_1_on_a_wrong_pose_and_says_it_last(
         assert code == 1, err
         assert last.startswith("bridge robot001: FAIL: the on-board pose was wrong in 1 episode ("
                                ), err
-        assert f"(enc {JUMP_AT})" in last, last  # where the bias began
+        assert "worst position 2.0" in last, last  # the bias began
+        assert " mm off at 3.0" in last, last
+        assert "(enc " not in last, last  # (a 4-bit counter locates nothing)
         assert last.endswith("; judged as robot 'kobuki' (--robot)"), last
     else:
         assert code == 0, err

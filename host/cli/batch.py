@@ -101,6 +101,7 @@ def analyze_one(path: str, job: Job) -> LogResult:
     from odocan.host.cli.robotchoice import choose_robot
     from odocan.host.cli.subparsers.analyze import load_judges_dbc, log_inputs
     from odocan.host.io.logs import read_log
+    from odocan.host.judge import verdictfacts
     from odocan.host.judge.analysis import Tolerance, analyze
     from odocan.host.judge.configs import ConfigPages, later_mismatches, running_before_configs
     from odocan.host.judge.profilepage import head_profile, with_bus_speed
@@ -150,6 +151,7 @@ def analyze_one(path: str, job: Job) -> LogResult:
             report = analysis.report
         report["inputs"] = choice.recorded(log_inputs(
             log, profile, report["integrator"], None if job.dbc is None else Path(job.dbc)))
+        verdictfacts.mark(report)  # a check on 0 samples, a stuck E2E COUNTER: no PASS
         _diagnose(log, report, profile, running, tolerance, db is None, later, choice.given_as)
     except (OdocanError, OSError) as exc:
         return LogResult(path, error=_one_line(exc))

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 import zlib
 from typing import Any
 
@@ -33,6 +34,10 @@ BABBLE_MAX_PER_S = 20_000.0  # on the wire: 10 000 from each of the rig's two ha
 DELAY_MAX_MS = 60_000.0
 BUSOFF_MAX_S = 86_400.0
 FAULT_SEED_LIMIT = 2**32
+# python-can's keywords of every bus (``can.Bus``, ``BusABC``; its configuration's keys)
+COMMON_BUS_ARGS = frozenset({"interface", "channel", "bitrate", "data_bitrate", "fd",
+                             "can_filters", "receive_own_messages", "timing", "context",
+                             "config_context", "ignore_config", "state"})
 
 
 def add_bus_arguments(parser: argparse.ArgumentParser, *, required: bool = False) -> None:
@@ -150,12 +155,36 @@ def _open_raw_bus(args: argparse.Namespace, **overrides: Any) -> can.BusABC:
         kwargs[key] = auto_type(value)
     kwargs.update(overrides)
     kwargs = isolated_bus_kwargs(kwargs)
+    for key in unread_bus_args(kwargs.get("interface"), [
+            item.partition("=")[0] for item in getattr(args, "bus_arg", [])]):
+        print(f"warning: --bus-arg {key}: not a parameter of python-can's "
+              f"{kwargs.get('interface')} interface; it may be ignored", file=sys.stderr)
     try:
         return can.Bus(**kwargs)
     except (can.CanError, ValueError, OSError, ImportError, TypeError) as exc:
         _release_half_made(exc)
         described = ", ".join(f"{k}={v}" for k, v in kwargs.items()) or "python-can defaults"
         raise BusSetupError(f"cannot open CAN bus ({described}): {exc}") from exc
+
+
+def unread_bus_args(interface: Any, keys: list[str]) -> list[str]:
+    """The ``--bus-arg`` keys neither the interface class's named ``__init__`` parameters nor
+    python-can's common ones (``COMMON_BUS_ARGS``) take: python-can passes any keyword on in
+    ``**kwargs`` (``--bus-arg bogus=1`` was accepted silently). A warning, not a refusal: some
+    interfaces read options from their ``**kwargs`` (kvaser, pcan), which no signature shows.
+    [] when the interface is unknown here (python-can's own error says so)."""
+    import inspect
+
+    from can.interface import _get_class_for_interface
+
+    if not isinstance(interface, str) or not keys:
+        return []
+    try:
+        cls = _get_class_for_interface(interface)
+        named = set(inspect.signature(cls.__init__).parameters)
+    except (ImportError, ValueError, TypeError, can.CanError):
+        return []
+    return [key for key in keys if key not in named and key not in COMMON_BUS_ARGS]
 
 
 def _release_half_made(exc: BaseException) -> None:

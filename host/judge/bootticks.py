@@ -34,6 +34,12 @@ new firmware breaks at least one: its first frames come within a tick of the old
 and the old COUNTERs would have to be one period short of 0 for both (not within the first
 second: 32 and 96 ticks in, the pose alone continues; 80, the status alone). So within UPTIME 0
 the signature is a new firmware.
+A COUNTER 0 after a COUNTER 0 (E2E REPEATED) breaks no sequence (``REPEAT_NO_BREAK``): a
+firmware whose E2E COUNTER does not advance sends COUNTER 0 in every frame, and was told
+rebooting at every summary of its first second (9 reboots at 0.10 .. 0.90 s, its pose then
+judged against 9 power-up references: 51.9 mm off, 0.000 m travelled, where the fault is the
+E2E counter: ``host.judge.verdictfacts``). A real reset heard as a repeat of both (the old
+life's last pose and status frames of COUNTER 0: its own first tick) is not told this way.
 Lost frames cannot make it up: they shorten no time and the COUNTERs are read, not counted (a
 COUNTER that jumps to 0 is also what 16 k - j lost frames look like, so a jump alone is no
 evidence, and one ID alone is not either: ODOM_STATUS wraps at 0.8 s). A recorder's repeat of
@@ -122,7 +128,8 @@ def breaks_sequence(counter_before: int, since_s: float) -> bool:
     frames (at least: frames lost between are more) one ``POSE_PERIOD_S`` apart to get there
     (ticks run, never faster: a stall or an INIT without poses only takes longer)."""
     lap = POSE_COUNTER_LAP
-    return bool(since_s < (lap - counter_before) * POSE_PERIOD_S - SEQUENCE_SLACK_S)
+    return bool(counter_before != 0  # a repeat is no break (``REPEAT_NO_BREAK``)
+                and since_s < (lap - counter_before) * POSE_PERIOD_S - SEQUENCE_SLACK_S)
 
 
 def status_breaks(counter_before: int, since_s: float) -> bool:
@@ -133,7 +140,8 @@ def status_breaks(counter_before: int, since_s: float) -> bool:
     sooner (lost frames, stalls: later)."""
     per = STATUS_FRAMES_PER_CYCLE
     cycles = STATUS_COUNTER_LAP // per - counter_before // per
-    return bool(since_s < cycles * STATUS_CYCLE_MS / 1000 - SEQUENCE_SLACK_S)
+    return bool(counter_before != 0  # a repeat is no break (``REPEAT_NO_BREAK``)
+                and since_s < cycles * STATUS_CYCLE_MS / 1000 - SEQUENCE_SLACK_S)
 
 
 def next_run(run: tuple[float, int, bool] | None, t_s: float, counter: int,
@@ -351,8 +359,10 @@ def boot_ticks(uptime_s: npt.NDArray[np.int64], counters: npt.NDArray[np.int64],
     status_t, status_counter = statuses
     per = STATUS_FRAMES_PER_CYCLE
     cycles = STATUS_COUNTER_LAP // per - status_counter // per
-    status_new = ((status_counter < 0)
-                  | (t_s - status_t < cycles * STATUS_CYCLE_MS / 1000 - SEQUENCE_SLACK_S))
+    status_new: npt.NDArray[np.bool_] = (
+        (status_counter < 0)
+        | ((status_counter != 0)  # a repeat is no break (``REPEAT_NO_BREAK``)
+           & (t_s - status_t < cycles * STATUS_CYCLE_MS / 1000 - SEQUENCE_SLACK_S)))
     since = t_s - pose_t  # NaN where no pose: every comparison False
     found: npt.NDArray[np.bool_] = (RULE_HOLDS & (uptime_s == 0) & (counters == 0)
                                     & (pose_counter >= 0) & (pose_counter < BOOT_POSE_FRAMES)
@@ -426,8 +436,9 @@ def _run_starts(t_pose: npt.NDArray[np.float64], counter: npt.NDArray[np.int64],
     anchor = (counter == 0) | ~stepped_on  # where a run starts or breaks
     anchor[0] = True
     new = np.ones(n, dtype=bool)  # a COUNTER 0 that breaks the sequence of the pose before
-    new[1:] = (t_pose[1:] - t_pose[:-1]
-               < (POSE_COUNTER_LAP - counter[:-1]) * POSE_PERIOD_S - SEQUENCE_SLACK_S)
+    new[1:] = ((counter[:-1] != 0)  # a repeat is no break (``REPEAT_NO_BREAK``)
+               & (t_pose[1:] - t_pose[:-1]
+                  < (POSE_COUNTER_LAP - counter[:-1]) * POSE_PERIOD_S - SEQUENCE_SLACK_S))
     value = np.where(counter == 0, t_pose, math.nan)
     broke = (counter == 0) & new
     if carried is not None:

@@ -190,6 +190,8 @@ class BusMonitor:
             return
         data, self._now_s = bytes(msg.data), now_s
         timestamp_s = self._bus_time_s = msg.timestamp
+        if self.tracker.wrongs.origin_s is None:  # the verdict's times count from here
+            self.tracker.wrongs.origin_s = timestamp_s
         message = self._by_key.get(frame_key(msg.arbitration_id, msg.is_extended_id))
         summary = self._summary(message, data) if message is not None else None
         if summary is not None:  # before its E2E check, which a reboot or a second source fails

@@ -73,10 +73,33 @@ class Episode:
         return max(1e-3 * self.beyond_mm / POSITION_LSB_M,
                    1e-3 * self.dheading_mrad / HEADING_LSB_RAD)
 
-    def text(self) -> str:
-        """``2.0494 mm (beyond allowance 2.0494 mm), 0.0479 mrad at 6.01 s (enc 598)``."""
-        return (f"{self.dpos_mm:.4f} mm (beyond allowance {self.beyond_mm:.4f} mm), "
-                f"{self.dheading_mrad:.4f} mrad at {self.t_s:.2f} s (enc {self.enc_seq})")
+    def position_text(self) -> str:
+        """``2.0494 mm off`` (``, 1.9 mm beyond its allowance`` when it had one)."""
+        if self.dpos_mm - self.beyond_mm < 5e-5:  # no allowance: the figure once
+            return f"{self.dpos_mm:.4f} mm off"
+        return f"{self.dpos_mm:.4f} mm off ({self.beyond_mm:.4f} mm beyond its allowance)"
+
+    def text(self, origin_s: float = 0.0) -> str:
+        """What failed first (``worst_text``): ``position 2.0494 mm off at 6.01 s`` and/or
+        ``heading 40.8814 mrad off at 6.01 s``, times from ``origin_s`` (bus time)."""
+        return worst_text(self, self, origin_s)
+
+
+def worst_text(position: Episode | None, heading: Episode | None, origin_s: float) -> str:
+    """The worst position and the worst heading, each of its own episode, what failed only
+    (both within their limits: the position's figure): ``position 7.5560 mm off at 12.34 s,
+    heading 40.8814 mrad off at 3.02 s`` (seconds since ``origin_s``: the watch's first frame).
+    Before, the worst episode by LSB gave its heading with its own position (0.41 mm where
+    another episode was 7.56 mm off), bus times as epoch seconds and a 4-bit ``(enc 10)``."""
+    said = []
+    if position is not None and position.beyond_mm > POSITION_LSB_M * 1e3:
+        said.append(f"position {position.position_text()} at {position.t_s - origin_s:.2f} s")
+    if heading is not None and heading.dheading_mrad > HEADING_LSB_RAD * 1e3:
+        said.append(f"heading {heading.dheading_mrad:.4f} mrad off at "
+                    f"{heading.t_s - origin_s:.2f} s")
+    if not said and position is not None:
+        said.append(f"position {position.position_text()} at {position.t_s - origin_s:.2f} s")
+    return ", ".join(said)
 
 
 class PoseWrongs:
@@ -89,6 +112,9 @@ class PoseWrongs:
         self.count = 0  # episodes latched
         self.wrong_samples = 0
         self.worst: Episode | None = None
+        self.worst_position: Episode | None = None  # the largest beyond its allowance
+        self.worst_heading: Episode | None = None  # the largest heading error
+        self.origin_s: float | None = None  # the watch's first frame (bus time): texts' zero
         self._open: Episode | None = None
         self.judged_until_s = math.inf  # two firmwares from then: no later sample is judged
         self.life_from_s = -math.inf  # bus time the pose's current life began (``new_life``)
@@ -130,6 +156,10 @@ class PoseWrongs:
         self.latest = deque(kept, maxlen=MAX_EPISODES)
         if self.worst is not None and self.worst.t_s >= t_s:
             self.worst = max(kept, key=lambda e: e.size_lsb, default=None)
+        if self.worst_position is not None and self.worst_position.t_s >= t_s:
+            self.worst_position = max(kept, key=lambda e: e.beyond_mm, default=None)
+        if self.worst_heading is not None and self.worst_heading.t_s >= t_s:
+            self.worst_heading = max(kept, key=lambda e: e.dheading_mrad, default=None)
         self.life_count = max(0, self.life_count - sum(e.t_s >= self.life_from_s for e in gone))
         if self._life_last is not None and self._life_last.t_s >= t_s:
             self._life_last = None
@@ -142,6 +172,8 @@ class PoseWrongs:
         """A sample of encoder frame ``seq`` (its ODOM_POSE_Y at bus time ``t_s``) was compared:
         ``dpos_m`` from the reference, ``dheading_rad``; judged once settled (``judged``)."""
         self._pending[seq] = (t_s, dpos_m, dheading_rad)
+        if self.origin_s is None:  # no frame said before (a bridge): the first sample's
+            self.origin_s = t_s
         if dpos_m > POSITION_LSB_M or abs(dheading_rad) > HEADING_LSB_RAD:
             self._suspects.add(seq)  # wrong unless a later page gives it an allowance
 
@@ -185,9 +217,17 @@ class PoseWrongs:
             self.latest.append(episode)
         episode.add(t_s, dpos_m, beyond_m, dheading_rad)
         self.wrong_samples += 1
+        self._worsts(episode)
+        self._count_in_life(episode, t_s)
+
+    def _worsts(self, episode: Episode) -> None:
+        """``episode`` grew: the worst by LSB, by position and by heading follow it."""
         if self.worst is None or episode.size_lsb > self.worst.size_lsb:
             self.worst = episode
-        self._count_in_life(episode, t_s)
+        if self.worst_position is None or episode.beyond_mm > self.worst_position.beyond_mm:
+            self.worst_position = episode
+        if self.worst_heading is None or episode.dheading_mrad > self.worst_heading.dheading_mrad:
+            self.worst_heading = episode
 
     def _count_in_life(self, episode: Episode, t_s: float) -> None:
         """A wrong sample at bus time ``t_s`` of ``episode``: counted in the pose's current life
@@ -210,8 +250,7 @@ class PoseWrongs:
         episode.add(t_s, dpos_m, dpos_m, dheading_rad)
         self.count, self.wrong_samples = self.count + 1, self.wrong_samples + 1
         self.latest.append(episode)
-        if self.worst is None or episode.size_lsb > self.worst.size_lsb:
-            self.worst = episode
+        self._worsts(episode)
         self._count_in_life(episode, t_s)  # the jump stands until the pose is set anew
 
     def close(self) -> None:
@@ -248,9 +287,9 @@ class PoseWrongs:
             return ""
         plural = "" if self.life_count == 1 else "s"
         since = ("since the watch began" if self.life_from_s == -math.inf
-                 else f"since its pose was set anew at {self.life_from_s:.2f} s")
+                 else f"since its pose was set anew at {self.life_from_s - self._origin():.2f} s")
         return (f"the on-board pose was wrong in {self.life_count} episode{plural} {since}, "
-                f"worst {self.life_worst.text()}")
+                f"worst {self.life_worst.text(self._origin())}")
 
     def summary(self) -> str:
         """One line: ``the on-board pose was wrong in 1 episode (12 samples), worst ...``; ""
@@ -259,4 +298,9 @@ class PoseWrongs:
             return ""
         plural = "" if self.count == 1 else "s"
         return (f"the on-board pose was wrong in {self.count} episode{plural} "
-                f"({self.wrong_samples} samples), worst {self.worst.text()}")
+                f"({self.wrong_samples} samples), worst "
+                + worst_text(self.worst_position, self.worst_heading, self._origin()))
+
+    def _origin(self) -> float:
+        """The texts' zero: the watch's first frame (``origin_s``), else bus time 0."""
+        return 0.0 if self.origin_s is None else self.origin_s

@@ -134,7 +134,9 @@ class PoseTracker:
         dark = self.placer.dark  # ``DarkRestarts.heard`` in line (per frame of every robot):
         last_s = dark.last_s  # a gap beyond ``dark_s`` is a later frame (the first's: none)
         if t_s > last_s:
-            if t_s - last_s > dark.dark_s and last_s != NO_FRAME_S:
+            if last_s == NO_FRAME_S:  # the first frame: the verdict's times count from it
+                self.wrongs.origin_s = min(t_s, self.wrongs.origin_s or t_s)
+            elif t_s - last_s > dark.dark_s:
                 dark.dark = True  # the input went dark
             dark.last_s = t_s
         self.now_s = t_s

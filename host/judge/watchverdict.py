@@ -16,6 +16,7 @@ from collections.abc import Iterable
 from typing import TYPE_CHECKING
 
 from odocan.host.judge.sources import FIRMWARE_NODE
+from odocan.host.judge.verdictfacts import TWIST, not_advancing, stuck_text
 
 if TYPE_CHECKING:
     from cantools.database.can import Database, Message
@@ -53,6 +54,27 @@ def nothing_judged(db: Database, heard: Iterable[str], poses_compared: int) -> s
     if not poses_compared:
         return "no on-board pose compared with the reference: nothing judged"
     return ""
+
+
+def twist_unheard(db: Database, heard: Iterable[str], poses_compared: int,
+                  seconds: float | None = None) -> str:
+    """Why the twist and DISTANCE checks judged nothing though the pose was judged: the DBC's
+    cyclic ODOM_TWIST never heard (``verdictfacts.unheard``, ``analyze``'s words; ``seconds``:
+    the watch's, None: not said); "" else. The end verdict is then UNJUDGED, never a PASS."""
+    names = {m.name for m in db.messages}
+    if not poses_compared or TWIST not in names or TWIST in set(heard):
+        return ""
+    if not _firmware_cyclic(db.get_message_by_name(TWIST)):
+        return ""
+    during = "in the watch" if seconds is None else f"in {seconds:.1f} s"
+    return f"no {TWIST} frame {during}: twist and DISTANCE not judged"
+
+
+def stuck_counters(counts: dict[str, dict[str, int]]) -> str:
+    """Most frames of a message E2E REPEATED (``verdictfacts.not_advancing``): a FAIL reason
+    (the sender's E2E COUNTER does not advance), "" when none."""
+    stuck = not_advancing(counts)
+    return stuck_text(stuck) if stuck else ""
 
 
 def _firmware_cyclic(message: Message) -> bool:

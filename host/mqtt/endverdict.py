@@ -14,6 +14,10 @@ pose (issue #11: the rig never shows OK while the pose it reports is wrong). Now
     proven: ... (``livereprime.unbounded_why``: a PASS would rest on a pose nothing bounds)
     UNJUDGED: the firmware stalled before its first pose after its power-up (INIT at UPTIME 0)
     while the robot moved: ... (``livefirst.unproven_why``: the same)
+    UNJUDGED: no ODOM_TWIST frame in the watch: twist and DISTANCE not judged (--require-firmware
+    fails it) (``watchverdict.twist_unheard``: a check on 0 samples is no pass)
+    FAIL: 991 of 1000 ODOM_POSE_X ... frames E2E REPEATED: the sender's E2E COUNTER does not
+    advance ... (``watchverdict.stuck_counters``: the host refuses those frames)
 
 Without ``--robot``, a firmware whose PROFILE page is not the default robot's is not judged
 (``host.judge.liverobot``: judging it as pmir FAILed a correct firmware for an option not
@@ -39,18 +43,13 @@ ends, before the links say ``offline``: the line and the status are the same ver
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
-from typing import TYPE_CHECKING, Any, Literal, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
-from odocan.host.judge.livefirst import unproven_why
-from odocan.host.judge.livekept import coarse_why
-from odocan.host.judge.livereprime import unbounded_why
-from odocan.host.judge.watchverdict import REQUIRE_FIRMWARE, failures, nothing_judged
+from odocan.host.judge.watchline import VerdictName as VerdictName
+from odocan.host.judge.watchline import Watched, watch_verdict
 
 if TYPE_CHECKING:
     from odocan.host.mqtt.telemetry import RobotTelemetry
-
-
-VerdictName = Literal["PASS", "FAIL", "UNJUDGED"]
 
 
 @dataclass(frozen=True)
@@ -110,28 +109,12 @@ def end_verdict(telemetry: RobotTelemetry, *, profile_name: str | None = None,
     """``telemetry``'s verdict (module docstring), its watch ended (``end_watch``);
     ``profile_name``: the robot profile it was judged as (``--robot``), said beside a wrong pose."""
     judged_as = "" if profile_name is None else telemetry.robot.judged_as()  # (liverobot)
-    fails = failures(telemetry.tracker, telemetry.distance, telemetry.twist, telemetry.sources,
-                     judged_as)
-    compared = telemetry.tracker.vs_reference.samples
-    why = telemetry.robot.unjudged or nothing_judged(telemetry.db, telemetry.frames, compared)
-    if why and require_firmware:
-        fails.append(f"{why} {REQUIRE_FIRMWARE}")
-    if fails:
-        return EndVerdict("FAIL", "; ".join(fails) + _mismatch(telemetry),
-                          worst_episode(telemetry))
-    if why:
-        return EndVerdict("UNJUDGED", f"{why} (--require-firmware fails it)"
-                          + _mismatch(telemetry))
-    # never a PASS on an unbounded start (livereprime) nor an unproven one (livefirst)
-    unbounded = (unbounded_why(telemetry.tracker) or unproven_why(telemetry.tracker)
-                 or coarse_why(telemetry.kept))  # (livekept: a re-prime's coarse APPLY check)
-    if unbounded:
-        return EndVerdict("UNJUDGED", unbounded + _mismatch(telemetry))
-    distance, twist = telemetry.distance.samples, telemetry.twist.samples
-    twists = (f", ODOM_TWIST DISTANCE in {distance} and its speeds in {twist}"
-              if distance or twist else ", no ODOM_TWIST judged")
-    return EndVerdict("PASS", f"the on-board pose right in {compared} samples{twists}"
-                      + _mismatch(telemetry))
+    name, reasons = watch_verdict(Watched(
+        telemetry.tracker, telemetry.distance, telemetry.twist, telemetry.sources,
+        telemetry.kept, telemetry.db, telemetry.frames, telemetry.e2e.counts(),
+        telemetry.robot.unjudged), judged_as=judged_as, require_firmware=require_firmware)
+    return EndVerdict(name, "; ".join(reasons) + _mismatch(telemetry),
+                      worst_episode(telemetry) if name == "FAIL" else None)
 
 
 def worst_episode(telemetry: RobotTelemetry) -> dict[str, Any] | None:

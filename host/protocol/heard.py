@@ -55,6 +55,7 @@ class Recorder(can.Listener):
             self._raw: dict[int, list[tuple[float, bytes]]] = {}
             self._checked: dict[int, int] = {}  # raw frames of each ID checked so far
             self._decoded: dict[int, list[dict[str, Any]]] = {}  # the accepted ones
+            self._refused: dict[int, dict[str, int]] = {}  # the others: E2E status -> count
             self._monitor = E2EMonitor(self.db)
 
     def on_message_received(self, msg: can.Message) -> None:
@@ -100,6 +101,14 @@ class Recorder(can.Listener):
             self._checked[frame_id] = len(raw)
             return done[start:]
 
+    def refused(self, name: str) -> dict[str, int]:
+        """The frames of message ``name`` checked so far (``decoded``) that failed their E2E
+        check, by status (``REPEATED``, ...): a command's missing ACK may be one refused
+        (a firmware whose E2E COUNTER does not advance), said, not "no ODOM_ACK"."""
+        frame_id = self.db.get_message_by_name(name).frame_id
+        with self._lock:
+            return dict(self._refused.get(frame_id, {}))
+
     def latest_pose(self) -> Pose | None:
         """The latest on-board pose heard (``host.protocol.pose``: ODOM_POSE_X and ODOM_POSE_Y
         naming one encoder frame, X first within a tick); None before the first pair."""
@@ -111,6 +120,8 @@ class Recorder(can.Listener):
         """One frame's signals (choices by name) and ``timestamp_s``; {} when it is rejected."""
         status = self._monitor.check(message.frame_id, data, timestamp_s=timestamp)
         if status not in _ACCEPTED:
+            refused = self._refused.setdefault(message.frame_id, {})
+            refused[status] = refused.get(status, 0) + 1
             return {}
         try:
             signals = message.decode(data, decode_choices=True)

@@ -31,7 +31,7 @@ from typing import Any, Final
 
 from odocan.host.protocol import busfacts
 from odocan.host.protocol.commands import Command, CommandEncoder
-from odocan.host.protocol.e2e import e2e_messages
+from odocan.host.protocol.e2e import REPEATED, e2e_messages
 from odocan.host.protocol.heard import Recorder
 from odocan.host.protocol.othersenders import contested_reason, foreign_frame
 from odocan.host.protocol.secoc import SecocSigner
@@ -113,6 +113,7 @@ class CommandSession:
         cmd = self.encoder.build(name, values)
         signer = self._synchronised_signer()
         seen = len(self.heard.decoded("ODOM_ACK"))
+        refused = sum(self.heard.refused("ODOM_ACK").values())
         first = len(self.heard)  # frames heard before this command's
         for frame in cmd.frames:
             self._own.append(frame.data)
@@ -126,9 +127,20 @@ class CommandSession:
             signer.next_fv = None  # resynchronise from the next ODOM_FRESHNESS
         self._uncontested(cmd, first)  # another sender: any answer may be the other's
         if nacks or final is None:
-            why = f"NACK {nacks[0]['REASON']}" if nacks else "no ODOM_ACK"
+            why = f"NACK {nacks[0]['REASON']}" if nacks else self._unanswered(refused)
             raise CommandNotAcked(name, values, why)
         return final
+
+    def _unanswered(self, refused_before: int) -> str:
+        """Why no ACK answered: none heard, or those heard since (``refused_before`` were
+        refused before the command) all failed their E2E check, by status (REPEATED: the
+        firmware's E2E COUNTER does not advance; an outside trial's firmware read as silent)."""
+        refused = self.heard.refused("ODOM_ACK")
+        if sum(refused.values()) <= refused_before:
+            return "no ODOM_ACK"
+        counts = ", ".join(f"{n} {status}" for status, n in sorted(refused.items()))
+        stuck = (": the firmware's E2E COUNTER does not advance" if REPEATED in refused else "")
+        return f"no ODOM_ACK that passed its E2E check ({counts} refused{stuck})"
 
     def _uncontested(self, cmd: Command, first: int) -> None:
         """``CommandNotAcked`` (contested) when another sender's frame of ``cmd``'s message

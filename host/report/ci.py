@@ -22,6 +22,7 @@ import math
 from pathlib import Path
 from typing import Any
 
+from odocan.host.judge import verdictfacts
 from odocan.host.outputs import check_writable, write_text
 from odocan.host.report.junit import Check, junit_xml
 from odocan.host.stopped import stopped_text
@@ -80,6 +81,10 @@ def analysis_checks(report: dict[str, Any]) -> list[Check]:
     if isinstance(versus, dict) and "passed" in versus:
         checks.append(Check("replay_vs_logged_firmware", bool(versus["passed"]),
                             "the replayed firmware departs from the logged one", dict(versus)))
+    stuck, unjudged = verdictfacts.reasons_of(report)
+    for name, reasons in (("e2e_counters_advance", stuck), ("judged", unjudged)):
+        if reasons:  # a stuck E2E COUNTER; a check on 0 samples (host.judge.verdictfacts)
+            checks.append(Check(name, False, "; ".join(reasons), {"reasons": reasons}))
     stopped = report.get("stopped")
     if stopped:  # a signal ended it before what it was asked: that is no pass
         checks.append(Check("completed", False, stopped_text(stopped), dict(stopped)))

@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from odocan.host.jsonutil import write_report
+from odocan.host.judge import verdictfacts
 from odocan.host.judge.analysis import Analysis, Tolerance
 from odocan.host.judge.finalstate import final_text
 from odocan.host.judge.samples import POSITION_LSB_M
@@ -106,6 +107,7 @@ def finish(analysis: Analysis, args: argparse.Namespace, *, title: str) -> int:
     from rich.console import Console
 
     console = Console(file=sys.stdout, highlight=False)
+    verdictfacts.mark(analysis.report)  # a check on 0 samples, a stuck E2E COUNTER: no PASS
     analysis.passed = mark_stopped(analysis.report)
     print_summary(analysis.report, args.tolerance, console, title=title)
     sys.stdout.flush()
@@ -152,13 +154,15 @@ def print_summary(
         console.print()
         console.print(Padding(table, (0, 0, 0, 2), expand=False))
     console.print()
-    passed = partial_verdict(report)  # a signal's stop: what ran, said as partial
+    stuck, unjudged = verdictfacts.reasons_of(report)
+    passed = _judged_verdict(report)  # a signal's stop: what ran, said as partial
     verdict, style = ("PASS", "green") if passed else ("FAIL", "bold red")
+    if passed and unjudged:  # what was judged passed, a check judged nothing: no PASS
+        verdict, style = "UNJUDGED", "bold yellow"
     if report.get("stopped"):  # a signal ended it early: never a plain PASS
         verdict = f"{stopped_text(report['stopped'])}: partial drive {verdict}"
         style = "bold yellow" if passed else style
     twist = report.get("onboard_twist_vs_reference") or {"passed": True}
-    distance = report.get("onboard_distance_vs_reference") or {"passed": True}
     pose_met = _pose_within(report, tolerance)
     for kept in kept_failures(report):  # a set-pose that moved what it kept: a FAIL of its own
         console.print(f"[{style}]{verdict}[/{style}]: {kept}", soft_wrap=True)
@@ -167,6 +171,17 @@ def print_summary(
     if conflict:  # a FAIL of its own; the pose before it is judged as usual
         console.print(f"[{style}]{verdict}[/{style}]: {conflict['detail']}", soft_wrap=True)
         verdict, style = "before it", "bold" if pose_met and twist["passed"] else style
+    line = "; ".join([*stuck, *unjudged, _criteria_line(report, tolerance, pose_met, bool(stuck)),
+                      *kept_unjudged(report)])
+    console.print(f"[{style}]{verdict}[/{style}]: {line}", soft_wrap=True)
+
+
+def _criteria_line(report: dict[str, Any], tolerance: Tolerance, pose_met: bool,
+                   stuck: bool) -> str:
+    """The pose and ODOM_TWIST criteria in words, what failed first; ``stuck``: most frames
+    were E2E REPEATED, the poses accepted prove nothing of the ones refused."""
+    twist = report.get("onboard_twist_vs_reference") or {"passed": True}
+    distance = report.get("onboard_distance_vs_reference") or {"passed": True}
     pose = (
         f"on-board vs reference within "
         f"{tolerance.position_m * 1e3:.4g} mm and {tolerance.heading_rad * 1e3:.4g} mrad"
@@ -180,8 +195,21 @@ def print_summary(
         line = "; ".join(failed) + f" (the pose criterion is met: {pose})"
     else:
         line = "; ".join([pose + ("" if pose_met else ": not met"), *failed])
-    line = "; ".join([line, *kept_unjudged(report)])
-    console.print(f"[{style}]{verdict}[/{style}]: {line}", soft_wrap=True)
+    if stuck and pose_met:
+        accepted = (report.get("samples") or {}).get("onboard")
+        line = f"the pose criterion is met on the {accepted} poses accepted: {line}"
+    return line
+
+
+def _judged_verdict(report: dict[str, Any]) -> bool:
+    """The verdict of what was judged (``partial_verdict``), a stuck E2E COUNTER failing it and
+    a check on 0 samples not (``verdictfacts``: said as UNJUDGED)."""
+    unjudged = report.get("unjudged")
+    if not unjudged:
+        return partial_verdict(report)
+    stopped = report.get("stopped") or {}
+    return bool(stopped.get("partial_passed", unjudged["judged_passed"])
+                and unjudged["judged_passed"] and not report.get("e2e_not_advancing"))
 
 
 def kept_unjudged(report: dict[str, Any]) -> list[str]:

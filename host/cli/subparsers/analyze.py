@@ -345,8 +345,10 @@ def _analyze_many(args: argparse.Namespace) -> int:
     if args.report_dir is not None:
         write_reports(results, args.report_dir)
     _say_choices(results)
+    from odocan.host.cli.batchout import batch_exit, print_batch_summary
+
     print_batch_summary(results)
-    return _batch_exit(results, problems)
+    return batch_exit(results, problems)
 
 
 def _say_choices(results: list[LogResult]) -> None:
@@ -392,62 +394,6 @@ def write_reports(results: list[LogResult], directory: Path) -> None:
             write_report(path, result.report)
         except OSError as exc:
             raise OutputError(f"--report-dir {path}: {exc.strerror or exc}") from None
-
-
-def print_batch_summary(results: list[LogResult]) -> None:
-    """One row per log: frames, verdict, largest on-board errors against the reference and
-    the truth (mm, mrad); an unreadable log's row says why."""
-    from rich import box
-    from rich.console import Console
-    from rich.table import Table
-
-    table = Table(box=box.SIMPLE_HEAD, pad_edge=False)
-    for column in ("log", "frames", "verdict", "ref mm", "ref mrad", "truth mm", "truth mrad"):
-        table.add_column(column, justify="left" if column in ("log", "verdict") else "right")
-    for result in results:
-        if result.report is None:
-            table.add_row(result.path, "-", "ERROR", "-", "-", "-", "-")
-            continue
-        ref = result.report["onboard_vs_reference"]
-        truth = result.report.get("onboard_vs_truth") or {}
-        table.add_row(
-            result.path, str(result.frames), "PASS" if result.passed else "FAIL",
-            _scaled(ref.get("max_position_error_m")), _scaled(ref.get("max_heading_error_rad")),
-            _scaled(truth.get("max_position_error_m")), _scaled(truth.get("max_heading_error_rad")),
-        )
-    longest = max(len(r.path) for r in results)  # a row per log, never wrapped or cut
-    console = Console(file=sys.stdout, highlight=False, width=max(80, longest + 72))
-    console.print(f"[bold]odocan analyze: {len(results)} logs[/bold]")
-    console.print(table)
-    for result in results:  # why a log may fail without its firmware's fault
-        for hint in (result.report or {}).get("diagnosis", []):
-            console.print(f"  - {result.path}: {hint}", soft_wrap=True)
-    passed = sum(r.passed for r in results)
-    failed = sum(r.report is not None and not r.passed for r in results)
-    errors = sum(r.report is None for r in results)
-    console.print(f"{passed} PASS, {failed} FAIL, {errors} unreadable")
-
-
-def _scaled(value: float | None) -> str:
-    """metres or radians as mm or mrad (4 significant digits), ``-`` when unknown."""
-    return "-" if value is None else f"{value * 1e3:.4g}"
-
-
-def _batch_exit(results: list[LogResult], problems: list[str]) -> int:
-    """2 when a path gave nothing or a log could not be analysed, else 1 when a log failed,
-    else 0; the logs at fault are named on stderr, one line each kind."""
-    failed = [r.path for r in results if r.report is not None and not r.passed]
-    bad = problems + [
-        r.error if r.error and r.path in r.error else f"{r.path}: {r.error}"
-        for r in results if r.report is None
-    ]
-    if failed:
-        print(f"FAIL: {len(failed)} of {len(results)} logs out of tolerance: {', '.join(failed)}",
-              file=sys.stderr)
-    if bad:
-        print(f"error: {len(bad)} unreadable: {'; '.join(bad)}", file=sys.stderr)
-        return 2
-    return 1 if failed else 0
 
 
 def log_inputs(

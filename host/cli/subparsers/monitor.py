@@ -53,7 +53,8 @@ from odocan.host.io.export import FOXGLOVE_PORT
 from odocan.host.judge.monitor import BusMonitor, to_json
 from odocan.host.judge.robotsource import DEFAULT_ROBOT
 from odocan.host.judge.watchend import end_watch
-from odocan.host.judge.watchverdict import REQUIRE_FIRMWARE, failures, nothing_judged
+from odocan.host.judge.watchline import Watched, watch_verdict
+from odocan.host.judge.watchverdict import nothing_judged
 from odocan.host.mqtt.broker import (
     BrokerError,
     BrokerURL,
@@ -190,23 +191,27 @@ def _do_monitor(args: argparse.Namespace) -> int:
         raise failure
     if said := model.robot.said("odocan monitor"):  # the PROFILE page chose the robot
         print(said, file=sys.stderr)
-    failed = _say_failures(args, model, model.robot.profile)
+    failed = _say_verdict(args, model, model.robot.profile, time.monotonic() - started_s)
     return 1 if failed and code == 0 else code
 
 
-def _say_failures(args: argparse.Namespace, model: BusMonitor, profile: robot.RobotProfile) -> bool:
-    """Print the watch's FAIL lines (and the PROFILE page's mismatch) on stderr; whether any."""
+def _say_verdict(args: argparse.Namespace, model: BusMonitor, profile: robot.RobotProfile,
+                 watched_s: float) -> bool:
+    """Print the watch's verdict on stderr (``host.judge.watchline``, the bridge's: a FAIL line
+    per reason, else one PASS or UNJUDGED line; nothing for a watch that heard no firmware
+    without ``--require-firmware``: its JSON says NO FIRMWARE) and the PROFILE page's
+    mismatch; whether it FAILed."""
     judged_as = (f"{model.robot.judged_as()}{_robot_hint(args, profile, model.robot.given_as)}"
                  if model.tracker.wrongs.count else "")  # (the hint reads the whole --log)
-    fails = failures(model.tracker, model.distance, model.twist, model.sources, judged_as)
-    unjudged = model.robot.unjudged  # the page contradicts the default (host.judge.liverobot)
-    if args.require_firmware and (why := unjudged or nothing_judged(  # judged nothing: no
-            model.db, model.messages, model.tracker.vs_reference.samples)):  # pass (CI)
-        fails.append(f"{why} {REQUIRE_FIRMWARE}")
-    for line in fails:
-        print(f"monitor: FAIL: {line}", file=sys.stderr)
-    if unjudged and not fails:  # as the bridge's end line says it
-        print(f"monitor: UNJUDGED: {unjudged} (--require-firmware fails it)", file=sys.stderr)
+    name, reasons = watch_verdict(Watched(
+        model.tracker, model.distance, model.twist, model.sources, model.kept, model.db,
+        model.messages, model.e2e.counts(), model.robot.unjudged, watched_s),
+        judged_as=judged_as, require_firmware=args.require_firmware)
+    silent = name == "UNJUDGED" and not model.robot.unjudged and nothing_judged(
+        model.db, model.messages, model.tracker.vs_reference.samples)  # no firmware: as before
+    for line in [] if silent else reasons:
+        print(f"monitor: {name}: {line}", file=sys.stderr)
+    fails = name == "FAIL"
     if args.interface == "odocan" and not model.frames_total:
         print("monitor: heard no frame: the odocan interface carries frames within one process "
               "only; watch a bus other processes share (udp_multicast, socketcan)",
