@@ -5,8 +5,8 @@ a 52.7 MB hour of kobuki with a config applied whole at 307-326 MB, past the 300
 Now the whole judge's bound (``stream_choice.WHOLE_RSS_MB``) lies over every hour-long drive
 measured (GNU time's max RSS, ``bench/stream_stall.py``; the figures below, docs/benchmarks.md)
 and a log streams when the bound passes the whole judge's budget (300 MB: the target, the bound
-being the worst drive measured). The sizes are those of the rig's hour-long logs (sparse files here: the
-choice reads the size alone).
+being the worst drive measured). The sizes are those of the rig's hour-long logs (sparse files
+here: the choice reads the size alone).
 """
 
 from __future__ import annotations

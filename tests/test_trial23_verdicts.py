@@ -101,21 +101,8 @@ def test_the_same_drive_with_its_twists_passes(
     assert report["passed"] is True
 
 
-def test_a_dbc_without_distance_leaves_distance_unjudged(
-        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    """``--dbc`` without ODOM_TWIST's DISTANCE: DISTANCE judged on 0 samples (before: PASS)."""
-    lines = contract.DBC_PATH.read_text().splitlines(keepends=True)
-    twist = next(k for k, ln in enumerate(lines) if ln.startswith("BO_ 514 ODOM_TWIST"))
-    end = next(k for k in range(twist, len(lines)) if not lines[k].strip())
-    kept = [ln for k, ln in enumerate(lines)
-            if not (twist < k < end and ln.startswith(" SG_ DISTANCE "))]
-    assert len(kept) == len(lines) - 1  # ODOM_TWIST's DISTANCE only
-    dbc = tmp_path / "no_distance.dbc"
-    dbc.write_text("".join(kept))
-    code, line, _ = _analyze(capsys, _drive_log(tmp_path / "twist.log", twist=True),
-                             "--dbc", str(dbc))
-    assert code == 1, line
-    assert line.startswith("UNJUDGED: ODOM_TWIST DISTANCE judged on none of its "), line
+# A --dbc without ODOM_TWIST's DISTANCE (the trial's DISTANCE judged on 0 samples, PASS) is now
+# refused before any judging, one line, exit 2: tests/test_dbc_lacking_signal.py.
 
 
 @pytest.mark.parametrize("stream", ["never", "always"])
