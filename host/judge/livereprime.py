@@ -8,7 +8,11 @@ its pose, and its heading leaves the reference's. Its word comes in its next sum
 (``nearthreshold``'s rule: COUNTER_RESET set there, clear on the last summary before the stall;
 or, latched by an earlier re-prime, set on both after a stall long enough that the firmware
 surely re-primed, ``stallreprime.certain``: before, a second such stall was judged with the
-exact heading, POSE WRONG on pmir's square), after its first poses. So the samples after such a
+exact heading, POSE WRONG on pmir's square; latched before a stall between ``possible`` and
+``certain``, the log cannot tell: the re-prime is tried, ``_trial``, kept when the frames put
+the first poses held where the firmware is, else the samples judged as not declared, no
+``stall_reprime_refused``: before, pmir's square halted 6 s then 3.7 to 3.9 s was POSE WRONG
+for the correct firmware), after its first poses. So the samples after such a
 stall are held, unjudged (``ReprimeHold.holds``), until a summary made ``AFTER_PERIODS`` after
 the stall's first sample is heard, or ``WAIT_S`` passed. Declared: the reference restarts from
 the next on-board pose (``livedark.DarkRestarts.owe``, as at a step near the threshold:
@@ -92,6 +96,7 @@ class ReprimeHold:
         self._before = -1  # ... of the latest before the stall held for
         self._stall_s = 0.0  # the stall's silence (s)
         self._sure = False  # ... long enough that the firmware surely re-primed (``certain``)
+        self._trial = False  # ... its word latched, the re-prime tried on the frames (_unsure)
         self._from_s = math.inf  # bus time of the stall's first sample (s; inf: no hold)
         self._first = -1  # its encoder frame (seq)
         self._anchor: tuple[float, float] | None = None  # the firmware's position before (m)
@@ -124,6 +129,8 @@ class ReprimeHold:
         self._mask = int(signals["ERROR_MASK"])
         if t_s >= self._from_s + AFTER_PERIODS * CYCLE_S:
             word = self._said()
+            self._trial = not word and self._unsure()
+            word = word or self._trial
             if word and ((self._power_up and not self._tracker.lives.power_up_proven)
                          or self.count.awaited):
                 self._word = True  # its power-up's proof, its count: the page, ``counted``
@@ -153,6 +160,12 @@ class ReprimeHold:
             return False
         return not self._before & COUNTER_RESET_BIT or self._sure
 
+    def _unsure(self) -> bool:
+        """COUNTER_RESET set before and after a stall not long enough to be ``certain``: the
+        firmware may or may not have re-primed (``stallreprime``'s docstring): tried."""
+        return (self._before >= 0 and bool(self._before & COUNTER_RESET_BIT)
+                and bool(self._mask & COUNTER_RESET_BIT) and not self._sure)
+
     def stalled(self, seq: int, t_s: float, talked: tuple[float, int] | None,
                 least: int | None) -> None:
         """The sample of encoder frame ``seq`` (its ODOM_POSE_Y at ``t_s``) was left out after
@@ -165,6 +178,7 @@ class ReprimeHold:
         if possible(t_s - talked[0], CYCLE_S, least) and self._mask >= 0:
             self._from_s, self._before, self._stall_s = t_s, self._mask, t_s - talked[0]
             self._sure = certain(self._stall_s, CYCLE_S, least)
+            self._trial = False
             self._first, self._anchor_pose = seq, self._anchored()
             anchor, last = self._anchor_pose, self._tracker.last_pair
             self._anchor = None if anchor is None else (anchor.x_m, anchor.y_m)
@@ -241,7 +255,7 @@ class ReprimeHold:
         held, self._held, self._from_s, self._word = self._held, [], math.inf, False
         samples, self._samples = self._samples, {}
         tracker = self._tracker
-        said = detail(self._stall_s)
+        said = detail(self._stall_s, not self._trial)
         if declared and held:
             declared, said = self._bounded(held, said)
         elif declared:  # nothing held: its first pose adopted, no bound, at a power-up
@@ -276,6 +290,8 @@ class ReprimeHold:
             reach_m = self._reach_m(held[0][0])
             self.wide, self.wide_m = self.wide + 1, max(self.wide_m, reach_m)
             return self._within_reach(held[0][0], origin, reach_m), said + _wide(reach_m)
+        if not replay.within and self._trial:  # not re-primed, as its rule may say: judged
+            return False, said
         if not replay.within:  # the frames put it elsewhere: judged as before
             self.refused += 1
             tracker.restarts.events.append({

@@ -37,8 +37,14 @@ either side of the halt, and a recorder's stamp ``LATE_S`` more (``SURE_SLACK_S`
 twice the stall less that slack reaches the ambiguous step (``certain``) the correct firmware
 has re-primed and the reference re-primes with it, the pair chosen as for a declared one (issue
 #11: on pmir's square halted 6 s then 8 s, the second stall was judged with the exact heading
-and the correct firmware FAILed by 2733 mrad). Between ``possible`` and ``certain`` (about 0.5 s
-of stall on pmir) the latched word cannot tell, and the exact rule stays. A firmware that
+and the correct firmware FAILed by 2733 mrad). Between ``possible`` and ``certain`` (pmir's
+summaries 3.49 to 3.98 s apart) the latched word cannot tell: the firmware re-primed from a
+3.7 s halt on, not at 3.6 s (its bound's periods since its last sample, which the log does not
+show). Both hypotheses are tried on the samples after (``unsure``): the re-prime is taken when
+its best pair fits within ``FIT_LSB`` or better than the exact heading does, else the exact rule
+stays (before, the exact rule alone: pmir's square halted 6 s then 3.7 s or 3.8 s FAILed the
+correct firmware by 919 mm). A correct firmware fits the hypothesis it followed; a wrong pose
+fits neither and FAILs under the nearer (the robot at rest: both agree). A firmware that
 re-primes without ever saying so keeps the exact rule: its heading FAILs. What a wrong firmware
 can hide: a heading off by the turn of a few frames at the stall it declared (the pairs'
 choice); a position off by more than those frames' merge allowance, or any wrong step after,
@@ -49,7 +55,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -78,6 +84,15 @@ COMPARED = 10  # samples after the stall the pairs are compared on
 LATE_S = 0.05  # a recorder's stamps of ODOM_STATUS this late (half its period) still read
 SUMMARY_S = 0.1  # ODOM_STATUS summary period (the DBC's cycle time of the page)
 SURE_SLACK_S = 2 * SUMMARY_S + LATE_S  # a stall's summaries' gap beyond the halt, at most
+FIT_LSB = 4.0  # a re-primed pair's score (position plus heading LSBs) that fits the samples
+
+
+class Declared(NamedTuple):
+    """A stall the firmware re-primed after by its word (``sure``), or may have (its word
+    latched, the stall between ``possible`` and ``certain``: ``unsure``), and its length (s)."""
+
+    stall_s: float
+    sure: bool = True
 
 
 @dataclass(frozen=True)
@@ -88,10 +103,17 @@ class Reprime:
     f: int
     r: int
     stall_s: float
+    sure: bool = True  # declared (or surely re-primed); False: the samples chose it (unsure)
 
 
-def detail(stall_s: float) -> str:
-    """The report's words for a re-prime declared after a stall of ``stall_s`` seconds."""
+def detail(stall_s: float, sure: bool = True) -> str:
+    """The report's words for a re-prime declared after a stall of ``stall_s`` seconds (not
+    ``sure``: the word latched, the samples after fit it, not the exact heading)."""
+    if not sure:
+        return (f"re-primed after a {stall_s:.1f} s stall: motion left out; COUNTER_RESET "
+                "latched before (it cannot say it again) and the stall's bound may or may not "
+                "have reached half the counters' range: the samples after fit the re-prime, "
+                "not the exact heading, so the reference re-primes with it")
     return (f"re-primed after a {stall_s:.1f} s stall: motion left out, declared by the "
             "firmware (COUNTER_RESET; its step's bound reached half the counters' range): the "
             "reference re-primes with it (heading and position re-placed there)")
@@ -117,13 +139,19 @@ def latched(mask: IntArray, i: int) -> bool:
 
 
 def reprimed_across(resets: Resets, i: int, stall_s: float, cycle_s: float,
-                    least: int | None) -> bool:
+                    least: int | None) -> bool | None:
     """Whether the firmware re-primed across its summaries ``i``, ``i + 1`` (``stall_s``
     apart): said after a stall that could bring it (``possible``, ``said_reset``), or its
-    word latched before a stall that surely brought it (``certain``, ``latched``)."""
+    word latched before a stall that surely brought it (``certain``, ``latched``): True; None
+    (unsure) when latched before a stall that could bring it only (module docstring)."""
     mask = resets.mask
-    return ((possible(stall_s, cycle_s, least) and said_reset(mask, i, resets.sent_s))
-            or (certain(stall_s, cycle_s, least) and latched(mask, i)))
+    if not possible(stall_s, cycle_s, least):
+        return False
+    if said_reset(mask, i, resets.sent_s):
+        return True
+    if not latched(mask, i):
+        return False
+    return True if certain(stall_s, cycle_s, least) else None
 
 
 def any_declared(resets: Resets, cycle_s: float, least: int | None) -> bool:
@@ -131,16 +159,16 @@ def any_declared(resets: Resets, cycle_s: float, least: int | None) -> bool:
     across (``reprimed_across``): the streamed judge then takes one more pass over the life
     (``stream_reprime``)."""
     gaps = np.diff(resets.sent_s)
-    return any(reprimed_across(resets, k, float(g), cycle_s, least)
+    return any(reprimed_across(resets, k, float(g), cycle_s, least) is not False
                for k, g in enumerate(gaps.tolist()))
 
 
 def declared_stalls(breaks: IntArray | None, enc: Encoders, e0: int, resets: Resets,
-                    least: int | None) -> dict[int, float]:
+                    least: int | None) -> dict[int, Declared]:
     """The stalls' ``breaks`` (encoder frames the reference's position restarts at after a
     stall, ``stalls.after_stalls``) after which the firmware declared a re-prime (module
     docstring): each frame, from ``e0``, with the stall's length (s: between the firmware's
-    summaries around it)."""
+    summaries around it), and whether it was ``sure``."""
     if breaks is None or enc.cycle_s is None:
         return {}
     return declared_at({b: float(enc.timestamp_s[b]) for b in breaks.tolist()
@@ -148,10 +176,10 @@ def declared_stalls(breaks: IntArray | None, enc: Encoders, e0: int, resets: Res
 
 
 def declared_at(break_s: dict[int, float], cycle_s: float, e0: int, resets: Resets,
-                least: int | None) -> dict[int, float]:
+                least: int | None) -> dict[int, Declared]:
     """``declared_stalls`` of the breaks after ``e0`` given with their encoder frames' bus
     times (``break_s``; the streamed judge's, ``stream_reprime``, read in a pass)."""
-    out: dict[int, float] = {}
+    out: dict[int, Declared] = {}
     if len(resets.sent_s) == 0:
         return out
     for b, b_s in sorted(break_s.items()):
@@ -159,8 +187,9 @@ def declared_at(break_s: dict[int, float], cycle_s: float, e0: int, resets: Rese
         if i is None:
             continue
         stall_s = float(resets.sent_s[i + 1] - resets.sent_s[i])
-        if reprimed_across(resets, i, stall_s, cycle_s, least):
-            out[b - e0] = stall_s
+        word = reprimed_across(resets, i, stall_s, cycle_s, least)
+        if word is not False:
+            out[b - e0] = Declared(stall_s, word is True)
     return out
 
 
@@ -196,7 +225,7 @@ def said_reset(mask: IntArray, i: int, sent_s: FloatArray | None = None) -> bool
             and float(sent_s[i + 2] - sent_s[i + 1]) <= SUMMARY_S + 2 * LATE_S)
 
 
-def stall_reprimes(declared: dict[int, float], onboard: Poses, e0: int,
+def stall_reprimes(declared: dict[int, Declared], onboard: Poses, e0: int,
                    rel: tuple[FloatArray, FloatArray, FloatArray],
                    start: tuple[float, float, float] | None,
                    lost: dict[int, int] | None = None) -> dict[int, Reprime]:
@@ -206,10 +235,10 @@ def stall_reprimes(declared: dict[int, float], onboard: Poses, e0: int,
     pose at e0 (power-up, set-pose), None when fitted; ``lost``: per stall's break (absolute
     frame) the first count page's ENC_E2E_LOST that pins its pairs (``reprimecount``). A stall
     without samples after it, or without a sample or an exact start before it, is left to the
-    exact rule."""
+    exact rule, and so is an unsure one whose samples do not choose the re-prime (``_chosen``)."""
     at = onboard.enc - e0
     out: dict[int, Reprime] = {}
-    for b, stall_s in sorted(declared.items()):
+    for b, (stall_s, sure) in sorted(declared.items()):
         before = np.flatnonzero(at < b)
         if len(before):
             s0 = int(before[-1])
@@ -224,20 +253,22 @@ def stall_reprimes(declared: dict[int, float], onboard: Poses, e0: int,
             continue
         pair = _chosen(b, int(at[after[0]]), anchor, rel, (
             at[after], onboard.x_m[after], onboard.y_m[after], onboard.heading_rad[after]),
-            (lost or {}).get(b + e0))
+            (lost or {}).get(b + e0), unsure=not sure)
         if pair is not None:
-            out[b] = Reprime(pair[0], pair[1], stall_s)
+            out[b] = Reprime(pair[0], pair[1], stall_s, sure)
     return out
 
 
 def _chosen(b: int, first: int, anchor: tuple[int, float, float, float],
             rel: tuple[FloatArray, FloatArray, FloatArray],
             samples: tuple[IntArray, FloatArray, FloatArray, FloatArray],
-            lost: int | None = None) -> tuple[int, int] | None:
+            lost: int | None = None, *, unsure: bool = False) -> tuple[int, int] | None:
     """The pair (f, r) whose re-primed path, placed on the ``anchor`` (frame from e0, its
     on-board x, y, heading), ends nearest the ``samples`` after (frames from e0, x, y,
     heading), in LSBs (the worst sample's position plus heading); ``first``: the first of
-    them; ``lost``: ENC_E2E_LOST, the pairs it allows only (``reprimecount.kept_pairs``)."""
+    them; ``lost``: ENC_E2E_LOST, the pairs it allows only (``reprimecount.kept_pairs``).
+    ``unsure``: None unless that pair fits (``FIT_LSB``) or beats the exact heading's worst
+    sample (LSBs; position left to the stall's placement: module docstring)."""
     rx, ry, rh = rel
     k0, ax, ay, ah = anchor
     turn0 = ah - float(rh[k0])
@@ -259,7 +290,16 @@ def _chosen(b: int, first: int, anchor: tuple[int, float, float, float],
                              + np.abs(eh) / HEADING_LSB_RAD))
         if best is None or score < best[0]:
             best = (score, f, r)
-    return None if best is None else (best[1], best[2])
+    if best is None or (unsure and best[0] > FIT_LSB
+                        and best[0] >= _exact_lsb(turn0 + rh[at] - on_h)):
+        return None
+    return best[1], best[2]
+
+
+def _exact_lsb(heading_off_rad: FloatArray) -> float:
+    """The exact rule's fit to the samples after a stall (``heading_off_rad``: each one's
+    heading less the reference's, nothing left out): the worst, in heading LSBs."""
+    return float(np.max(np.abs(wrap_pi(heading_off_rad)))) / HEADING_LSB_RAD
 
 
 def left_out(d_left: IntArray, d_right: IntArray, reprimes: dict[int, Reprime]) -> None:
@@ -275,5 +315,5 @@ def reprime_events(timestamp_s: Any, enc: Encoders, start: int,
     """``analyze``'s events of the declared re-primes (frames from ``start``), at the frame
     the firmware re-primed on."""
     return [{"kind": "stall_reprime", "t_s": float(timestamp_s[enc.index[start + rep.r]]),
-             "encoder_frame": int(start + rep.r), "detail": detail(rep.stall_s)}
+             "encoder_frame": int(start + rep.r), "detail": detail(rep.stall_s, rep.sure)}
             for _, rep in sorted(reprimes.items())]

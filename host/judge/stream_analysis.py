@@ -429,7 +429,7 @@ def _judged(
             for e in info.reprimed
         ] + [
             {"kind": "stall_reprime", "t_s": final.times_s[e0 + rep.r],
-             "encoder_frame": e0 + rep.r, "detail": reprime_detail(rep.stall_s)}
+             "encoder_frame": e0 + rep.r, "detail": reprime_detail(rep.stall_s, rep.sure)}
             for _, rep in sorted(stalled.reprimes.items())
         ] + [
             {"kind": "firmware_stall", "t_s": final.times_s[e], "encoder_frame": int(e),

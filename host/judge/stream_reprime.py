@@ -154,11 +154,11 @@ class ReprimeTap:
         if self.page_at is not None and any(0 < b + e0 < self.page_at for b in declared):
             raise NotStreamable(BEFORE_PAGE)
         by_break = {w.b: w for w in self.windows}
-        for b, stall_s in sorted(declared.items()):
-            pair = _pair(by_break[b + e0], e0, start)
+        for b, (stall_s, sure) in sorted(declared.items()):
+            pair = _pair(by_break[b + e0], e0, start, unsure=not sure)
             if pair is None:
                 continue
-            out.reprimes[b] = Reprime(pair[0] - e0, pair[1] - e0, stall_s)
+            out.reprimes[b] = Reprime(pair[0] - e0, pair[1] - e0, stall_s, sure)
             out.allowance_m[b + e0] = _allowance(by_break[b + e0], pair[0], geometry, bits,
                                                  integrator)
         return out
@@ -185,8 +185,8 @@ def _sample(chunk: PlacedChunk, k: int) -> Sample:
             float(chunk.rel_heading_rad[k]))
 
 
-def _pair(w: _Window, e0: int, start: tuple[float, float, float] | None
-          ) -> tuple[int, int] | None:
+def _pair(w: _Window, e0: int, start: tuple[float, float, float] | None, *,
+          unsure: bool = False) -> tuple[int, int] | None:
     """``stallreprime._chosen`` on the window (absolute frames): its frames laid out as
     one short path (the anchor, frames b - 1 .. first, the samples after), positions for
     frames (the pair's ranges lie in b - 1 .. first, contiguous there)."""
@@ -211,7 +211,7 @@ def _pair(w: _Window, e0: int, start: tuple[float, float, float] | None
                np.array([s[1] for s in w.after]), np.array([s[2] for s in w.after]),
                np.array([s[3] for s in w.after]))
     pair = _chosen(position[w.b], position[w.first], (position[anchor[0]], *anchor[1:4]),
-                   (rx, ry, rh), samples)
+                   (rx, ry, rh), samples, unsure=unsure)
     return None if pair is None else (pair[0] - shift, pair[1] - shift)
 
 
