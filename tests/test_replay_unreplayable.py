@@ -39,14 +39,6 @@ def _rebooted_log(folder: Path) -> Path:
     return both
 
 
-def _replay_reasons(capsys: pytest.CaptureFixture[str], log: Path) -> list[str]:
-    code, out, _ = run_cli(capsys, "replay", str(log), "--robot", "kobuki")
-    assert code == 1
-    lines = out.splitlines()
-    at = lines.index("FAIL: the replayed firmware departs from the log's")
-    return [line for line in lines[at + 1:] if line.startswith("  - ")]
-
-
 def test_a_reboot_in_the_log_is_named_not_the_build(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -67,10 +59,16 @@ def test_late_encoder_frames_are_named_not_the_build(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """Since the rig puts held frames on the bus at their release time, a 10 % share held 15 ms
-    replays faithfully; a 20 % share still makes the recording firmware take late frames."""
+    replays faithfully; a 20 % share still makes the recording firmware take late frames: the
+    replay compares no position after the first (the log's firmware did not take its frames on
+    time) and never blames the build. It FAILed on 383.5 mrad of heading (and the log's own
+    "resent" poses 16.8 mm apart) until a pose could no longer name a frame logged after it
+    (``EncoderTrack.named``): those were poses put at the wrong frame, not departures."""
     log = tmp_path / "late.log"
     _run(log, "--seed", "1", "--faults", "delay=0.2:15,seed=1")
     capsys.readouterr()
-    reasons = _replay_reasons(capsys, log)
-    assert not any(BUILD_DIFFERS in r for r in reasons), reasons
-    assert any("WHEEL_ENCODERS frames out of sequence" in r for r in reasons), reasons
+    code, out, _ = run_cli(capsys, "replay", str(log), "--robot", "kobuki")
+    assert BUILD_DIFFERS not in out
+    assert "positions not compared (the log's firmware did not take its frames on time); " \
+        "heading 0.0000 mrad" in out, out
+    assert code == 0, out

@@ -52,7 +52,13 @@ class EncoderTrack:
         name by ``enc_counter``, resolved against the latest accepted encoder frame before each
         when it is less than 8 cycles older (``samples.named_targets``, the judges' rule: across
         a longer gap of the log the 4-bit COUNTER cannot tell the frame named from one 16
-        periods away); -1 when that frame is not in the track."""
+        periods away); -1 when that frame is not in the track or comes after the naming frame
+        in the log (``samples.match_encoder``'s causal rule: no firmware names a frame it has not
+        yet taken). Without it, the first pose after a halt of 30, 46 or 62 ticks (14 mod 16),
+        naming the encoder frame of the halt's first tick that the board's receive FIFO held,
+        resolved 32 ticks later, to the frame of the same COUNTER just after the halt, and was
+        compared, as a resend, with the different pose truly naming that one: a correct
+        firmware's replay, byte-identical, departed by up to 345.6 mrad and was UNJUDGED."""
         result = np.full(len(index), -1, dtype=np.int64)
         if len(self.tick) == 0:
             return result
@@ -62,7 +68,8 @@ class EncoderTrack:
         has, target = named_targets(as_encoders, index, enc_counter, timestamp_s)
         target = target[has]
         found = np.minimum(np.searchsorted(self.tick, target), len(self.tick) - 1)
-        result[has] = np.where(self.tick[found] == target, target, -1)
+        taken = self.index[found] < index[has]  # named before it was on the bus: none
+        result[has] = np.where((self.tick[found] == target) & taken, target, -1)
         return result
 
 
