@@ -125,6 +125,7 @@ from odocan.host.judge.evidencechoice import chosen_seen
 from odocan.host.judge.finalstate import firmware_fields, latched_per_firmware
 from odocan.host.judge.gapseen import Seen, seen_in_log
 from odocan.host.judge.holepages import page_numbered
+from odocan.host.judge.judgedfloor import floored
 from odocan.host.judge.keptmark import mark_kept
 from odocan.host.judge.losses import (
     firmware_losses,
@@ -214,6 +215,7 @@ class Analysis:
     passed: bool = False
 
 
+@floored  # fewer than half the poses judged, most for twins: no PASS
 def analyze(
     frames: FrameArrays,
     robot: RobotProfile,

@@ -40,6 +40,7 @@ from odocan.host.judge.breaks import placed_offsets
 from odocan.host.judge.configs import ConfigPages, in_force
 from odocan.host.judge.distance import DistanceJudge
 from odocan.host.judge.gapfill import gap_or_fill_allowance
+from odocan.host.judge.judgedfloor import mark_floor
 from odocan.host.judge.keptmark import mark_kept
 from odocan.host.judge.nearthreshold import least_of
 from odocan.host.judge.reboots import Life, merge
@@ -168,7 +169,7 @@ def analyze_file(
         if len(spans) != len(firmware):  # a set-pose is no reboot: one latch per firmware
             report.update(latched_per_firmware(firmware, frames_of, db))
         report["events"] = [*report.get("events", []), *senders.events]
-        return lives.marked(report, count.frames)
+        return mark_floor(lives.marked(report, count.frames))  # judged floor: judgedfloor
 
 
 def _analyze_lives(
