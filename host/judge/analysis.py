@@ -125,6 +125,7 @@ from odocan.host.judge.evidencechoice import chosen_seen
 from odocan.host.judge.finalstate import firmware_fields, latched_per_firmware
 from odocan.host.judge.gapseen import Seen, seen_in_log
 from odocan.host.judge.holepages import page_numbered
+from odocan.host.judge.judgedfloor import floored
 from odocan.host.judge.keptmark import mark_kept
 from odocan.host.judge.losses import (
     firmware_losses,
@@ -132,16 +133,10 @@ from odocan.host.judge.losses import (
     life_placements,
     loss_allowance,
 )
+from odocan.host.judge.posestreams import one_source_cut
 from odocan.host.judge.powerup import saw_only_the_log, starts_at_power_up
 from odocan.host.judge.primedon import each_prime
-from odocan.host.judge.reboots import (
-    Life,
-    before_two_sources,
-    mark_two_sources,
-    merge,
-    split_lives,
-    two_sources,
-)
+from odocan.host.judge.reboots import Life, mark_two_sources, merge, split_lives
 from odocan.host.judge.reference import PROFILE_SPEED, Geometry, SpeedBound
 from odocan.host.judge.reference_path import (
     Reference,
@@ -214,6 +209,7 @@ class Analysis:
     passed: bool = False
 
 
+@floored  # fewer than half the poses judged: no PASS
 def analyze(
     frames: FrameArrays,
     robot: RobotProfile,
@@ -239,13 +235,13 @@ def analyze(
     db = db if db is not None else default_plan()
     decoder = BulkDecoder(db)
     require_messages(decoder)
-    conflict = two_sources(frames, decoder)
-    if conflict is not None:  # judged up to where the second firmware came, then a FAIL
-        cut = before_two_sources(frames, decoder, conflict)
+    conflict = one_source_cut(frames, decoder, db)
+    if conflict is not None:  # judged up to where the second source came, then a FAIL
+        cut, t_s, detail = conflict
         one = analyze(frames.select(np.arange(cut)), robot, integrator, tolerance=tolerance,
                       db=db, scenario=scenario, seed=seed, wall_seconds=wall_seconds,
                       max_wheel_speed_mm_s=max_wheel_speed_mm_s)
-        mark_two_sources(one.report, conflict[1], len(frames) - cut)
+        mark_two_sources(one.report, t_s, len(frames) - cut, detail)
         return Analysis(report=one.report, series=one.series, passed=False)
     firmware_lives = split_lives(frames, decoder)
     lives = cut_configs(cut_lives(firmware_lives, set_pose_cuts(frames, decoder)),

@@ -291,12 +291,14 @@ def before_two_sources(frames: FrameArrays, decoder: BulkDecoder,
     return cut
 
 
-def mark_two_sources(report: dict[str, Any], t_s: float, frames_not_judged: int) -> None:
+def mark_two_sources(report: dict[str, Any], t_s: float, frames_not_judged: int,
+                     detail: str | None = None) -> None:
     """A FAIL of its own in ``report`` (``two_sources``, an event): from ``t_s`` two firmwares
     answered on one node ID. Their pose frames interleave with nothing to tell whose each is,
     so no pose from there is judged (a pose error there would blame a firmware that may be
-    right); what came before is judged as usual, and a wrong pose there fails as well."""
-    detail = two_sources_text(t_s)
+    right); what came before is judged as usual, and a wrong pose there fails as well.
+    ``detail``: the reason (``two_sources_text`` when None: told by UPTIME)."""
+    detail = detail or two_sources_text(t_s)
     report["two_sources"] = {"t_s": t_s, "frames_not_judged": frames_not_judged,
                              "detail": detail}
     report["events"] = sorted([*report["events"], {"kind": "two sources", "t_s": t_s,

@@ -44,6 +44,7 @@ from odocan.host.judge.distfall import (
 from odocan.host.judge.latefall import continues_twice, tied_late
 from odocan.host.judge.liveadopted import LATE_REBOOT
 from odocan.host.judge.livegapseen import heard_status
+from odocan.host.judge.livestreams import LiveStreams, hear_pose_frame, pose_told_first
 from odocan.host.judge.navrestart import NAV_MESSAGE, restarted_within
 from odocan.host.judge.powerup import (
     NAMED_SPAN,
@@ -86,6 +87,9 @@ class SourceWatch:
     page_pending: bool = True  # the first life's first ENC_E2E_OK page not heard yet
     changed_at_s: float | None = None  # when the offset followed last changed to a new one
     conflict_from_s: float | None = None  # two sources: when the second offset first came
+    # (or the pose streams began to interleave: ``livestreams``)
+    conflict_detail: str = ""  # the pose streams' reason (``livestreams.detail_text``)
+    streams: LiveStreams = field(default_factory=LiveStreams)  # the pose streams' watch
 
     summary: tuple[int, int, int | None] | None = None  # the latest accepted one: COUNTER,
     # the encoder frames heard, those up to the frame the latest pose names (pose_named_live)
@@ -201,8 +205,10 @@ class SourceWatch:
         elif self.other_s is not None and abs(offset - self.other_s) <= UPTIME_MATCH_S:
             kind = "two sources"
             self.conflict_until_s = t_s + CONFLICT_HOLD_S
-            if self.conflict_from_s is None:  # it began when the second offset first came
-                self.conflict_from_s = self.changed_at_s
+            if self.conflict_from_s is None or (  # it began when the second offset first
+                    self.changed_at_s is not None  # came, unless the poses told it well before
+                    and not pose_told_first(self.conflict_from_s, self.changed_at_s)):
+                self.conflict_from_s, self.conflict_detail = self.changed_at_s, ""
             self.offset_s, self.other_s = self.other_s, self.offset_s
         else:
             kind = "reboot" if uptime_s < self.last_uptime_s or state == "INIT" else "uptime jump"
@@ -287,7 +293,9 @@ class SourceWatch:
 
     def conflict_text(self) -> str:
         """The verdict's reason once two sources were seen (``two_sources_text``); "" before."""
-        return "" if self.conflict_from_s is None else two_sources_text(self.conflict_from_s)
+        if self.conflict_from_s is None:
+            return ""
+        return self.conflict_detail or two_sources_text(self.conflict_from_s)
 
     def observe_quiet(
         self, t_s: npt.NDArray[np.float64], uptime_s: npt.NDArray[np.int64],
@@ -379,6 +387,7 @@ def pose_frame(watch: SourceWatch, message: Message, data: bytes, e2e: Any, t_s:
         counter = pose_heard(data, e2e.data_ids if e2e is not None else None)
         if counter is not None and message.name == POSE_MESSAGE:
             watch.hear_pose(t_s, counter)
+            hear_pose_frame(watch, message.name, data, t_s, tracker)  # two pose streams
             if tracker is not None and (counter == 0 or tracker.powerup.waits_next):
                 tracker.powerup.heard_raw(_plain_decoder(message)(data), t_s,
                                           tracker.window.rows)

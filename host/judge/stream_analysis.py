@@ -40,8 +40,10 @@ from odocan.host.judge.breaks import placed_offsets
 from odocan.host.judge.configs import ConfigPages, in_force
 from odocan.host.judge.distance import DistanceJudge
 from odocan.host.judge.gapfill import gap_or_fill_allowance
+from odocan.host.judge.judgedfloor import mark_floor
 from odocan.host.judge.keptmark import mark_kept
 from odocan.host.judge.nearthreshold import least_of
+from odocan.host.judge.posestreams import PoseStreams
 from odocan.host.judge.reboots import Life, merge
 from odocan.host.judge.reference import PROFILE_SPEED, Geometry, SpeedBound
 from odocan.host.judge.reportfacts import realtime, robot_dict
@@ -135,6 +137,7 @@ def analyze_file(
         e2e, lives = StreamE2E(db), StreamLives(decoder)  # one decoder: its cache too
         facts, cuts = StreamFacts(decoder), StreamCuts(decoder)
         senders = LogSenders(db)  # two tools on a command message (#11)
+        streams = PoseStreams(db)  # two firmwares' pose frames interleaved (#11)
         for chunk in carried(iter_log(path, chunk_frames=chunk_frames, warn=warn), db):
             count.frames += len(chunk)
             spill.write(chunk)
@@ -143,6 +146,7 @@ def analyze_file(
             facts.feed(chunk, accepted)
             cuts.feed(chunk, accepted)
             senders.feed(chunk)
+            streams.feed(chunk)
         spill.close()
         if not e2e.exact:  # its accepted frames may not be the whole log's: nor its lives
             raise NotStreamable(UNSETTLED)
@@ -153,7 +157,7 @@ def analyze_file(
             return lambda: carry.chunks((span.start, span.stop), lambda: spill.read(
                 span.start, span.stop, chunk_frames))
 
-        firmware = lives.finish_one_source()  # two firmwares: not judged from there, a FAIL
+        firmware = lives.finish_one_source(streams.told())  # two firmwares: a FAIL from there
         applied = cuts.configs(robot.counter_bits, firmware)
         if applied and whole_on_config and config_pages is None:
             raise NotStreamable("a config was applied: its PROFILE pages are judged whole")
@@ -168,7 +172,7 @@ def analyze_file(
         if len(spans) != len(firmware):  # a set-pose is no reboot: one latch per firmware
             report.update(latched_per_firmware(firmware, frames_of, db))
         report["events"] = [*report.get("events", []), *senders.events]
-        return lives.marked(report, count.frames)
+        return mark_floor(lives.marked(report, count.frames))  # judged floor: judgedfloor
 
 
 def _analyze_lives(

@@ -50,6 +50,7 @@ from odocan.host.judge.bootticks import (
 from odocan.host.judge.distfall import Falls, joined, no_falls
 from odocan.host.judge.gapseen import crc_holds
 from odocan.host.judge.latefall import continues_twice, fell_late
+from odocan.host.judge.livestreams import pose_told_first
 from odocan.host.judge.navrestart import Carried, second_evidence
 from odocan.host.judge.primed import counted_start
 from odocan.host.judge.reboots import SUMMARY_PAGE, mark_two_sources
@@ -116,6 +117,7 @@ class StreamLives:
     _changed: tuple[int, float] = (0, 0.0)  # the summary of the last new UPTIME offset
     conflict: tuple[int, float] | None = None  # ``reboots.two_sources``: position, bus time
     _cut: int = 0  # where the lives were cut for it (``finish_one_source``)
+    _detail: str = ""  # why (``two_sources_text``, ``posestreams.PoseStreams.told``)
     _pose: tuple[float, int, bool, float] | None = None  # the pose run so far, its latest's
     # bus time (``bootticks.poses_before``)
     _status: tuple[float, int] | None = None  # the latest ODOM_STATUS (``status_before``)
@@ -210,25 +212,35 @@ class StreamLives:
                                   uptime_before_s=boot.before_s))
         return lives
 
-    def finish_one_source(self) -> list[LifeSpan]:
+    def finish_one_source(self, streams: tuple[int, float, str] | None = None
+                          ) -> list[LifeSpan]:
         """``finish``, the lives cut where a second firmware came (``conflict``: at the start of
         the life its first summary was taken to begin, else that summary, as
-        ``reboots.before_two_sources``). Raises ``AnalysisError`` when that is the log's start."""
+        ``reboots.before_two_sources``), or where two pose streams began to interleave
+        (``streams``: ``posestreams.PoseStreams.told``) where UPTIME tells none or well after
+        (``livestreams.pose_told_first``), as ``posestreams.one_source_cut``. Raises
+        ``AnalysisError`` when that is the log's start."""
         spans = self.finish()
+        if self.conflict is not None:
+            position, t_s = self.conflict
+            self._cut = min([position, *(s.start for s in spans
+                                         if s.t_s == t_s and s.stop > s.start)])
+            self._detail = two_sources_text(t_s)
+        if streams is not None and pose_told_first(
+                streams[1], None if self.conflict is None else self.conflict[1]):
+            self._cut, self.conflict, self._detail = streams[0], streams[:2], streams[2]
         if self.conflict is None:
             return spans
-        position, t_s = self.conflict
-        self._cut = min([position, *(s.start for s in spans if s.t_s == t_s and s.stop > s.start)])
         kept = [s for s in spans if s.start < self._cut]
         if not kept:
-            raise AnalysisError(f"{two_sources_text(t_s)}, from the log's start")
+            raise AnalysisError(f"{self._detail}, from the log's start")
         return [*kept[:-1], dataclasses.replace(kept[-1], stop=self._cut)]
 
     def marked(self, report: dict[str, Any], n_frames: int) -> dict[str, Any]:
         """``report`` with the FAIL of two firmwares (``reboots.mark_two_sources``) when the
         lives were cut for them (``n_frames``: the log's)."""
         if self.conflict is not None:
-            mark_two_sources(report, self.conflict[1], n_frames - self._cut)
+            mark_two_sources(report, self.conflict[1], n_frames - self._cut, self._detail)
         return report
 
     def _decide(self, page: tuple[int, tuple[int, int]] | None, limit: int | None = None

@@ -61,6 +61,7 @@ from odocan.host.judge.livefit import pose_wrong
 from odocan.host.judge.livegapseen import heard_status
 from odocan.host.judge.livepose import FramePose, difference, pose_dict
 from odocan.host.judge.liverobot import DEFAULT, GIVEN, LiveRobot, PageWait
+from odocan.host.judge.livestreams import hear_pose_frame
 from odocan.host.judge.livetwins import CRC_RIGHT_REFUSED, refused_encoders
 from odocan.host.judge.livetwist import LiveTwist
 from odocan.host.judge.reference import Geometry
@@ -271,6 +272,7 @@ class RobotTelemetry(CommandFollowing):
         if route.name == POSE_MESSAGE:
             if (counter := pose_heard(data, self._pose_ids.data_ids)) is not None:
                 self.sources.hear_pose(t_s, counter)
+                hear_pose_frame(self.sources, route.name, data, t_s, self.tracker)  # two poses
                 if counter == 0 or self.tracker.powerup.waits_next:  # (bootnamed)
                     self.tracker.powerup.heard_raw(route.signals(data), t_s,
                                                    self.tracker.window.rows)

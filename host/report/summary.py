@@ -24,8 +24,9 @@ from odocan.host.judge import verdictfacts
 from odocan.host.judge.analysis import Analysis, Tolerance
 from odocan.host.judge.finalstate import final_text
 from odocan.host.judge.samples import POSITION_LSB_M
-from odocan.host.outputs import check_writable, replaced
+from odocan.host.outputs import OutputError, check_writable, replaced
 from odocan.host.protocol.e2e_silence import lost_text, silence_caption
+from odocan.host.report.judgedfacts import judged_fact, placed_fact
 from odocan.host.stopped import mark_stopped, partial_verdict, stopped_text
 from odocan.sim.exceptions import ConfigurationError
 
@@ -100,10 +101,13 @@ def check_output_paths(args: argparse.Namespace) -> None:
 
 
 def finish(analysis: Analysis, args: argparse.Namespace, *, title: str) -> int:
-    """Print the summary, then write ``--report`` and ``--plot``; 0 when passed, 1 when not.
+    """Print the summary, then write ``--plot`` and ``--report``; 0 when passed, 1 when not.
 
     The summary comes first so that an output that cannot be written (an ``OutputError``
-    naming its path, exit 2) never loses the verdict."""
+    naming its path, exit 2) never loses the verdict. The report comes last, so that it can
+    say that the plot failed (``output_failed``, ``passed`` false: the command exits 2, as for a
+    failed ``--log`` recording, ``as_written``): a CI step reading it must not see a PASS the
+    command did not give (with ``ulimit -f`` the plot failed after the report said PASS)."""
     from rich.console import Console
 
     console = Console(file=sys.stdout, highlight=False)
@@ -111,16 +115,21 @@ def finish(analysis: Analysis, args: argparse.Namespace, *, title: str) -> int:
     analysis.passed = mark_stopped(analysis.report)
     print_summary(analysis.report, args.tolerance, console, title=title)
     sys.stdout.flush()
-    for option, path in (("--report", args.report), ("--plot", args.plot)):
-        if path is None:
-            continue
-        if option == "--report":
-            write_report(path, as_written(analysis.report))
-            continue
+    failed = None
+    if args.plot is not None:
         from odocan.host.report.plots import plot_analysis  # matplotlib only when asked
 
-        with replaced(path, option) as target:  # a full disk: an older plot there kept
-            plot_analysis(analysis, target, tolerance=args.tolerance)
+        try:
+            with replaced(args.plot, "--plot") as target:  # a full disk: an older plot kept
+                plot_analysis(analysis, target, tolerance=args.tolerance)
+        except OutputError as exc:
+            failed = exc
+    if args.report is not None:
+        report = as_written(analysis.report)
+        write_report(args.report, report if failed is None else {
+            **report, "passed": False, "output_failed": str(failed)})
+    if failed is not None:
+        raise failed
     return 0 if analysis.passed else 1
 
 
@@ -164,13 +173,9 @@ def print_summary(
         style = "bold yellow" if passed else style
     twist = report.get("onboard_twist_vs_reference") or {"passed": True}
     pose_met = _pose_within(report, tolerance)
-    for kept in kept_failures(report):  # a set-pose that moved what it kept: a FAIL of its own
-        console.print(f"[{style}]{verdict}[/{style}]: {kept}", soft_wrap=True)
-        verdict, style = "otherwise", "bold" if pose_met and twist["passed"] else style
-    conflict = report.get("two_sources")
-    if conflict:  # a FAIL of its own; the pose before it is judged as usual
-        console.print(f"[{style}]{verdict}[/{style}]: {conflict['detail']}", soft_wrap=True)
-        verdict, style = "before it", "bold" if pose_met and twist["passed"] else style
+    distance = report.get("onboard_distance_vs_reference") or {"passed": True}
+    verdict, style = _own_lines(report, console, (verdict, style), pose_met and twist["passed"],
+                                pose_met and twist["passed"] and distance["passed"])
     line = "; ".join([*stuck, *unjudged, _criteria_line(report, tolerance, pose_met, bool(stuck)),
                       *kept_unjudged(report)])
     console.print(f"[{style}]{verdict}[/{style}]: {line}", soft_wrap=True)
@@ -210,6 +215,30 @@ def _judged_verdict(report: dict[str, Any]) -> bool:
     stopped = report.get("stopped") or {}
     return bool(stopped.get("partial_passed", unjudged["judged_passed"])
                 and unjudged["judged_passed"] and not report.get("e2e_not_advancing"))
+
+
+def _own_lines(report: dict[str, Any], console: Console, said: tuple[str, str], met: bool,
+               all_met: bool) -> tuple[str, str]:
+    """The verdicts of their own before the pose line (a set-pose that moved what it kept, two
+    sources on one ID, too few poses judged), printed; the pose line's word and style after
+    them (``said``: before them; ``met``: the pose and twist criteria are; ``all_met``: the
+    distance too)."""
+    verdict, style = said
+    for kept in kept_failures(report):  # a set-pose that moved what it kept: a FAIL of its own
+        console.print(f"[{style}]{verdict}[/{style}]: {kept}", soft_wrap=True)
+        verdict, style = "otherwise", "bold" if met else style
+    conflict = report.get("two_sources")
+    if conflict:  # a FAIL of its own; the pose before it is judged as usual
+        console.print(f"[{style}]{verdict}[/{style}]: {conflict['detail']} "
+                      f"({conflict['frames_not_judged']} frames from there not judged)",
+                      soft_wrap=True)
+        verdict, style = "before it", "bold" if met else style
+    floor = report.get("judged_floor")
+    if floor:  # too few poses judged (judgedfloor): UNJUDGED when nothing else failed
+        word = "UNJUDGED" if all_met and verdict == "FAIL" else verdict
+        console.print(f"[{style}]{word}[/{style}]: {floor['detail']}", soft_wrap=True)
+        verdict, style = "otherwise", "bold" if met else style
+    return verdict, style
 
 
 def kept_unjudged(report: dict[str, Any]) -> list[str]:
@@ -310,6 +339,7 @@ def _facts(report: dict[str, Any]) -> list[tuple[str, str]]:
     if report.get("reference_start"):
         facts.append(("start", _START_TEXT.get(report["reference_start"],
                                                str(report["reference_start"]))))
+    facts.extend(fact for fact in (placed_fact(report), judged_fact(report)) if fact)
     if truth.get("distance_travelled_m") is not None:
         facts.append(("distance", f"{truth['distance_travelled_m']:.3f} m travelled"))
     reboots = report.get("reboots") or []

@@ -29,6 +29,7 @@ from odocan.host.io.buses import add_bus_arguments, open_bus
 from odocan.host.io.logs import FrameArrays, read_log, warn_on_stderr
 from odocan.host.io.player import play
 from odocan.host.jsonutil import write_report
+from odocan.host.judge.posestreams import pose_streams
 from odocan.host.judge.profilepage import profile_mismatch, running_profile, with_bus_speed
 from odocan.host.judge.replay import (
     ReplayInput,
@@ -38,6 +39,7 @@ from odocan.host.judge.replay import (
 )
 from odocan.host.judge.replay_compare import compared, departures, not_comparable, unjudged
 from odocan.host.outputs import check_distinct
+from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.report.ci import (
     add_junit_argument,
@@ -130,6 +132,8 @@ def _do_replay(args: argparse.Namespace) -> int:
     _print_versus_log(section)
     analysis.report["inputs"] = choice.recorded(log_inputs(args.log, profile, integrator, None))
     reasons, blind = _judged(section, args.tolerance)
+    if (told := pose_streams(frames, default_plan()).told()) is not None:  # whose poses?
+        blind = f"{blind}; {told[2]}" if blind else f"UNJUDGED: {told[2]}"
     if reasons:  # the firmware's own word on its profile first, then the poses' fit
         reasons += ([] if said is None else [said]) + diagnose(
             frames, feed.accepted, with_bus_speed(profile, running), integrator, args.tolerance,

@@ -1,0 +1,46 @@
+"""What the judge could judge, as the text summary says it (``host.report.summary``): how many
+of the on-board poses it compared (``host.judge.judgedfloor``), and where it re-placed the
+reference (``reference_breaks``: after a gap of the log, a stall or a hold the position across it
+is judged only within the placement's allowance, so the summary must not say only "exact from
+power-up" while the JSON says the reference moved)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+
+def judged_fact(report: dict[str, Any]) -> tuple[str, str] | None:
+    """The ``judged`` line: poses compared of those sent; None without the count."""
+    samples = report.get("samples") or {}
+    if "judged_fraction" not in samples:
+        return None
+    judged = int(samples["onboard"])
+    sent = judged + int(samples.get("unmatched_poses") or 0) / 2
+    return "judged", (f"{judged} of {sent:g} on-board poses compared with the reference "
+                      f"({100 * samples['judged_fraction']:.4g} %)")
+
+
+def placed_fact(report: dict[str, Any]) -> tuple[str, str] | None:
+    """The ``re-placed`` line: the reference's placements after gaps, stalls and holds, each
+    with the largest offset absorbed and its allowance; None when there were none."""
+    breaks = report.get("reference_breaks") or {}
+    said = []
+    if breaks.get("gap_placements"):
+        said.append(_placements(breaks["gap_placements"], "a gap of the log",
+                                breaks["max_gap_offset_absorbed_m"],
+                                breaks["gap_offset_allowance_m"]))
+    if breaks.get("stall_placements"):
+        said.append(_placements(breaks["stall_placements"], "a firmware stall or hold",
+                                breaks["max_offset_absorbed_m"], breaks["offset_allowance_m"]))
+    if breaks.get("free_gap_placements"):
+        said.append(f"{breaks['free_gap_placements']} after a gap with no bound (no plausibility "
+                    "bound configured): the position across it is not judged")
+    if not said:
+        return None
+    return "re-placed", "; ".join(said)
+
+
+def _placements(count: int, after: str, absorbed_m: float, allowance_m: float) -> str:
+    return (f"{count} after {after} (at most {absorbed_m * 1e3:.4g} mm absorbed, within "
+            f"{allowance_m * 1e3:.4g} mm allowed): the position across it is judged only within "
+            "that allowance")
