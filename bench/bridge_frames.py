@@ -6,8 +6,9 @@ the fleet stepping and paho writing around it; here the frames of a lockstep fle
 ``--ticks``; the worker's own: ``Fleet.take_batch``) are recorded first, then fed to one
 ``RobotTelemetry`` per robot as ``Bridge._handle`` feeds them (each identifier's plan, else
 ``feed_fields``), every publication encoded (``topics.dumps``), under the worker's GC regime
-(``fleetrun.TickCollector``: the set-up frozen, the automatic collector off, one young pass
-after each tick, counted in): nothing else runs, so two trees compare in alternating pairs
+(``fleetrun.TickCollector``: the set-up frozen, the automatic collector off, the tree's young
+passes, counted in: one after each tick before issue #13's fleetcut pass, none since;
+``--young-gc-every N``): nothing else runs, so two trees compare in alternating pairs
 with little noise. ``--by-message`` adds each message's frames per robot-tick and CPU per frame
 (``process_time`` around each frame: the figures include that clock's own cost, ~1 us a
 frame).
@@ -59,6 +60,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+import odocan.host.mqtt.fleetrun as fleetrun
 import odocan.host.mqtt.topics as topics
 from odocan.host import accel
 from odocan.host.judge.reference import Geometry
@@ -69,6 +71,9 @@ from odocan.sim.contract import database
 from odocan.sim.fleet import Fleet, FleetConfig, robot_name
 
 # the bridge's entry for a fleet's frames (``_feed`` in the trees before it was public)
+# the worker's young GC pass every this many ticks (``fleetrun.TickCollector.every_ticks``: 1
+# on trees before issue #13's fleetcut pass, which has none, 0; ``--young-gc-every``)
+YOUNG_EVERY = getattr(fleetrun.TickCollector, "every_ticks", 1)
 FEED = getattr(RobotTelemetry, "feed_fields", None) or getattr(RobotTelemetry, "_feed")  # noqa: B009
 Recording = tuple[int, list[list[tuple[int, tuple[float, int, bytes]]]]]  # robots, batches
 
@@ -141,6 +146,7 @@ def run_once(recording: Recording, by_message: Counter[str] | None,
     gc.collect()
     gc.freeze()
     gc.disable()
+    ticks = 0
     try:
         start_s = clock()
         for batch in batches:
@@ -155,7 +161,9 @@ def run_once(recording: Recording, by_message: Counter[str] | None,
                     name = names.get(can_id, hex(can_id))
                     by_message[name] += clock() - t0_s
                     frames[name] += 1
-            gc.collect(0)
+            ticks += 1
+            if YOUNG_EVERY and ticks % YOUNG_EVERY == 0:
+                gc.collect(0)
         cpu_s = clock() - start_s
     finally:
         gc.enable()
@@ -172,6 +180,9 @@ def main() -> int:
     parser.add_argument("--record", metavar="PATH", help="record the frames there, then stop")
     parser.add_argument("--frames", metavar="PATH", help="a recording (else one made now)")
     parser.add_argument("--repeat", type=int, default=1)
+    parser.add_argument("--young-gc-every", type=int, default=None, metavar="N",
+                        help="a young GC pass every N ticks (0: none; default: the tree's "
+                             "worker's rule, fleetrun.TickCollector)")
     parser.add_argument("--group", type=int, default=0, metavar="N",
                         help="the robots fed N at a time over every tick (0: all, by tick)")
     parser.add_argument("--batch-ticks", type=int, default=1, metavar="K",
@@ -181,6 +192,9 @@ def main() -> int:
     parser.add_argument("--by-message", action="store_true",
                         help="CPU per frame of each message (the clock read per frame)")
     args = parser.parse_args()
+    if args.young_gc_every is not None:
+        global YOUNG_EVERY
+        YOUNG_EVERY = args.young_gc_every
     recording: Recording
     if args.frames:
         recording = pickle.loads(Path(args.frames).read_bytes())

@@ -44,10 +44,12 @@ takes longer than 10 ms of wall, so they weigh more per robot-tick than in real 
 
 The bridge's frame handling alone, on recorded frames, with a digest of what it publishes (two
 trees compared without the fleet, paho and the loop around it): ``bench/bridge_frames.py``.
-``--young-gc-every N`` makes the worker's young GC pass one every N ticks instead of every tick
-(``TickCollector.every_ticks``; 0: none while the clock runs): what the pass costs, measured
-whole (its survivors live 20-100 ticks, so rarer passes cost about as much CPU in all, in longer
-pauses: 16 ms every 50 ticks, 43 ms every 200, 50 robots at load 9).
+``--young-gc-every N`` makes the worker's young GC pass one every N ticks
+(``TickCollector.every_ticks``; 0: none while the clock runs); without it each tree runs its own
+product's rule: a pass after every tick before the fleetcut pass, none since (issue #13; a
+worker makes no cyclic garbage): ``--young-gc-every 1`` on this tree is the old rule. Rarer
+passes cost about as much CPU in all as one a tick (its survivors live 20-100 ticks), in longer
+pauses: 16 ms every 50 ticks, 43 ms every 200, 50 robots at load 9.
 
 ``--clock real`` runs the same worker under the product's clock (``sim.fleet.run_realtime``:
 each tick released at ``k * 10 ms`` of the wall clock, the loop asleep in between, late releases
@@ -350,16 +352,17 @@ def main() -> int:
                         help="the bridge's pose telemetry rate per robot (FleetRun.publish_hz)")
     parser.add_argument("--firmware", choices=FIRMWARES, default="python",
                         help="every board's firmware (FleetConfig.firmware)")
-    parser.add_argument("--young-gc-every", type=int, default=1, metavar="N",
+    parser.add_argument("--young-gc-every", type=int, default=None, metavar="N",
                         help="the worker's young GC pass every N ticks (0: none while the "
-                             "clock runs; the product: 1)")
+                             "clock runs; default: the tree's own rule)")
     parser.add_argument("--parts", action="store_true",
                         help="the CPU of the step, of the bridge's frame handling, the rest")
     parser.add_argument("--clock", choices=("flat", "real", "both"), default="flat",
                         help="flat out (default), the product's real-time clock, or both "
                              "alternately (a pair per --repeat)")
     args = parser.parse_args()
-    fleetrun.TickCollector.every_ticks = args.young_gc_every or 1 << 62
+    if args.young_gc_every is not None:
+        fleetrun.TickCollector.every_ticks = args.young_gc_every or 1 << 62
     if args.hold_s is not None:
         setattr(fleetrun, "HOLD_S", args.hold_s)  # noqa: B010 (read by run_fleet)
     if args.parts:

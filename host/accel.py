@@ -46,7 +46,8 @@ MODULES = (
     *(f"host.judge.{name}" for name in ("tracking", "sources", "posewrongs", "bootticks",
                                         "gapseen", "distance", "reprimereplay", "statuslatch")),
     *(f"host.mqtt.{name}" for name in ("telemetry", "liveplan", "livedecode", "topics",
-                                       "errorbatch", "liveroutes", "livecommands")),
+                                       "errorbatch", "liveroutes", "livecommands", "lsbround",
+                                       "framehold")),
     *(f"host.protocol.{name}" for name in ("e2e_live", "e2e_evidence", "e2e", "e2e_crc", "pose")),
     # Not the fleet's step (sim.*): compiled (node, tickloop, motor_controller, board, cboard,
     # simplan, drivetrain, transport, canbits) it ran more instructions, not fewer: 128.7k ->

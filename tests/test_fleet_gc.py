@@ -1,6 +1,6 @@
 """A real-time fleet worker's cyclic GC (``fleetrun.TickCollector``): no automatic collection
-while the clock runs, the young generation collected after every tick, the rest at the end, and
-the collector left as it was found."""
+while the clock runs, no young pass either unless the young generation passed its bound (a
+leak's guard), the rest at the end, and the collector left as it was found."""
 
 from __future__ import annotations
 
@@ -8,14 +8,16 @@ import asyncio
 import gc
 from typing import Any
 
+import pytest
+
 from odocan.host.mqtt import fleetrun
 from odocan.host.mqtt.fleetrun import FleetRun
 from odocan.sim import robot
 from odocan.sim.fleet import FleetConfig
 
 
-def test_the_worker_collects_the_young_generation_after_each_tick_and_the_rest_at_the_end(
-) -> None:
+def _passes() -> tuple[list[int], dict[str, Any]]:
+    """The generations collected while the automatic collector was off, and the report."""
     seen: list[tuple[int, bool]] = []  # (generation, automatic collector on) of each pass
 
     def on_gc(phase: str, info: dict[str, Any]) -> None:
@@ -30,11 +32,29 @@ def test_the_worker_collects_the_young_generation_after_each_tick_and_the_rest_a
         report = asyncio.run(fleetrun.run_fleet(run))
     finally:
         gc.callbacks.remove(on_gc)
-    while_off = [generation for generation, on in seen if not on]
+    assert gc.isenabled()
+    assert gc.get_freeze_count() == 0
+    return [generation for generation, on in seen if not on], report
+
+
+def test_the_worker_collects_nothing_while_the_clock_runs_and_everything_at_the_end() -> None:
+    while_off, report = _passes()
     assert report["ticks"] > 0
-    # one young pass per tick the clock released, then the one full pass at the end
+    assert while_off == [2]  # the one full pass at the end
+
+
+def test_a_young_generation_past_its_bound_is_collected_after_the_tick(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(fleetrun.TickCollector, "young_bound", -1)  # always past it
+    while_off, report = _passes()
     assert while_off.count(0) == report["ticks"]
     assert [g for g in while_off if g > 0] == [2]
     assert while_off[-1] == 2
-    assert gc.isenabled()
-    assert gc.get_freeze_count() == 0
+
+
+def test_every_ticks_brings_back_a_young_pass_every_n_ticks(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(fleetrun.TickCollector, "every_ticks", 2)
+    while_off, report = _passes()
+    assert while_off.count(0) == report["ticks"] // 2
+    assert while_off[-1] == 2

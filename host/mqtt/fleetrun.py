@@ -226,19 +226,22 @@ class TickCollector:
     """The cyclic GC of a real-time fleet worker: no collection in the middle of a tick.
 
     Made after the set-up: one full collection, then ``gc.freeze()`` (the long-lived set-up
-    objects leave the collector's generations) and the automatic collector off. After each
-    tick's step (``after_tick``, the fleet's ``on_batch``) the young generation is collected
-    (``gc.collect(0)``): the objects of about one tick, ~0.2-0.5 ms. The automatic collector
-    ran far fewer, far larger collections at unpredictable points: a worker's gen-0 count
-    (allocations minus frees, old objects' frees included) let 10-20 k objects pile up, so a
-    gen-0 pass took 2-9 ms of CPU, a gen-1 pass 8-20 ms and a gen-2 one 20-55 ms (50 robots,
-    ``gc.callbacks``): a pause of half a period makes a late tick, one of a period a skipped
-    release (UNJUDGED). Older generations are never collected while the clock runs: what
-    survives a young collection is alive or cyclic garbage, and a 50-robot worker was seen to
-    leave none (a full collection at the end found 0 unreachable objects); ``close`` runs that
-    full collection, turns the collector back on as it was and unfreezes."""
+    objects leave the collector's generations) and the automatic collector off. The automatic
+    collector ran large collections at unpredictable points (a gen-0 pass 2-9 ms of CPU, gen-1
+    8-20 ms, gen-2 20-55 ms, 50 robots, ``gc.callbacks``): a pause of half a period makes a late
+    tick, one of a period a skipped release (UNJUDGED). No generation is collected while the
+    clock runs: a worker makes no cyclic garbage (a 50-robot worker run 1 500 ticks without any
+    pass left 0 unreachable objects for ``close``'s full collection), so a young pass after each
+    tick (``gc.collect(0)``, as before issue #13's fleetcut pass) only walked the tick's
+    survivors (~2 000 objects, 7-11 us per robot-tick, 5-7 % of a worker) to find nothing, and
+    rarer passes pause longer (16 ms every 50 ticks). A guard against a leak: once the young
+    generation's count (tracked objects made less those freed since the latest pass) passes
+    ``young_bound`` (a worker's plateaus at ~5.6 k a robot: 280 k at 50), one young pass.
+    ``every_ticks`` (``bench/fleet_flat.py --young-gc-every``) brings back a pass every N ticks.
+    ``close`` runs the full collection, turns the collector back on as it was and unfreezes."""
 
-    every_ticks = 1  # a young collection after every this many ticks
+    every_ticks = 0  # a young collection after every this many ticks (0: only past the bound)
+    young_bound = 2_000_000  # a young collection past this count (a leak: ~0.4 s of CPU)
 
     def __init__(self, on_batch: Callable[[Any], None] | None) -> None:
         self.on_batch = on_batch
@@ -250,11 +253,13 @@ class TickCollector:
         self.ticks = 0  # since the latest young collection
 
     def after_tick(self, batch: Any) -> None:
-        """The tick's frames to ``on_batch``, then a collection of the young generation."""
+        """The tick's frames to ``on_batch``; a young collection only when one is due (the
+        class docstring)."""
         if self.on_batch is not None:
             self.on_batch(batch)
         self.ticks += 1
-        if self.ticks >= self.every_ticks:
+        if ((self.every_ticks and self.ticks >= self.every_ticks)
+                or gc.get_count()[0] > self.young_bound):
             self.ticks = 0
             gc.collect(0)
 
