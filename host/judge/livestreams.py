@@ -45,6 +45,9 @@ from __future__ import annotations
 from collections import deque
 from typing import TYPE_CHECKING, Any, Final
 
+import numpy as np
+import numpy.typing as npt
+
 from odocan.host.protocol.busfacts import (
     MS_PER_S,
     POSE_COUNTER_LAP,
@@ -115,6 +118,32 @@ class TwinWatch:
         if other is None:
             return None
         return self._paired(t_s, min(other, (t_s, position)), data[1] & COUNTER_MASK)
+
+    def hear_block(self, data: npt.NDArray[np.uint8], t_s: npt.NDArray[np.float64],
+                   positions: npt.NDArray[np.int64]) -> None:
+        """``hear`` each row of ``data`` (CRC-right frames, 8 bytes each, in the log's order:
+        bus times ``t_s`` never going back) at once where none can pair: no frame comes within
+        ``PAIR_WINDOW_S`` after one of its COUNTER (this block's or one kept from before), the
+        one sender's usual log; then each COUNTER keeps its latest frame, as ``hear`` leaves it.
+        Else frame by frame."""
+        counters = data[:, 1] & COUNTER_MASK
+        order = np.argsort(counters, kind="stable")  # by COUNTER, the log's order within
+        same = counters[order][1:] == counters[order][:-1]
+        close = same & (np.diff(t_s[order]) < PAIR_WINDOW_S)
+        firsts = order[np.r_[True, ~same]] if len(order) else order
+        carried = any(self._recent[c] and t - self._recent[c][-1][0] < PAIR_WINDOW_S
+                      for c, t in zip(counters[firsts].tolist(), t_s[firsts].tolist(),
+                                      strict=True))
+        if close.any() or carried:
+            raw = data.tobytes()
+            for i, (t, p) in enumerate(zip(t_s.tolist(), positions.tolist(), strict=True)):
+                self.hear(raw[i * 8:(i + 1) * 8], t, p)
+            return
+        self.heard += len(data)
+        self.last_paired = False
+        lasts = order[np.r_[~same, True]] if len(order) else order
+        for c, i in zip(counters[lasts].tolist(), lasts.tolist(), strict=True):
+            self._recent[c] = deque([(float(t_s[i]), data[i].tobytes(), int(positions[i]))])
 
     def _paired(self, t_s: float, earlier: tuple[float, int], counter: int
                 ) -> tuple[float, int] | None:

@@ -59,11 +59,8 @@ class PoseStreams:
                                   & ((frames.flags & NOT_A_STANDARD_DATA_FRAME) == 0))
             data = np.ascontiguousarray(frames.data[rows, :FRAME_BYTES], dtype=np.uint8)
             good = crc8h2f_p02(data, data_ids[data[:, 1] & COUNTER_MASK]) == data[:, 0]
-            raw = data[good].tobytes()
-            for i, (row, t_s) in enumerate(zip((rows[good] + self._offset).tolist(),
-                                               frames.timestamp_s[rows[good]].tolist(),
-                                               strict=True)):
-                watch.hear(raw[i * FRAME_BYTES:(i + 1) * FRAME_BYTES], t_s, row)
+            watch.hear_block(data[good], frames.timestamp_s[rows[good]],
+                             (rows[good] + self._offset).astype(np.int64))
         self._offset += len(frames)
 
     def _told(self) -> tuple[str, TwinWatch] | None:
