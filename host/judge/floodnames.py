@@ -50,9 +50,10 @@ def cumulative_counts(left: IntArray, right: IntArray, bits: int) -> tuple[IntAr
     """The counts unwrapped frame to frame (mod ``2**bits``, each step the nearest): the
     travel between any two frames as one difference."""
     def unwrapped(counts: IntArray) -> IntArray:
-        steps = np.diff(counts.astype(np.int64), prepend=counts[:1].astype(np.int64))
+        wide = counts.astype(np.int64)
+        steps = np.concatenate((wide[:1], wide[1:] - wide[:-1]))
         half = 1 << (bits - 1)
-        out: IntArray = np.cumsum(((steps + half) % (1 << bits)) - half)
+        out: IntArray = np.cumsum(np.mod(steps + half, 1 << bits) - half)
         return out
     return unwrapped(left), unwrapped(right)
 
