@@ -102,27 +102,42 @@ def resolve_x(named: IntArray, enc_seq: IntArray, enc_t_s: FloatArray,
               geometry: Geometry) -> IntArray:
     """``named`` (the ODOM_POSE_X halves' encoder frames, ``match_encoder``) with each name a
     flood makes ambiguous taken to the candidate its HEADING alone matches (module
-    docstring); the anchor is the last half before it named without doubt."""
+    docstring); the anchor is the last half before it named without doubt. Vectorized to the
+    ambiguous halves (a flood's few): a log of millions of poses walks none."""
     if cycle_s is None or len(named) == 0:
         return named
+    doubt = _in_flood(named, enc_seq, enc_t_s, cycle_s)
+    if not doubt.any():
+        return named
+    sure = np.flatnonzero((named >= 0) & ~doubt)
     out = named.copy()
-    anchor: tuple[int, int] | None = None  # half, frame
-    for i, e in enumerate(named.tolist()):
-        if e < 0:
+    for i in np.flatnonzero(doubt).tolist():
+        k = int(np.searchsorted(sure, i)) - 1
+        if k < 0:
             continue
-        after = int(enc_seq[anchor[1]]) if anchor is not None else -(1 << 62)
-        cands = candidates(enc_seq, enc_t_s, e, cycle_s, after)
+        a_half = int(sure[k])
+        a = int(named[a_half])
+        cands = candidates(enc_seq, enc_t_s, int(named[i]), cycle_s, int(enc_seq[a]))
         if len(cands) == 1:
-            anchor = (i, e)
             continue
-        if anchor is None:
-            continue
-        a_half, a = anchor
         found = pick(geometry, (int(cum[0][a]), int(cum[1][a]), int(heading_raw[a_half])),
                      [(int(cum[0][c]), int(cum[1][c])) for c in cands], int(heading_raw[i]))
         if found is not None:
             out[i] = cands[found]
     return out
+
+
+def _in_flood(named: IntArray, enc_seq: IntArray, enc_t_s: FloatArray,
+              cycle_s: float) -> npt.NDArray[np.bool_]:
+    """Which names have a frame a COUNTER lap before them less than ``HALF_LAP`` cycles
+    earlier on the bus (``candidates`` finds more than one, the anchor aside)."""
+    at = np.maximum(named, 0)
+    before = np.minimum(np.searchsorted(enc_seq, enc_seq[at] - ENC_COUNTER_LAP),
+                        len(enc_seq) - 1)
+    doubt: npt.NDArray[np.bool_] = ((named >= 0)
+                                    & (enc_seq[before] == enc_seq[at] - ENC_COUNTER_LAP)
+                                    & (enc_t_s[at] - enc_t_s[before] < HALF_LAP * cycle_s))
+    return doubt
 
 
 def follow(named: IntArray, enc_counter: IntArray, t_s: FloatArray,
