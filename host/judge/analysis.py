@@ -110,7 +110,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from odocan.host.io.logs import FrameArrays
-from odocan.host.judge import acrosscut, cutreprime
+from odocan.host.judge import acrosscut, cutreprime, floodnames
 from odocan.host.judge.compare import (
     check_twist,
     error_summary,
@@ -156,9 +156,9 @@ from odocan.host.judge.samples import (
     Encoders,
     accepted_rows,
     encoder_frames,
+    flood_named,
     onboard_samples,
     pick_integrator,
-    pose_halves,
     require_messages,
     truth_samples,
     wrap_pi,
@@ -336,7 +336,7 @@ def _analyze_life(
     e2e, accepted = check_frames(frames, db)
     integrator, source = pick_integrator(frames, accepted, decoder, integrator)
     enc = page_numbered(frames, decoder, encoder_frames(frames, accepted, decoder))
-    halves = pose_halves(frames, accepted, decoder, enc)
+    enc, halves = flood_named(frames, accepted, decoder, enc, floodnames.of_robot(robot))
     onboard, unmatched, sent_s = onboard_samples(frames, accepted, decoder, enc, halves)
     onboard, sent_s = acrosscut.without_first(onboard, sent_s) if backlog else (onboard, sent_s)
     pose_sent_s = accepted_rows(frames, accepted, decoder, "ODOM_POSE_Y")["timestamp_s"]

@@ -56,6 +56,7 @@ import itertools
 import math
 from typing import TYPE_CHECKING, Any
 
+from odocan.host.judge.livefloodnames import beyond_why
 from odocan.host.judge.livepose import FramePose
 from odocan.host.judge.livereprimecount import (
     PRIMES,
@@ -397,6 +398,8 @@ def unbounded_why(tracker: PoseTracker) -> str | None:
         said.append(f"{unchosen} staged APPLY{'' if unchosen == 1 else 's'} just after a long "
                     "stall whose re-prime frame was not chosen (its frames not heard): the "
                     "heading there not judged")
+    if beyond := beyond_why(tracker.floods):  # (livefloodnames)
+        said.append(beyond)
     return "; ".join(said) or None
 
 

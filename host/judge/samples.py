@@ -6,15 +6,16 @@ steps 1 to 3; the power-up rule of step 4 is ``host.judge.powerup``)."""
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
+from odocan.host.judge import floodnames
 from odocan.host.judge.queuednames import queued_names
-from odocan.host.judge.reference import INTEGRATORS
+from odocan.host.judge.reference import INTEGRATORS, Geometry
 from odocan.host.judge.resendalias import may_alias
 from odocan.host.judge.senderseq import QUEUED_GAP_CYCLES as QUEUED_GAP_CYCLES
 from odocan.host.judge.senderseq import pose_skips
@@ -64,6 +65,8 @@ class Encoders:
     twinned: npt.NDArray[np.bool_] | None = None  # ``twinned_encoder_frames``; None: none
     twins: tuple[IntArray, IntArray, IntArray] | None = None  # ``encoder_twins``; None: none
     uptime: IntArray | None = None  # CTRL_UPTIME (0: not reported); None: the DBC has none
+    # a flood's ambiguous names an ODOM_POSE_X's HEADING resolved (``floodnames.follow``)
+    renamed: tuple[IntArray, IntArray, IntArray, FloatArray] | None = None
 
 
 @dataclass(frozen=True)
@@ -254,6 +257,8 @@ def match_encoder(
         result = queued_names(result, enc, index, enc_counter, own_counter, timestamp_s)
     if enc.twinned is not None:  # which of a frame and its twin the firmware had is unknown
         result[(result >= 0) & enc.twinned[np.maximum(result, 0)]] = -1
+    if enc.renamed is not None and enc.cycle_s is not None and causal:
+        result = floodnames.follow(result, enc_counter, timestamp_s, enc.renamed, enc.cycle_s)
     return result
 
 
@@ -359,6 +364,28 @@ def pose_halves(
                        py["COUNTER"].astype(np.int64))
     return PoseHalves(px, py, ex, ey, may_alias(frames, decoder, enc, px["index"], ex),
                       may_alias(frames, decoder, enc, py["index"], ey))
+
+
+def flood_named(
+    frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder, enc: Encoders,
+    robot: tuple[Geometry, int],
+) -> tuple[Encoders, PoseHalves]:
+    """``pose_halves``, with each ODOM_POSE_X name a flood makes ambiguous resolved by its
+    HEADING (``floodnames``; ``robot``: geometry, counter bits) and ``enc`` carrying those
+    renames (``Encoders.renamed``): every frame sent with it (its Y half, the twist) follows
+    in ``match_encoder``."""
+    halves = pose_halves(frames, accepted, decoder, enc)
+    px, plain = halves.px, halves.ex
+    ex = floodnames.resolve_x(plain, enc.seq, enc.timestamp_s,
+                              floodnames.cumulative_counts(enc.left, enc.right, robot[1]),
+                              px["HEADING"].astype(np.int64), enc.cycle_s, robot[0])
+    changed = np.flatnonzero(ex != plain)
+    if len(changed) == 0:
+        return enc, halves
+    enc = replace(enc, renamed=(plain[changed], ex[changed],
+                                px["ENC_COUNTER"][changed].astype(np.int64),
+                                px["timestamp_s"][changed].astype(np.float64)))
+    return enc, pose_halves(frames, accepted, decoder, enc)
 
 
 def onboard_samples(

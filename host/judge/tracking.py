@@ -27,6 +27,7 @@ from odocan.host.judge.livecutreprime import CutHold
 from odocan.host.judge.livedark import NO_FRAME_S
 from odocan.host.judge.livefirst import FIRST_FRAMES, FirstStall, left_out_first
 from odocan.host.judge.livefit import LiveFit
+from odocan.host.judge.livefloodnames import LiveFloodNames
 from odocan.host.judge.livehalves import HalfPairs
 from odocan.host.judge.livelaphold import LapHold
 from odocan.host.judge.livelosses import LiveAllowance
@@ -53,7 +54,7 @@ from odocan.host.judge.livewindow import (
     named_plain,
 )
 from odocan.host.judge.reference import Geometry
-from odocan.host.judge.samples import WIRE_COUNTER_BITS
+from odocan.host.judge.samples import HEADING_LSB_RAD, WIRE_COUNTER_BITS
 from odocan.sim.pose import TURN_RAD
 
 
@@ -116,6 +117,7 @@ class PoseTracker:
         self.losses = self.placer.losses = LiveAllowance()  # (livegapseen re-judges)
         self.wrongs = self.losses.wrongs  # POSE WRONG episodes latched (host.judge.posewrongs)
         self.now_s = 0.0  # the latest bus time (s; ``advance`` sets it)
+        self.floods = LiveFloodNames()  # a flood's names resolved by HEADING (livefloodnames)
         self.pose: FramePose | None = None
         self.pose_t_s = 0.0  # bus time of the ODOM_POSE_Y of ``pose`` (s)
         self.reference: FramePose | None = None
@@ -175,6 +177,7 @@ class PoseTracker:
                                             self.window.col("right").tolist()[:FIRST_FRAMES],
                                             strict=True)))
         self.truths.frame_heard(counter, self.enc_seq, left, right)
+        self.floods.frame(self.enc_seq, counter, (left, right), t_s, self.counter_bits)
         ref = self.raw.odometry
         if ref is not None:
             step = self.raw.step(ref, (self.enc_seq, counter, left, right, self.placer.periods,
@@ -204,6 +207,7 @@ class PoseTracker:
     def on_pose_x(self, enc_counter: int, x_m: float, heading_rad: float, counter: int,
                   t_s: float) -> None:
         """ODOM_POSE_X (X in m, HEADING in rad within the turn; its E2E COUNTER, bus time s)."""
+        self.floods.pose_x(enc_counter, round(heading_rad / HEADING_LSB_RAD), t_s, self.geometry)
         self._on_half("x", Half(0, enc_counter, counter, t_s, x_m, heading_rad))
 
     def on_pose_y(self, enc_counter: int, y_m: float, turns: int, counter: int,
@@ -252,8 +256,9 @@ class PoseTracker:
         if self.fast_path:
             plain = named_plain(halves.rows, self.window, pos)
             if plain is not None:
-                return plain, False
-        return named_in_window(halves, self.window, pos)
+                return self.floods.follow(plain, halves.rows, pos), False
+        seq, queued = named_in_window(halves, self.window, pos)
+        return self.floods.follow(seq, halves.rows, pos), queued  # (livefloodnames)
 
     def on_pair(self, seq: int, x: Half, y: Half, queued: bool) -> None:
         """The X and Y halves naming encoder frame ``seq`` (``livehalves``): one on-board
