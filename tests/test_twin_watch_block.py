@@ -12,7 +12,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from odocan.host.judge.livestreams import LAP_S, POSE_PERIOD_S, TwinWatch
+from odocan.host.judge.livestreams import LAP_S, TwinWatch
+from odocan.host.protocol.busfacts import POSE_PERIOD_S
 
 
 def _stream(kind: str, rng: np.random.Generator, n: int) -> tuple[np.ndarray, np.ndarray]:
