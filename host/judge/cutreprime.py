@@ -16,9 +16,14 @@ firmware's first after the stall (``acrosscut.backlog_first``: nothing but backl
 before the APPLY), the start exact (all three staged), and the firmware says it re-primed at
 that stall (its last summary before the stall, read before the cut: ``acrosscut.earlier_word``, with
 COUNTER_RESET clear, the first one made after it set: ``Resets.told``, a stall long enough:
-``stallreprime.possible``), the reference holds the staged pose to frame ``r`` (the steps into
-frames 1 .. ``r`` of the life left out, in the pose and in DISTANCE), ``r`` one of 0 (it
-re-primed before the APPLY: nothing left out) and the frames up to the first sample kept
+``stallreprime.possible``; or, latched by an earlier re-prime, set on both, read as
+``stallreprime.reprimed_across`` reads a stall: ``_word``; before, a latched word was never
+read and the correct firmware FAILed by the step into the re-prime frame, DISTANCE 2.38 mm
+beyond on pmir's square: ``tests/test_cut_reprime_latched.py``), the reference holds the
+staged pose to frame ``r`` (the steps into frames 1 .. ``r`` of the life left out, in the
+pose and in DISTANCE), ``r`` one of 0 (it re-primed before the APPLY, or not at all: nothing
+left out, the exact rule's hypothesis when the latched word cannot tell) and the frames up to
+the first sample kept
 (``stallreprime.R_SPAN`` at most), whichever path best meets the first samples
 (``stallreprime.COMPARED``): the stall re-prime's own choice. What a wrong firmware can hide
 there: a heading off by the turn of those few frames (as at a declared stall); its position is
@@ -42,7 +47,14 @@ from odocan.host.judge.samples import (
     Poses,
     wrap_pi,
 )
-from odocan.host.judge.stallreprime import COMPARED, R_SPAN, Reprime, possible
+from odocan.host.judge.stallreprime import (
+    COMPARED,
+    R_SPAN,
+    Reprime,
+    latched,
+    possible,
+    reprimed_across,
+)
 
 Word = tuple[FloatArray, IntArray]  # summaries' bus times and ERROR_MASKs (``acrosscut``)
 CUT_KEY = 0  # the cut's re-prime in ``Reference.stall_reprimes`` (a stall's keys are breaks > 0)
@@ -73,10 +85,26 @@ def cut_reprime(backlog: Backlog | None, start_pose: tuple[float, float, float] 
     if i < 0 or j >= len(heard.sent_s) or enc.cycle_s is None:
         return {}
     stall_s = float(heard.sent_s[j] - heard.sent_s[i])
-    if not (possible(stall_s, enc.cycle_s, least) and heard.told(b_s)):
+    word = _word(heard, i, b_s, stall_s, enc.cycle_s, least)
+    if word is False:
         return {}
     r = _chosen(start_pose, rel, onboard)
-    return {CUT_KEY: Reprime(0, r, stall_s)} if r > 0 else {}
+    return {CUT_KEY: Reprime(0, r, stall_s, word is True)} if r > 0 else {}
+
+
+def _word(heard: Resets, i: int, b_s: float, stall_s: float, cycle_s: float,
+          least: int | None) -> bool | None:
+    """The firmware's word at the stall before the cut (summaries ``i`` and on, ``stall_s``
+    apart across it; ``b_s``: the life's first frame's bus time): True when said (clear before,
+    set after: ``Resets.told``) or latched before a stall that surely re-primed it; None when
+    latched before one that only may have (``stallreprime.reprimed_across``'s unsure: both
+    hypotheses tried, ``_chosen``'s r = 0 is the not-re-primed one); False otherwise."""
+    if not possible(stall_s, cycle_s, least):
+        return False
+    said = heard.told(b_s)
+    if said is None and latched(heard.mask, i):
+        return reprimed_across(heard, i, stall_s, cycle_s, least)
+    return bool(said)
 
 
 def _chosen(start: tuple[float, float, float], rel: tuple[FloatArray, FloatArray, FloatArray],
