@@ -110,7 +110,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from odocan.host.io.logs import FrameArrays
-from odocan.host.judge import acrosscut, cutreprime, floodnames
+from odocan.host.judge import acrosscut, cutreprime, floodnames, reportfacts
 from odocan.host.judge.compare import (
     check_twist,
     error_summary,
@@ -293,8 +293,8 @@ def analyze(
     seconds = covered_s(frames, db)
     report.update(
         integrator_source=source, scenario=scenario, seed=seed, sim_seconds=seconds,
-        wall_seconds=wall_seconds, realtime_factor=realtime(seconds, wall_seconds),
-        frames=frame_counts(frames, decoder),
+        first_frame_s=reportfacts.first_frame_s(frames), wall_seconds=wall_seconds,
+        realtime_factor=realtime(seconds, wall_seconds), frames=frame_counts(frames, decoder),
     )
     vs_ref = report["onboard_vs_reference"]
     report["passed"] = bool(
@@ -407,7 +407,7 @@ def _analyze_life(
             "power-up" if ref_all.exact_start else "fitted"),
         "scenario": scenario,
         "seed": seed,
-        "sim_seconds": covered_s(frames, db),
+        "sim_seconds": covered_s(frames, db), "first_frame_s": reportfacts.first_frame_s(frames),
         "wall_seconds": wall_seconds,
         "realtime_factor": realtime(covered_s(frames, db), wall_seconds),
         "frames": frame_counts(frames, decoder),

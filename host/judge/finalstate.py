@@ -45,12 +45,14 @@ def firmware_fields(frames: Any, accepted: npt.NDArray[np.bool_], decoder: Any
     return latched_fields(firmware_events(frames, accepted, decoder, latch), latch)
 
 
-def final_text(final: dict[str, Any] | None) -> str | None:
+def final_text(final: dict[str, Any] | None, origin_s: float = 0.0) -> str | None:
     """The summary's words for ``final`` when the firmware ends not OK, e.g. ``ends DEGRADED
-    POSE_UNCERTAIN since 4.05 s: ... until a set-pose``; None when it ends OK (or said nothing)."""
+    POSE_UNCERTAIN since 4.05 s: ... until a set-pose``, its time in seconds since ``origin_s``
+    (the log's first frame: ``host.report.logtime``; the report's ``since_s`` is bus time);
+    None when it ends OK (or said nothing)."""
     if not final or final["state"] == "OK":
         return None
-    since = "" if final["since_s"] is None else f" since {final['since_s']:.2f} s"
+    since = "" if final["since_s"] is None else f" since {final['since_s'] - origin_s:.2f} s"
     words = REASON_WORDS.get(str(final["reason"]))
     return f"ends {final['state']} {final['reason']}{since}" + (f": {words}" if words else "")
 

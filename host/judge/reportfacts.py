@@ -47,6 +47,12 @@ def span_s(frames: FrameArrays) -> float:
     return float(frames.timestamp_s[-1] - frames.timestamp_s[0])
 
 
+def first_frame_s(frames: FrameArrays) -> float | None:
+    """Bus time (s) of the log's first frame, None for no frame: the summary's times count from
+    it (a capture's epoch seconds read as noise); the report's ``t_s`` stay bus times."""
+    return float(frames.timestamp_s[0]) if len(frames) else None
+
+
 def realtime(sim_s: float, wall_s: float | None) -> float | None:
     """Simulated seconds per wall-clock second."""
     if wall_s is None or wall_s <= 0:

@@ -229,8 +229,8 @@ def _analyze_lives(
     covered_s = facts.covered_s()
     report.update(
         integrator_source=source, scenario=scenario, seed=seed, sim_seconds=covered_s,
-        wall_seconds=wall_seconds, realtime_factor=realtime(covered_s, wall_seconds),
-        frames=facts.frame_counts,
+        first_frame_s=facts.first_frame_s, wall_seconds=wall_seconds,
+        realtime_factor=realtime(covered_s, wall_seconds), frames=facts.frame_counts,
     )
     vs_ref = report["onboard_vs_reference"]
     report["passed"] = bool(
@@ -413,7 +413,7 @@ def _judged(
         "reference_start": "set pose" if start_pose else "power-up" if exact else "fitted",
         "scenario": scenario,
         "seed": seed,
-        "sim_seconds": covered_s,
+        "sim_seconds": covered_s, "first_frame_s": facts.first_frame_s,
         "wall_seconds": wall_seconds,
         "realtime_factor": realtime(covered_s, wall_seconds),
         "frames": facts.frame_counts,

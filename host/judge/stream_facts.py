@@ -174,6 +174,11 @@ class StreamFacts:
         if self._enc_ok.first_at is not None and "COUNTER" in counts:
             self._page_counter = int(counts["COUNTER"][accepted[counts["index"]]][0])
 
+    @property
+    def first_frame_s(self) -> float | None:
+        """``reportfacts.first_frame_s`` of the frames fed."""
+        return self._first_s
+
     def covered_s(self) -> float:
         """``analysis._covered_s`` of the frames fed."""
         message = self.decoder.db.get_message_by_name("WHEEL_ENCODERS")

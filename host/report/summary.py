@@ -27,6 +27,7 @@ from odocan.host.judge.samples import POSITION_LSB_M
 from odocan.host.outputs import OutputError, check_writable, replaced
 from odocan.host.protocol.e2e_silence import lost_text, silence_caption
 from odocan.host.report.judgedfacts import judged_fact, placed_fact
+from odocan.host.report.logtime import origin_s, start_text
 from odocan.host.stopped import mark_stopped, partial_verdict, stopped_text
 from odocan.sim.exceptions import ConfigurationError
 
@@ -247,16 +248,17 @@ def kept_unjudged(report: dict[str, Any]) -> list[str]:
     verdict says so, never a silent PASS (a jump within them is judged by the life's fit
     alone, which cannot see a jump at its start); likewise a power-up whose first pose a stall
     left unjudged (``host.judge.stallpowerup``)."""
-    said = []
+    said, first_s = [], origin_s(report)
     for event in report.get("events") or []:
         kept = event.get("kept")
         if event.get("kind") == "power_up_unproven":  # its first pose (stallpowerup)
-            said.append(f"the first pose at {event['t_s']:.3f} s not judged ({event['detail']})")
+            said.append(f"the first pose at {event['t_s'] - first_s:.3f} s not judged "
+                        f"({event['detail']})")
         if event.get("kind") == "unjudged":  # a life without samples (silentlives)
             said.append(event["detail"].split(": ", 1)[0])
         if event.get("kind") != "set_pose":
             continue
-        at = f"what the ODOM_SET_POSE APPLY at {event['t_s']:.3f} s kept"
+        at = f"what the ODOM_SET_POSE APPLY at {event['t_s'] - first_s:.3f} s kept"
         if event.get("kept_not_judged"):
             said.append(f"{at} not judged ({event['kept_not_judged']})")
         elif isinstance(kept, dict) and kept["passed"] and \
@@ -269,7 +271,8 @@ def kept_unjudged(report: dict[str, Any]) -> list[str]:
 
 def kept_failures(report: dict[str, Any]) -> list[str]:
     """The set-poses whose APPLY moved a field it kept (``host.judge.setposekept``), in words."""
-    return [f"at {event['t_s']:.3f} s the firmware's pose jumped "
+    first_s = origin_s(report)
+    return [f"at {event['t_s'] - first_s:.3f} s the firmware's pose jumped "
             f"{event['kept']['position_jump_m'] * 1e3:.4g} mm and "
             f"{event['kept']['heading_jump_rad'] * 1e3:.4g} mrad at an ODOM_SET_POSE APPLY that "
             f"kept {', '.join(event['kept']['fields_kept'])} (nothing staged for them in this "
@@ -314,6 +317,7 @@ def _facts(report: dict[str, Any]) -> list[tuple[str, str]]:
     robot = report["robot"]
     pose = report["final_onboard_pose"]
     truth = report.get("onboard_vs_truth") or {}
+    first_s = origin_s(report)  # the times said count from the log's first frame (logtime)
     facts = [
         (
             "robot",
@@ -332,6 +336,8 @@ def _facts(report: dict[str, Any]) -> list[tuple[str, str]]:
         ),
         ("time", _time_text(report)),
     ]
+    if start := start_text(report):
+        facts.append(("log", start))
     inputs = report.get("inputs") or {}
     if inputs.get("errors") or inputs.get("faults"):  # what the run injected (a log: unknown)
         facts.append(("injected", f"errors {inputs.get('errors') or 'none'}, "
@@ -345,19 +351,20 @@ def _facts(report: dict[str, Any]) -> list[tuple[str, str]]:
     reboots = report.get("reboots") or []
     if reboots:  # each restarts the reference (host.judge.reboots)
         facts.append(("reboots", f"{len(reboots)}: the firmware restarted at "
-                      + ", ".join(f"{r['t_s']:.2f} s ({r['reference_start']})" for r in reboots)
+                      + ", ".join(f"{r['t_s'] - first_s:.2f} s ({r['reference_start']})"
+                                  for r in reboots)
                       + "; the reference restarted with it"))
     stalls = [e for e in report.get("events") or [] if e.get("kind") == "firmware_stall"]
     if stalls:  # the reference placed again after each (host.judge.analysis, reference_breaks)
         facts.append(("stalls", f"{len(stalls)}: the firmware went silent or held its pose from "
-                      + ", ".join(f"{e['t_s']:.2f} s" for e in stalls[:5])
+                      + ", ".join(f"{e['t_s'] - first_s:.2f} s" for e in stalls[:5])
                       + (", ..." if len(stalls) > 5 else "")
                       + "; the reference placed again after each, within its merge bound"))
     reprimed = [e for e in report.get("events") or [] if e.get("kind") == "counter_restart"]
     if reprimed:  # the truth row is off by the motion there (reference_path, ambiguity)
         facts.append(("re-primed", f"{len(reprimed)}: the reference re-primed where the firmware "
                       "must (COUNTER_RESET) at "
-                      + ", ".join(f"{e['t_s']:.2f} s" for e in reprimed[:5])
+                      + ", ".join(f"{e['t_s'] - first_s:.2f} s" for e in reprimed[:5])
                       + (", ..." if len(reprimed) > 5 else "")
                       + "; the motion across is unknowable: the truth row is off by it, and a "
                         "firmware that integrated it instead is off the reference"))
@@ -377,7 +384,7 @@ def _facts(report: dict[str, Any]) -> list[tuple[str, str]]:
             f"{pose['heading_rad']:.4f} rad ({math.degrees(pose['heading_rad']):.2f} deg)",
         )
     )
-    final = final_text(report.get("firmware_final"))
+    final = final_text(report.get("firmware_final"), first_s)
     if final:  # a PASS may end DEGRADED (a latched REASON): said, never a plain PASS
         facts.append(("firmware", final))
     return facts
