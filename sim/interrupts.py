@@ -11,6 +11,11 @@ point, even when the exception that should have stopped it never arrived.
 
 from __future__ import annotations
 
+import contextlib
+import signal
+from collections.abc import Callable, Iterator, Mapping
+from typing import Any
+
 _latched: list[int] = []  # the signal numbers latched since the last ``clear``, first first
 
 
@@ -27,3 +32,21 @@ def latched() -> int | None:
 def clear() -> None:
     """Forget every latched signal (a command's end: the next one starts unasked)."""
     _latched.clear()
+
+
+@contextlib.contextmanager
+def handlers_installed(handlers: Mapping[signal.Signals, Callable[..., Any]]) -> Iterator[None]:
+    """``handlers`` (Python-level) while inside, the previous ones back after; in a thread other
+    than the main one (where ``signal.signal`` refuses) none, the block run as it is."""
+    previous: dict[signal.Signals, Any] = {}
+    try:
+        for sig, handler in handlers.items():
+            previous[sig] = signal.signal(sig, handler)
+    except ValueError:  # not the main thread
+        yield
+        return
+    try:
+        yield
+    finally:
+        for sig, before in previous.items():
+            signal.signal(sig, before)

@@ -21,7 +21,7 @@ import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
 from types import FrameType
-from typing import Any, NoReturn
+from typing import NoReturn
 
 from odocan import __version__
 from odocan.host.cli.dbcfirst import follow_named_dbc
@@ -273,18 +273,10 @@ def sigterm_as_interrupt() -> Iterator[None]:
     on to its end (exit 0, or -2 from the interpreter's exit). Main thread only (elsewhere a
     no-op); commands that install their own handlers override it."""
     interrupts.clear()
-    previous: dict[signal.Signals, Any] = {}
     try:
-        for sig in _LATCHED_SIGNALS:
-            previous[sig] = signal.signal(sig, _interrupt)
-    except ValueError:  # not the main thread
-        yield
-        return
-    try:
-        yield
+        with interrupts.handlers_installed(dict.fromkeys(_LATCHED_SIGNALS, _interrupt)):
+            yield
     finally:
-        for signum, handler in previous.items():
-            signal.signal(signum, handler)
         interrupts.clear()
 
 

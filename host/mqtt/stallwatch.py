@@ -20,11 +20,12 @@ and drops those beyond its queue unanswered, and the line says that instead.
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import logging
 import signal
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
+
+from odocan.sim.interrupts import handlers_installed
 
 log = logging.getLogger("odocan.mqtt")
 
@@ -53,8 +54,11 @@ class StallWatch:
         self.continued_at_s = float("-inf")  # monotonic time of the last SIGCONT
 
     async def run(self) -> None:
-        """Wake every ``WATCH_PERIOD_S``; a wake that came ``STALL_S`` late is a stall."""
-        with _on_sigcont(self.continued):
+        """Wake every ``WATCH_PERIOD_S``; a wake that came ``STALL_S`` late is a stall. SIGCONT
+        by a Python-level handler, not the loop's: it runs at the first bytecode after the
+        process goes on, before the loop turns its late timer (``add_signal_handler``'s callback
+        came a turn or two after it)."""
+        with handlers_installed({signal.SIGCONT: self.continued}):  # main thread only
             last = time.monotonic()
             while True:
                 await asyncio.sleep(WATCH_PERIOD_S)
@@ -80,18 +84,3 @@ class StallWatch:
         """``loop_stalls`` and ``loop_stalled_ms`` (sums: a sharded fleet adds its shards')."""
         return {"loop_stalls": self.stalls, "loop_stalled_ms": round(self.stalled_s * 1e3)}
 
-
-@contextlib.contextmanager
-def _on_sigcont(handler: Callable[..., None]) -> Iterator[None]:
-    """``handler`` on SIGCONT while in the block (main thread only, else nothing). A Python-level
-    handler, not the loop's: it runs at the first bytecode after the process goes on, before the
-    loop turns its late timer (``add_signal_handler``'s callback came a turn or two after it)."""
-    try:
-        before = signal.signal(signal.SIGCONT, handler)
-    except ValueError:  # not the main thread
-        yield
-        return
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGCONT, before)
