@@ -1,0 +1,157 @@
+"""Combined bus faults (``delay`` with ``busoff`` and ``dup``, issue #11): who is wrong.
+
+The trial's three drives (kobuki, 4 s, seed 703) FAIL a firmware whose every on-board pose is
+the float64 odometry of the encoder frames it actually took: the Python firmware (the C port's
+log is byte-identical) is run with its ``Odometry.step_deltas`` and ``set_pose`` watched, and
+each step it integrated is integrated again here in plain float64 (the exact arc) from the pose
+it had; the RAM pose after each step is within 1e-6 mm and 1e-12 rad of it on every drive
+below. So the firmware is right and the judge wrong: its model of the frames the firmware took
+differs under these faults (on ``delay=0.5:150`` the firmware took the late stream's COUNTER 8,
+9, 10 at 0.55 to 0.57 s and refused the on-time COUNTER 7 at 0.55 s, a wrong sequence in its
+one-period window; the host's E2E accepted both and its reference integrated the on-time one).
+Until the judges are fixed the verdicts are pinned as strict xfails: a fixed judge turns them
+into XPASS, which fails the suite until the marks are removed. A pose 10 mm off from 2.0 s
+FAILs, except on three drives the judge PASSes today (pinned too: a possible false PASS).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+import pytest
+
+from odocan.firmware import odometry as fo
+from odocan.host.cli.app import main
+from odocan.host.io.logs import read_log
+from odocan.host.judge.analysis import analyze
+from odocan.sim.robot import load
+from tests.log_edit import raise_raw
+
+KOBUKI = load("kobuki")
+POSITION_LSB_M, HEADING_LSB_RAD = 1e-4, 2 * math.pi / 65536
+TAMPER_LSB = 100  # 10 mm in ODOM_POSE_X's 0.1 mm LSBs
+JUDGE_WRONG = "issue #11: the judge's model of the frames taken under delay + busoff/long delay"
+
+# (seed, faults, the judge wrongly FAILs it today): the trial's three, then a sweep of
+# delay P:MS x busoff x dup (measured: every delay with busoff=1:1 FAILs, delay alone PASSes
+# but 0.5:150)
+DRIVES = [
+    (703, "delay=0.5:150", True),
+    (703, "delay=0.5:100,busoff=1:1", True),
+    (703, "delay=0.3:55,dup=0.1,busoff=1.2:0.8,reboot=2.5", True),
+    (703, "delay=0.3:55", False),
+    (703, "delay=0.3:55,dup=0.1", False),
+    (703, "delay=0.3:55,busoff=1:1", True),
+    (703, "delay=0.3:55,dup=0.1,busoff=1:1", True),
+    (703, "delay=0.5:100", False),
+    (703, "delay=0.5:100,dup=0.1", False),
+]
+
+
+def _params(drives: list[tuple[int, str, bool]]) -> list[object]:
+    xfail = pytest.mark.xfail(strict=True, reason=JUDGE_WRONG)
+    return [pytest.param(seed, faults, id=f"{seed}-{faults}", marks=[xfail] if wrong else [])
+            for seed, faults, wrong in drives]
+
+
+class _Watch:
+    """The firmware's steps integrated again in float64 from the pose it had (per odometry)."""
+
+    def __init__(self) -> None:
+        p = KOBUKI.firmware_params()
+        self.m_left = 2 * math.pi * p["wheel_radius_left_nm"] * 1e-9 / p["counts_per_rev"]
+        self.m_right = 2 * math.pi * p["wheel_radius_right_nm"] * 1e-9 / p["counts_per_rev"]
+        self.b = p["wheelbase_nm"] * 1e-9
+        self.poses: dict[int, list[float]] = {}
+        self.steps = 0
+        self.worst_m = self.worst_rad = 0.0
+
+    @staticmethod
+    def ram(odo: fo.Odometry) -> list[float]:
+        return [odo.x_q40_m / 2**40, odo.y_q40_m / 2**40,
+                (odo.heading_bam64 / 2**64 + odo.heading_turns) * 2 * math.pi]
+
+    def step(self, odo: fo.Odometry, d_left: int, d_right: int) -> None:
+        """After ``odo`` integrated (d_left, d_right): the same step in float64, compared."""
+        s = self.poses[id(odo)]
+        ds = 0.5 * (d_left * self.m_left + d_right * self.m_right)
+        dth = (d_right * self.m_right - d_left * self.m_left) / self.b
+        old, new = s[2], s[2] + dth
+        if abs(dth) < 1e-6:
+            factor = 1 - dth * dth / 24
+            s[0] += ds * factor * math.cos(old + dth / 2)
+            s[1] += ds * factor * math.sin(old + dth / 2)
+        else:
+            s[0] += ds / dth * (math.sin(new) - math.sin(old))
+            s[1] -= ds / dth * (math.cos(new) - math.cos(old))
+        s[2] = new
+        x, y, h = self.ram(odo)
+        self.steps += 1
+        self.worst_m = max(self.worst_m, math.hypot(x - s[0], y - s[1]))
+        self.worst_rad = max(self.worst_rad, abs((h - new + math.pi) % (2 * math.pi) - math.pi))
+
+
+@contextmanager
+def _watched() -> Iterator[_Watch]:
+    watch = _Watch()
+    step, set_pose = fo.Odometry.step_deltas, fo.Odometry.set_pose
+
+    def watched_step(odo: fo.Odometry, d_left: int, d_right: int) -> None:
+        watch.poses.setdefault(id(odo), watch.ram(odo))
+        step(odo, d_left, d_right)
+        watch.step(odo, d_left, d_right)
+
+    def watched_set_pose(odo: fo.Odometry, x: int, y: int, heading: int) -> None:
+        set_pose(odo, x, y, heading)
+        watch.poses[id(odo)] = watch.ram(odo)
+
+    with pytest.MonkeyPatch.context() as monkeypatch:
+        monkeypatch.setattr(fo.Odometry, "step_deltas", watched_step)
+        monkeypatch.setattr(fo.Odometry, "set_pose", watched_set_pose)
+        yield watch
+
+
+def _run(path: Path, seed: int, faults: str) -> int:
+    return main(["run", "--robot", "kobuki", "--duration", "4", "--seed", str(seed),
+                 "--faults", faults, "--firmware", "python", "--log", str(path)])
+
+
+@pytest.mark.parametrize(("seed", "faults"), [(s, f) for s, f, _ in DRIVES])
+def test_the_firmware_integrates_the_frames_it_took(seed: int, faults: str,
+                                                    tmp_path: Path) -> None:
+    with _watched() as watch:
+        _run(tmp_path / "drive.log", seed, faults)
+    assert watch.steps > 100, watch.steps
+    assert watch.worst_m <= POSITION_LSB_M / 1000, watch.worst_m
+    assert watch.worst_rad <= HEADING_LSB_RAD / 1000, watch.worst_rad
+
+
+@pytest.mark.parametrize(("seed", "faults"), _params(DRIVES))
+def test_every_judge_passes_the_right_firmware(seed: int, faults: str, tmp_path: Path,
+                                              capsys: pytest.CaptureFixture[str]) -> None:
+    log = tmp_path / "drive.log"
+    codes = [_run(log, seed, faults)]
+    codes += [main(["analyze", str(log), "--stream", s]) for s in ("always", "never")]
+    capsys.readouterr()
+    assert codes == [0, 0, 0]
+
+
+ABSORBED = "analyze PASSes X raised 10 mm from 2.0 s: absorbed (a placement?), not analysed"
+TAMPER_PASSES = {"delay=0.3:55", "delay=0.5:100", "delay=0.5:100,dup=0.1"}  # measured, seed 703
+
+
+@pytest.mark.parametrize(("seed", "faults"), [
+    pytest.param(s, f, id=f"{s}-{f}", marks=[pytest.mark.xfail(strict=True, reason=ABSORBED)]
+                 if f in TAMPER_PASSES else []) for s, f, _ in DRIVES])
+def test_a_pose_10_mm_off_fails(seed: int, faults: str, tmp_path: Path,
+                                capsys: pytest.CaptureFixture[str]) -> None:
+    log, tampered = tmp_path / "drive.log", tmp_path / "tampered.log"
+    _run(log, seed, faults)
+    assert raise_raw(log, tampered, "ODOM_POSE_X", (2, 4), TAMPER_LSB, 2.0) > 20
+    capsys.readouterr()
+    assert not analyze(read_log(tampered), KOBUKI, "exact").passed
+    for stream in ("always", "never"):
+        assert main(["analyze", str(tampered), "--stream", stream]) == 1
