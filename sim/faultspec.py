@@ -66,8 +66,12 @@ MCU_KEYS = ("stall", "reboot")  # the firmware MCU's own faults, not a bus handl
 _KEYS = ("drop", "burst", "dup", "delay", "flip", "babble", "busoff", "stall", "reboot", "seed")
 
 
+ECHO_CHARS = 60  # of a value said back: a 5 000-digit one made a 5 kB "line"
+
+
 def _fail(key: str, value: str, why: str) -> ConfigurationError:
-    return ConfigurationError(f"faults: {key}={value}: {why}")
+    said = value if len(value) <= ECHO_CHARS else value[:ECHO_CHARS] + "..."
+    return ConfigurationError(f"faults: {key}={said}: {why}")
 
 
 @dataclass(frozen=True)
@@ -263,6 +267,8 @@ def _check_int(key: str, value: object, lo: int | None, hi: int | None, what: st
 
 def _number(key: str, text: str, what: str) -> float:
     try:
+        if "_" in text or text != text.strip():  # float() reads "1_0" as 10, " 2" as 2
+            raise ValueError(text)
         value = float(text)
     except ValueError:
         raise _fail(key, text, f"{what} is not a number") from None
@@ -306,9 +312,17 @@ def _parse_value(key: str, value: str) -> dict[str, Any]:
     if key == "reboot":
         parts = _fields(key, value, "T[:DUR]", optional_second=True)
         boot_s = _number(key, parts[1], "DUR") if len(parts) == 2 else 0.0
-        return {key: BusOff(_number(key, parts[0], "T"), boot_s)}
-    at, duration = _fields(key, value, "T:DURATION")  # busoff, stall
-    return {key: BusOff(_number(key, at, "T"), _number(key, duration, "DURATION"))}
+        return {key: _episode(key, value, _number(key, parts[0], "T"), boot_s)}
+    at, duration = _fields(key, value, "T:DUR")  # busoff, stall
+    return {key: _episode(key, value, _number(key, at, "T"), _number(key, duration, "DUR"))}
+
+
+def _episode(key: str, value: str, at_s: float, duration_s: float) -> BusOff:
+    """T and DUR of ``key=value``, refused as given when either is negative."""
+    for what, number in (("T", at_s), ("DUR", duration_s)):
+        if number < 0:
+            raise _fail(key, value, f"{what} must be a finite number >= 0")
+    return BusOff(at_s, duration_s)
 
 
 def two_handles(spec: FaultSpec) -> tuple[FaultSpec, FaultSpec]:

@@ -103,16 +103,18 @@ def mcu_faults(spec: FaultSpec | None) -> McuFaults | None:
 
 
 def check_within(spec: FaultSpec | None, run_s: float) -> None:
-    """A stall or reboot that ends after the run's ``run_s`` seconds is refused in one line: a
-    stall never resumed, or a reset the run never reaches, would be judged as no such fault (a
-    CI job believing it tested a hang it never ran); so are episodes that meet on the ticks
-    (``_check_apart``)."""
+    """A stall or reboot that ends after the run's last tick (``run_s`` seconds of 10 ms ticks)
+    is refused in one line: a stall never resumed, or a reset the run never reaches, would be
+    judged as no such fault (a CI job believing it tested a hang it never ran; an outside trial:
+    ``reboot=9.991`` and ``stall=9.5:0.499`` of a 10 s run PASSed with no reboot or stall);
+    so are episodes that meet on the ticks (``_check_apart``)."""
     if spec is None:
         return
+    ticks = tick_at(run_s)  # the run's ticks: 0 .. ticks - 1
     for key, episode in mcu_episodes(spec):
-        if episode.at_s + episode.duration_s >= run_s:
+        if tick_at(episode.at_s + episode.duration_s) >= ticks:  # never reached or resumed
             shape = "T + DUR" if episode.duration_s else "T"
             raise ConfigurationError(
-                f"faults: {mcu_text(key, episode)}: {shape} must be before "
-                f"the run's end ({run_s:g} s; --duration)")
+                f"faults: {mcu_text(key, episode)}: {shape} must fall on a tick of the run, "
+                f"the last at {(ticks - 1) * TICK_S:.2f} s (--duration {run_s:g})")
     _check_apart(spec)

@@ -87,7 +87,7 @@ def test_spec_parses_every_key_and_prints_back() -> None:
         ("flip=0.1:1:2", "expected flip=P[:BITS]"),
         ("babble=-1", "RATE must be a finite number >= 0"),
         ("babble=inf", "RATE must be finite"),
-        ("busoff=2", "expected busoff=T:DURATION"),
+        ("busoff=2", "expected busoff=T:DUR"),
         ("busoff=-1:2", "T must be a finite number >= 0"),
         ("busoff=3:0", "busoff=3:0: DUR must be > 0 s"),
         ("babble=100:0x050:2:0", "babble=100:0x050:2:0: DUR must be > 0 s"),

@@ -85,9 +85,9 @@ def test_the_keys_parse_print_back_and_go_to_the_firmwares_handle() -> None:
 
 
 @pytest.mark.parametrize(("faults", "words"), [
-    ("stall=3", "expected stall=T:DURATION"),
+    ("stall=3", "expected stall=T:DUR"),
     ("stall=x:1", "T is not a number"),
-    ("stall=3:nan", "DURATION must be finite"),
+    ("stall=3:nan", "DUR must be finite"),
     ("stall=-1:1", "T must be a finite number >= 0"),
     ("stall=3:-2", "DUR must be a finite number >= 0"),
     ("stall=3:0", "DUR must be > 0 s"),
@@ -96,10 +96,12 @@ def test_the_keys_parse_print_back_and_go_to_the_firmwares_handle() -> None:
     ("stall=1:1,busoff=2:1,busoff=5:1", "busoff given twice"),  # stall and reboot repeat
     ("stall=3:2,reboot=4", "overlap"),  # a reset within the halt
     ("stall=3:2,reboot=2.5:0.5", "overlap"),  # a boot time running into the halt
-    ("stall=7:2", f"T + DUR must be before the run's end ({RUN_S:g} s"),  # past the run
-    ("stall=9:1", "T + DUR must be before the run's end"),  # wholly outside it
-    ("reboot=8", f"T must be before the run's end ({RUN_S:g} s"),
-    ("reboot=7:1.5", "T + DUR must be before the run's end"),
+    ("stall=7:2", f"T + DUR must fall on a tick of the run, the last at {RUN_S - 0.01:.2f} s"),
+    ("stall=7.5:0.499", "T + DUR must fall on a tick"),  # resumes after the last tick (trial)
+    ("reboot=7.991", "T must fall on a tick"),  # a reset the run never reaches (trial)
+    ("stall=9:1", "T + DUR must fall on a tick of the run"),  # wholly outside it
+    ("reboot=8", f"T must fall on a tick of the run, the last at {RUN_S - 0.01:.2f} s"),
+    ("reboot=7:1.5", "T + DUR must fall on a tick of the run"),
     ("stall=1e6:1", "at most 86400"),
 ])
 def test_bad_episodes_are_one_line_exit_2(

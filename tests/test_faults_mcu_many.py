@@ -80,8 +80,9 @@ def test_several_episodes_parse_in_time_order_and_print_back() -> None:
     ("stall=5:1,reboot=1,stall=5.5:0.1", "stall=5:1 and stall=5.5:0.1 overlap"),
     ("stall=2:1.004,stall=3.005:1", "fall on the same or adjacent 10 ms ticks"),
     ("reboot=2:0.501,reboot=2.505", "fall on the same or adjacent 10 ms ticks"),
-    ("stall=1:1,stall=7:1.5", "stall=7:1.5: T + DUR must be before the run's end (8 s"),
-    ("reboot=1,reboot=3,reboot=8", "reboot=8: T must be before the run's end"),
+    ("stall=1:1,stall=7:1.5", "stall=7:1.5: T + DUR must fall on a tick of the run, the last at "
+     "7.99 s (--duration 8"),
+    ("reboot=1,reboot=3,reboot=8", "reboot=8: T must fall on a tick of the run"),
     ("stall=1:1,busoff=2:1,busoff=5:1", "busoff given twice"),
     ("stall=1:1,stall=3:0", "DUR must be > 0 s"),
     ("stall=1:1,stall=1e6:1", "at most 86400"),
