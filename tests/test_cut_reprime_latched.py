@@ -12,8 +12,8 @@ that surely re-primed it, the cut's re-prime is taken; in the band between ``pos
 ``certain`` (pmir 3.6-3.8 s: a probe on the firmware's ``_reprime`` says whether it did) both
 hypotheses are tried (r = 0, not re-primed after the APPLY, among the candidates). X 10 mm off
 after the APPLY still FAILs; the stream refuses these logs. Live: the correct firmware is not
-POSE WRONG; 10 mm off is never POSE WRONG in this drive, latched or not (a hole of the live
-judge, not of the word: pinned as strict xfails).
+POSE WRONG; 10 mm off is POSE WRONG, latched or not (before, never: the held samples' stall
+rule measured the silence from before the stall, ``livecutreprime.CutHold.arm``).
 """
 
 from __future__ import annotations
@@ -163,10 +163,12 @@ def test_live_the_correct_firmware_is_not_pose_wrong(halted: int) -> None:
     assert monitor.health(messages[-1].timestamp)["state"] in ("OK", "DEGRADED")
 
 
-@pytest.mark.xfail(strict=True, reason="live: 10 mm off after the APPLY never POSE WRONG when "
-                   "the stall comes 10 s after the reset, latched or not (measured)")
 @pytest.mark.parametrize("latch", [False, True])
 def test_live_a_firmware_10_mm_off_is_pose_wrong(latch: bool) -> None:
+    """Before, never POSE WRONG (DEGRADED): ``CutHold.arm`` measured the stall's silence from
+    the last sample before it, so the first sample held, judged at its release, was left out
+    again as the stall's and a second re-prime hold restarted the reference at the firmware's
+    own pose (``livecutreprime``: the silence ends at the APPLY)."""
     wrong = drive("square", 400, latch, off_q40=100 * LSB_Q40)[0]
     monitor, bridge = _live(wrong)
     assert monitor.tracker.wrongs.count > 0

@@ -56,19 +56,21 @@ class CutHold:
         self._samples: dict[int, Sample] = {}
         self.unchosen = 0  # choices not made: the frames not in the window
 
-    def arm(self, pose: FramePose, last_t_s: float | None) -> None:
-        """An APPLY with all fields staged restarted the reference exactly at ``pose``;
-        ``last_t_s``: the bus time of the last sample's ODOM_POSE_Y before it (the stall's
-        silence measured from there, not carried). Held only while a long stall's re-prime hold
-        would be (module docstring)."""
+    def arm(self, pose: FramePose) -> None:
+        """An APPLY with all fields staged restarted the reference exactly at ``pose``. Held
+        only while a long stall's re-prime hold would be (module docstring). The stall's
+        silence ends here, at the APPLY: measured from the last sample before the stall (issue
+        #11, a stall 10 s after a reset), the first sample held was left out again as the
+        stall's when judged at ``release``, and the stall's re-prime hold, declared by
+        COUNTER_RESET, restarted the reference at the firmware's own pose (10 mm off: OK)."""
         tracker = self._tracker
         talked = tracker.first.talked_before(tracker.now_s)
         if talked is None or not possible(tracker.now_s - talked[0], CYCLE_S,
                                           tracker.raw.gate.least):
             return
         tracker.reprime.release(False)  # a hold pending: its samples held are the old life's
-        # no placement owed (``livefirst``): the pose is exact, the silence not carried
-        tracker.stall.heard_first(tracker.now_s if last_t_s is None else last_t_s)
+        # no placement owed (``livefirst``): the pose is exact, the silence ends at the APPLY
+        tracker.stall.heard_first(tracker.now_s)
         self.pending, self._from_s, self._held = pose, tracker.now_s, []
 
     def holds(self, pose: FramePose, y: Half, queued: bool) -> bool:

@@ -150,7 +150,7 @@ def apply_set_pose(tracker: PoseTracker, seq: int, staged: dict[str, float],
     start_reference(tracker, pose, counts, [], first_owed)  # a placement owed: still owed
     if all(name in staged for name in ("X", "Y", "HEADING")):
         tracker.fit = LiveFit(pose.x_m, pose.y_m, exact=True)  # the pose set: nothing to fit
-        tracker.cut.arm(pose, silence_from_s)  # just after a long stall (livecutreprime)
+        tracker.cut.arm(pose)  # just after a long stall (livecutreprime)
     return pose
 
 
