@@ -24,7 +24,10 @@ frame (``Life.boot``), with E2E sequences starting afresh (a reboot is not frame
   the frame it primed on: ENC_E2E_OK + ENC_E2E_LOST - 1 COUNTER steps back from the page's
   latest encoder frame (``page_counted_start``: the earliest the counts allow). That holds when the
   log missed the boot summary (UPTIME counts whole seconds: the summaries of the first second
-  all say 0) and is checked again on the life (``host.judge.powerup.saw_only_the_log``);
+  all say 0) and is checked again on the life (``host.judge.powerup.saw_only_the_log``); that
+  life is a power-up (``Life.boot``) whatever UPTIME says: a new firmware starts at (0, 0, 0)
+  (issue #11: rebooted inside a 2 s bus-off, UPTIME 1 in the first summary heard, its start was
+  fitted and a firmware 10 mm off over the whole new life PASSed);
 * above both, when the summary (UPTIME 0) follows the new firmware's power-up pose within 80 ms,
   the frame that pose names (``host.judge.bootnamed``): the two rules above read ODOM_STATUS
   stamps, which a recorder may have delayed (every one 15..50 ms late: 1..5 frames late);
@@ -107,6 +110,7 @@ def split_lives(frames: FrameArrays, decoder: BulkDecoder) -> list[Life]:
     pages = encoder_count_pages(frames, decoder)
     poses, after = powerup_poses(frames, decoder), pose_enc_rows(frames, decoder)
     starts: list[int] = []
+    counted_boots: list[bool] = []  # the start named by the new firmware's first count page
     limits = [b[0] for b in boots[1:]] + [len(frames)]
     for (position, uptime_s, state, _), limit in zip(boots, limits, strict=True):
         start = summary_start(position, uptime_s, state, encoders)
@@ -119,10 +123,11 @@ def split_lives(frames: FrameArrays, decoder: BulkDecoder) -> list[Life]:
             if found is not None and found > (starts[-1] if starts else 0):
                 start = found
         starts.append(start)
+        counted_boots.append(counted is not None and start == counted)
     lives = [Life(everything[: starts[0]], boot=False)]
     for k, (position, uptime_s, _, before_s) in enumerate(boots):
         end = starts[k + 1] if k + 1 < len(starts) else len(frames)
-        lives.append(Life(everything[starts[k] : end], boot=uptime_s == 0,
+        lives.append(Life(everything[starts[k] : end], boot=uptime_s == 0 or counted_boots[k],
                           t_s=float(frames.timestamp_s[position]), uptime_before_s=before_s))
     return lives
 

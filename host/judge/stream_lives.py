@@ -91,6 +91,7 @@ class _Boot:
     pose: tuple[int, float] | None = None  # its first ODOM_POSE_Y: log position, bus time
     stalled: bool | None = None  # stalled before its first pose (None: not told yet)
     page_at: int | None = None  # its first count page's position in the log
+    by_count: bool = False  # its start is the one its first count page named (a power-up)
 
 
 @dataclass
@@ -208,7 +209,8 @@ class StreamLives:
         lives = [LifeSpan(0, starts[0], boot=False)]
         for k, (boot, start) in enumerate(self._boots):
             end = starts[k + 1] if k + 1 < len(starts) else stop
-            lives.append(LifeSpan(start, end, boot=boot.uptime_s == 0, t_s=boot.t_s,
+            lives.append(LifeSpan(start, end, boot=boot.uptime_s == 0 or boot.by_count,
+                                  t_s=boot.t_s,
                                   uptime_before_s=boot.before_s))
         return lives
 
@@ -260,9 +262,10 @@ class StreamLives:
         previous = self._boots[-1][1] if self._boots else 0
         start = boot.start
         if boot.counted is not None and boot.counted > previous and not self._stalled(boot, limit):
-            start = boot.counted
+            start, boot.by_count = boot.counted, True
         if boot.named is not None and boot.named > previous:
             start = boot.named  # the power-up pose's word last (``reboots.split_lives``)
+            boot.by_count = start == boot.counted
         self._boots.append((boot, start))
         self._tracking = [other for other in self._tracking if other is not boot]
 
