@@ -46,6 +46,7 @@ from typing import Any
 import can
 import numpy as np
 import numpy.typing as npt
+from can.interfaces.virtual import VirtualBus
 
 from odocan.firmware.config import RobotParams
 from odocan.host.io.logs import (
@@ -148,8 +149,8 @@ class LockstepReplay:
         self, params: RobotParams, listeners: list[can.Listener], channel: str
     ) -> None:
         self.clock = LockstepClock()
-        self._buses = [can.Bus(interface="virtual", channel=channel, preserve_timestamps=True,
-                               receive_own_messages=False) for _ in range(3)]
+        self._buses = [VirtualBus(channel=channel, preserve_timestamps=True,
+                                  receive_own_messages=False) for _ in range(3)]
         self._log_bus, fw_bus, host_bus = self._buses
         self.board = FirmwareBoard(fw_bus, params, self.clock)
         self.listeners = listeners
@@ -191,6 +192,7 @@ class LockstepReplay:
         self.loop.start_s = t0 - phase_ticks * TICK_S
         self.loop.run_to(phase_ticks)
         held = self._held_fed(frames, feed, phase_ticks)
+        hidden = _unfed_truth(frames, feed, held)
         events = _events(enc.index, feed.truth, held)
         shift_s = clock_steps_s(frames.timestamp_s)
         due: int | None = None  # the tick whose encoder frame is on the bus, not yet run
@@ -214,7 +216,7 @@ class LockstepReplay:
                         self._reset(which, False)
                     message = to_message(frames, position)
                     message.timestamp += float(shift_s[position])
-                    self._log_bus.send(message)
+                    self._send(message, position in hidden)
                     if which >= 0:
                         self._reset(which, True)
                 else:
@@ -229,15 +231,20 @@ class LockstepReplay:
             if self.fed:  # none: the caller's one line says so
                 print(f"interrupted after {self.ticks * TICK_S:g} s of the log", file=sys.stderr)
 
+    def _send(self, message: can.Message, firmware_only: bool) -> None:
+        """Put a log's frame on the bus, or (``_unfed_truth``) into the firmware's handle's
+        receive queue alone, as python-can's virtual bus does for each handle but the sender."""
+        if firmware_only:
+            self._buses[1].queue.put(message)
+        else:
+            self._log_bus.send(message)
+
     def _held_fed(self, frames: FrameArrays, feed: ReplayInput,
                   phase_ticks: int) -> dict[int, int]:
-        """``held``, its ticks ``phase_ticks`` later, less the truth frames not fed (a log cut
-        mid-drive: its truth left off the replayed bus, held frames too) and those past the
-        end of ``frames`` (a prefix of the log, tried)."""
-        truth_id = contract.database().get_message_by_name("SIM_TRUTH").frame_id
-        fed = set(feed.truth.tolist())
-        return {p: t + phase_ticks for p, t in self.held.items() if p < len(frames.can_id)
-                and (p in fed or int(frames.can_id[p]) != truth_id)}
+        """``held``, its ticks ``phase_ticks`` later, less those past the end of ``frames`` (a
+        prefix of the log, tried). A truth frame not fed (a log cut mid-drive) is kept: it took
+        a slot of the recording board's FIFO (``_unfed_truth``)."""
+        return {p: t + phase_ticks for p, t in self.held.items() if p < len(frames.can_id)}
 
     def _drain(self) -> None:
         deliver(self.loop.host_bus, self.listeners)
@@ -281,11 +288,23 @@ def clock_steps_s(timestamp_s: npt.NDArray[np.float64]) -> npt.NDArray[np.float6
     return np.concatenate(([0.0], np.cumsum(steps)))
 
 
+def _unfed_truth(frames: FrameArrays, feed: ReplayInput, held: dict[int, int]) -> set[int]:
+    """The held frames that are truth frames left off the replayed bus (a log whose firmware
+    powered up mid-drive: ``truth_compared`` False): handed to the firmware's receive queue
+    alone, since the halted board's FIFO held them (three slots: ``stall=0:1,stall=6:0.5``,
+    seed 2, kept the MOTOR_CMD, the encoder frame and the first SIM_TRUTH frame of the halt's
+    first tick); left out, the replay's FIFO took a later encoder frame in its place, no
+    trial reproduced the log, and the correct firmware was UNJUDGED (issue #11)."""
+    truth_id = contract.database().get_message_by_name("SIM_TRUTH").frame_id
+    fed = set(feed.truth.tolist())
+    return {p for p in held if p not in fed and int(frames.can_id[p]) == truth_id}
+
+
 def _events(encoders: IntArray, truth: IntArray,
             held: dict[int, int] | None = None) -> list[tuple[int, int]]:
     """(position in the log, k) in log order: k the encoder frame's number, -1 for truth, -2
-    for a frame a halted board's FIFO held (``LockstepReplay.held``; a truth frame only when
-    truth is fed)."""
+    for a frame a halted board's FIFO held (``LockstepReplay.held``; a truth frame not fed
+    goes to the firmware alone: ``_unfed_truth``)."""
     held = held or {}
     events = [(int(p), k) for k, p in enumerate(encoders.tolist())]
     events += [(int(p), -1) for p in truth.tolist() if int(p) not in held]

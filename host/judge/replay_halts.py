@@ -25,6 +25,14 @@ The silence as it was (the only halt replayed before) was that for ``stall=2.0:0
 4, instant bus): its firmware's first frames after it were no poses, the replay's poses named
 none of the log's after it, and a log with ODOM_POSE_X raised 10 mm there PASSed. The silence
 as it is stays only when no trial names them all (or the log has no pose after it).
+
+The log's poses after the silence are those naming a tick from its first on, not its end: the
+first pose after a 50-tick halt names the encoder frame of the halt's first tick, held by the
+FIFO, whose 4-bit COUNTER resolves 48 ticks later, inside the silence (``EncoderTrack.named``).
+Taken from the silence's end, two halts one tick apart (``stall=7:0.5,stall=7.52:0.5``, seed
+7: ticks 700..749 and 752..801) left no pose after the first before the second: no trial was
+taken, the first halt stayed one tick early with an empty FIFO, and the correct firmware was
+UNJUDGED (issue #11).
 """
 
 from __future__ import annotations
@@ -99,7 +107,9 @@ def fit_halts(frames: FrameArrays, accepted: npt.NDArray[np.bool_], track: Encod
     for k, silence in enumerate(plan.halts):
         cut = _next_halt_position(track, plan, k, len(frames))
         head, head_accepted = frames.select(slice(0, cut)), accepted[:cut]
-        after = {t for t in onboard_by_tick(head, head_accepted) if t >= silence[1]}
+        # after the halt: every pose naming a tick from the silence on (none before it does),
+        # the first one's ENC_COUNTER may alias into the silence (module docstring)
+        after = {t for t in onboard_by_tick(head, head_accepted) if t >= silence[0]}
         best: tuple[tuple[int, int], LifePlan] | None = None
         for halt in halt_candidates(silence):
             for held in fifo_contents(frames, track, halt):
