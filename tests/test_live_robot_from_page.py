@@ -167,8 +167,11 @@ def test_odocan_monitor_without_robot_passes_a_live_kobuki(
     """The trial's command, on a live kobuki rig: exit 0, the robot said and in the JSON."""
     code, out, err = run_cli(capsys, "monitor", "-i", "virtual", "-c", kobuki.channel,
                              "--duration", BOUND, "--json", "--require-firmware")
-    assert (code, err) == (0, "odocan monitor: robot 'kobuki' (from the firmware's PROFILE "
-                              "page)\n")
+    assert code == 0, err  # its robot said, then the watch's PASS line
+    lines = err.splitlines()
+    assert lines[0] == "odocan monitor: robot 'kobuki' (from the firmware's PROFILE page)"
+    assert len(lines) == 2, err
+    assert lines[1].startswith("monitor: PASS: ")
     assert json.loads(out)["robot"] == FROM_PAGE
 
 

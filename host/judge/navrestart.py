@@ -44,6 +44,7 @@ from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.protocol.e2e import crc8h2f_p02, crc8h2f_p02_one, e2e_messages
 
 NAV_MESSAGE = "NAV_STATUS"
+NAV_BYTES = 8  # its length (the DBC): what its E2E CRC covers
 TICK_S = busfacts.ENC_CYCLE_S  # the firmware's tick: at most one NAV_STATUS in it (the DBC)
 COUNTER_LAP = busfacts.ENC_COUNTER_LAP  # every E2E COUNTER's lap: 16
 SLACK_S = busfacts.POSE_CYCLE_MS / 4000  # a recorder's stamping (``bootticks``' slack)
@@ -124,7 +125,7 @@ def restarted_within(data_ids: tuple[int, ...] | None, heard: Iterable[tuple[flo
     judges' ``restart_times``, read only when a summary needs it."""
     before: tuple[float, int] | None = None
     for t_s, data in heard:
-        if len(data) < 2:
+        if len(data) != NAV_BYTES:  # a babbler's short frame on the ID: no CRC, no COUNTER
             continue
         counter = data[1] & ENC_COUNTER_MASK
         if data_ids and data[0] != crc8h2f_p02_one(data, data_ids[counter]):

@@ -419,11 +419,11 @@ def load_judges_dbc(path: Path) -> cantools.database.can.Database:
     from odocan.sim.contract import database
 
     db = load_dbc(path)
+    require_judges_follow(db, path)  # a fact the judges read, named first
     lacking = missing_signals(db, database(SHIPPED_DBC))
     if lacking is not None:
         raise DbcFactError(f"--dbc {path}: {lacking}, which odocan's judges read (its DBC: "
                            f"{SHIPPED_DBC})")
-    require_judges_follow(db, path)
     return db
 
 
