@@ -470,3 +470,30 @@ def _binomial_cdf(k: int, n: int, p: float) -> float:
     ]
     top = max(terms)
     return math.exp(top) * sum(math.exp(t - top) for t in terms)
+
+
+def reset_then_send(rig: FaultRig, reset_at: int, send_at: int | None,
+                    frames: list[tuple[int, bytes]], ticks: int) -> tuple[can.Message, ...]:
+    """Run ``rig`` ``ticks`` ticks: the MCU reset at tick ``reset_at`` (its receive FIFO
+    cleared), ``frames`` (CAN ID, data) sent by a tool in tick ``send_at`` (a set-pose's or a
+    config's staged fields and APPLY); every frame heard."""
+    heard: list[can.Message] = []
+    tool = open_virtual(rig.channel)
+
+    def host(k: int) -> None:
+        if k == reset_at:
+            rig.board.reboot()
+            while rig.fw_bus.recv(0) is not None:  # the reset clears the receive FIFO
+                pass
+        if k == send_at:
+            for can_id, data in frames:
+                tool.send(can.Message(arbitration_id=can_id, is_extended_id=False, data=data,
+                                      timestamp=k * TICK_S))
+
+    rig.observers.append(lambda _k, got: heard.extend(got))
+    rig.before_board.append(host)
+    try:
+        rig.run(ticks * TICK_S)
+    finally:
+        tool.shutdown()
+    return tuple(heard)

@@ -31,11 +31,10 @@ from odocan.firmware.odometry import Odometry
 from odocan.host.io.logs import read_log
 from odocan.host.judge.analysis import analyze
 from odocan.host.judge.stream_analysis import NotStreamable, analyze_file
-from odocan.sim.board import TICK_S
 from odocan.sim.robot import load
 from odocan.sim.scenarios import get_scenario
 from tests import host_frames as hf
-from tests.fault_rig import FaultRig, open_virtual
+from tests.fault_rig import FaultRig, reset_then_send
 from tests.test_reprime_apply import AFTER_TICKS, LSB_Q40, REBOOT
 from tests.test_staged_apply_sweep import _moved_by
 from tests.test_staged_reboot import PMIR, _live, _written
@@ -52,7 +51,6 @@ def drive(scenario: str, halted: int, latch: bool, robot: str = "pmir", off_q40:
     heard and the ticks the firmware re-primed on (its ``_reprime`` probed, as a debugger's
     breakpoint). ``off_q40``: set_pose adds it to X (a wrong firmware's APPLY)."""
     apply_at = CUT_STALL + halted + 2
-    heard: list[can.Message] = []
     primed: list[int] = []
     sends = ((fr.SetPoseField.X, TARGET[0]), (fr.SetPoseField.Y, TARGET[1]),
              (fr.SetPoseField.HEADING, TARGET[2]), (fr.SetPoseField.APPLY, 0))
@@ -72,26 +70,10 @@ def drive(scenario: str, halted: int, latch: bool, robot: str = "pmir", off_q40:
         patch.setattr(encoders, "_reprime", probed)
         rig.halted = lambda k: ((latch and REBOOT + 100 < k <= REBOOT + 700)
                                 or CUT_STALL < k <= CUT_STALL + halted)
-        tool = open_virtual(rig.channel)
-
-        def host(k: int) -> None:
-            if k == REBOOT:
-                rig.board.reboot()
-                while rig.fw_bus.recv(0) is not None:  # the reset clears the receive FIFO
-                    pass
-            if k == apply_at:
-                for counter, (field, value) in enumerate(sends):
-                    tool.send(can.Message(
-                        arbitration_id=fr.ODOM_SET_POSE_ID, is_extended_id=False,
-                        data=hf.pack_odom_set_pose(counter, field, value, ErrorMask()),
-                        timestamp=k * TICK_S))
-
-        rig.observers.append(lambda _k, got: heard.extend(got))
-        rig.before_board.append(host)
-        try:
-            rig.run((CUT_STALL + halted + AFTER_TICKS) * TICK_S)
-        finally:
-            tool.shutdown()
+        heard = reset_then_send(
+            rig, REBOOT, apply_at,
+            [(fr.ODOM_SET_POSE_ID, hf.pack_odom_set_pose(counter, field, value, ErrorMask()))
+             for counter, (field, value) in enumerate(sends)], CUT_STALL + halted + AFTER_TICKS)
     return tuple(heard), tuple(primed)
 
 

@@ -23,7 +23,6 @@ from odocan.host.cli.app import main
 from odocan.host.judge import stream_analysis, stream_choice
 from odocan.host.judge.stream_analysis import NotStreamable, analyze_file
 from odocan.host.protocol.commands import CommandEncoder
-from odocan.sim.board import TICK_S
 from odocan.sim.robot import load
 from odocan.sim.scenarios import get_scenario
 from tests.test_stall_before_first_pose import EVIDENCE
@@ -114,7 +113,7 @@ def test_many_logs_say_each_refusal(tmp_path: Path, capsys: pytest.CaptureFixtur
 def _config_drive(scenario: str, halted: int, after: int) -> tuple[can.Message, ...]:
     """``test_staged_apply_sweep.drive``'s re-primed stall, but the APPLY ``after`` ticks after
     it is a config's (every field staged, pmir's own values, then APPLY, in that tick)."""
-    from tests.fault_rig import FaultRig, open_virtual
+    from tests.fault_rig import FaultRig, reset_then_send
     from tests.test_reprime_apply import AFTER_TICKS, REBOOT
     from tests.test_staged_reboot import PMIR
 
@@ -122,28 +121,11 @@ def _config_drive(scenario: str, halted: int, after: int) -> tuple[can.Message, 
         "counts_per_rev": PMIR.counts_per_rev, "wheel_radius_left_m": PMIR.wheel_radius_left_m,
         "wheel_radius_right_m": PMIR.wheel_radius_right_m, "wheelbase_m": PMIR.wheelbase_m,
         "counter_bits": PMIR.counter_bits, "integrator": "exact"}).frames
-    heard: list[can.Message] = []
     with FaultRig(scenario=get_scenario(scenario, PMIR, duration_s=60.0)) as rig:
         rig.halted = lambda k: REBOOT < k <= REBOOT + halted
-        tool = open_virtual(rig.channel)
-
-        def host(k: int) -> None:
-            if k == REBOOT:
-                rig.board.reboot()
-                while rig.fw_bus.recv(0) is not None:  # the reset clears the receive FIFO
-                    pass
-            if k == REBOOT + halted + after:
-                for frame in frames:
-                    tool.send(can.Message(arbitration_id=frame.can_id, is_extended_id=False,
-                                          data=frame.data, timestamp=k * TICK_S))
-
-        rig.observers.append(lambda _k, got: heard.extend(got))
-        rig.before_board.append(host)
-        try:
-            rig.run((REBOOT + halted + AFTER_TICKS) * TICK_S)
-        finally:
-            tool.shutdown()
-    return tuple(heard)
+        return reset_then_send(rig, REBOOT, REBOOT + halted + after,
+                               [(frame.can_id, frame.data) for frame in frames],
+                               REBOOT + halted + AFTER_TICKS)
 
 
 @pytest.mark.parametrize("apply", ["set-pose", "config"])
