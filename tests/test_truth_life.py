@@ -161,8 +161,9 @@ def test_without_the_boot_summaries_every_judge_still_compares_in_the_new_life_f
     reboot_run: tuple[Record, Watch, Path], tmp_path: Path,
 ) -> None:
     """The recorder missed the new firmware's summaries of its first second (all UPTIME 0):
-    the reboot is told at UPTIME 1, the life's start fitted (analyze) or adopted at the next
-    pose (the live judges); the truth is still re-based at the life's first truth sample on
+    the reboot is told at UPTIME 1; analyze takes the life's start from its first count page
+    (ENC_E2E_OK names the frame it primed on), a power-up whatever UPTIME says
+    (``reboots.split_lives``), the live judges adopt it at the next pose; the truth is still re-based at the life's first truth sample on
     the reference (the same ``life_origin``), not compared in the simulator's frame."""
     record, _, _ = reboot_run
     profile = record.rig.profile
@@ -177,7 +178,7 @@ def test_without_the_boot_summaries_every_judge_still_compares_in_the_new_life_f
                 logger.on_message_received(msg)
     analysis = analyze(read_log(path), profile)
     (boot,) = analysis.report["reboots"]
-    assert boot["reference_start"] == "fitted"
+    assert boot["reference_start"] == "power-up"  # named by the count page, not fitted
     after = analysis.series["truth_t_s"] >= boot["t_s"] - t0 - 1.0
     assert np.count_nonzero(after) > 20
     assert float(np.max(analysis.series["truth_position_error_m"][after])) < FEW_MM
