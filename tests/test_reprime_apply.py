@@ -43,10 +43,9 @@ from odocan.host.io.logs import read_log
 from odocan.host.judge.analysis import analyze
 from odocan.host.mqtt.endverdict import end_verdict
 from odocan.host.report.summary import kept_failures, kept_unjudged
-from odocan.sim.board import TICK_S
 from odocan.sim.scenarios import get_scenario
 from tests import host_frames as hf
-from tests.fault_rig import FaultRig, open_virtual
+from tests.fault_rig import FaultRig, reset_then_send
 from tests.test_staged_reboot import PMIR, _live, _written, _x_by_frame
 
 REBOOT = 10  # the reset's tick (0.1 s)
@@ -61,32 +60,15 @@ def drive(scenario: str, halted: int, after: int | None,
     """The module docstring's drive: halted ``halted`` ticks, the APPLY ``after`` ticks after
     it resumed (None: none); set_pose adds ``off_q40`` to X."""
     apply_at = None if after is None else REBOOT + halted + after
-    heard: list[can.Message] = []
+    apply = [(fr.ODOM_SET_POSE_ID, hf.pack_odom_set_pose(0, fr.SetPoseField.APPLY, 0,
+                                                          ErrorMask()))]
     with pytest.MonkeyPatch.context() as patch, FaultRig(
             scenario=get_scenario(scenario, PMIR, duration_s=60.0)) as rig:
-        apply = Odometry.set_pose
+        set_pose = Odometry.set_pose
         patch.setattr(Odometry, "set_pose",
-                      lambda self, x, y, h: apply(self, x + off_q40, y, h))
+                      lambda self, x, y, h: set_pose(self, x + off_q40, y, h))
         rig.halted = lambda k: REBOOT < k <= REBOOT + halted
-        tool = open_virtual(rig.channel)
-
-        def host(k: int) -> None:
-            if k == REBOOT:
-                rig.board.reboot()
-                while rig.fw_bus.recv(0) is not None:  # the reset clears the receive FIFO
-                    pass
-            if k == apply_at:
-                data = hf.pack_odom_set_pose(0, fr.SetPoseField.APPLY, 0, ErrorMask())
-                tool.send(can.Message(arbitration_id=fr.ODOM_SET_POSE_ID, data=data,
-                                      is_extended_id=False, timestamp=k * TICK_S))
-
-        rig.observers.append(lambda _k, got: heard.extend(got))
-        rig.before_board.append(host)
-        try:
-            rig.run((REBOOT + halted + AFTER_TICKS) * TICK_S)
-        finally:
-            tool.shutdown()
-    return tuple(heard)
+        return reset_then_send(rig, REBOOT, apply_at, apply, REBOOT + halted + AFTER_TICKS)
 
 
 def _report(messages: tuple[can.Message, ...], path: Path) -> dict[str, Any]:

@@ -36,10 +36,9 @@ from odocan.host.io.logs import read_log
 from odocan.host.judge.analysis import analyze
 from odocan.host.judge.stream_analysis import NotStreamable, analyze_file
 from odocan.host.report.summary import kept_failures
-from odocan.sim.board import TICK_S
 from odocan.sim.scenarios import get_scenario
 from tests import host_frames as hf
-from tests.fault_rig import FaultRig, open_virtual
+from tests.fault_rig import FaultRig, reset_then_send
 from tests.independent_checker import HEADING_LSB_RAD, POSITION_LSB_M, _Odometry
 from tests.test_analysis_reboot import checker_robot
 from tests.test_reprime_apply import AFTER_TICKS, LSB_Q40, METRE_Q40, REBOOT
@@ -58,36 +57,17 @@ def drive(scenario: str, halted: int, after: int, target: Target,
     """``test_reprime_apply.drive`` with X, Y, HEADING (``target``) and APPLY sent in the
     APPLY's tick (E2E COUNTERs 0..3); set_pose adds ``off_q40`` to X."""
     apply_at = REBOOT + halted + after
-    heard: list[can.Message] = []
+    sends = ((fr.SetPoseField.X, target[0]), (fr.SetPoseField.Y, target[1]),
+             (fr.SetPoseField.HEADING, target[2]), (fr.SetPoseField.APPLY, 0))
+    frames = [(fr.ODOM_SET_POSE_ID, hf.pack_odom_set_pose(counter, field, value, ErrorMask()))
+              for counter, (field, value) in enumerate(sends)]
     with pytest.MonkeyPatch.context() as patch, FaultRig(
             scenario=get_scenario(scenario, PMIR, duration_s=60.0)) as rig:
         apply = Odometry.set_pose
         patch.setattr(Odometry, "set_pose",
                       lambda self, x, y, h: apply(self, x + off_q40, y, h))
         rig.halted = lambda k: REBOOT < k <= REBOOT + halted
-        tool = open_virtual(rig.channel)
-        sends = ((fr.SetPoseField.X, target[0]), (fr.SetPoseField.Y, target[1]),
-                 (fr.SetPoseField.HEADING, target[2]), (fr.SetPoseField.APPLY, 0))
-
-        def host(k: int) -> None:
-            if k == REBOOT:
-                rig.board.reboot()
-                while rig.fw_bus.recv(0) is not None:  # the reset clears the receive FIFO
-                    pass
-            if k == apply_at:
-                for counter, (field, value) in enumerate(sends):
-                    tool.send(can.Message(
-                        arbitration_id=fr.ODOM_SET_POSE_ID, is_extended_id=False,
-                        data=hf.pack_odom_set_pose(counter, field, value, ErrorMask()),
-                        timestamp=k * TICK_S))
-
-        rig.observers.append(lambda _k, got: heard.extend(got))
-        rig.before_board.append(host)
-        try:
-            rig.run((REBOOT + halted + AFTER_TICKS) * TICK_S)
-        finally:
-            tool.shutdown()
-    return tuple(heard)
+        return reset_then_send(rig, REBOOT, apply_at, frames, REBOOT + halted + AFTER_TICKS)
 
 
 def _apply_acked_s(messages: tuple[can.Message, ...]) -> float:

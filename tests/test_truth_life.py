@@ -163,8 +163,9 @@ def test_without_the_boot_summaries_every_judge_still_compares_in_the_new_life_f
     """The recorder missed the new firmware's summaries of its first second (all UPTIME 0):
     the reboot is told at UPTIME 1; analyze takes the life's start from its first count page
     (ENC_E2E_OK names the frame it primed on), a power-up whatever UPTIME says
-    (``reboots.split_lives``), the live judges adopt it at the next pose; the truth is still re-based at the life's first truth sample on
-    the reference (the same ``life_origin``), not compared in the simulator's frame."""
+    (``reboots.split_lives``), the live judges adopt it at the next pose; the truth is still
+    re-based at the life's first truth sample on the reference (the same ``life_origin``), not
+    compared in the simulator's frame."""
     record, _, _ = reboot_run
     profile = record.rig.profile
     origin, worst_m, _ = independent(record, min(profile.counter_bits, 24))
