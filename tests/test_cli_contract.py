@@ -245,11 +245,16 @@ def test_a_report_that_fails_at_the_end_names_its_path_after_the_summary(
         ["run", "--seed", "-1", "--debug"],
     ],
 )
-def test_debug_is_taken_anywhere_and_shows_the_exception(argv: list[str]) -> None:
-    from odocan.host.cli.app import UsageError
-
-    with pytest.raises(UsageError, match="--seed"):
-        main(argv)
+def test_debug_is_taken_anywhere_and_shows_the_exception(
+    argv: list[str], capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The traceback on stderr, but the same exit code: --debug must not turn 2 into 1."""
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "Traceback (most recent call last)" in err
+    assert "UsageError" in err
+    assert err.rstrip().splitlines()[-1].startswith("error: ")
+    assert "--seed" in err
 
 
 def test_debug_after_the_subcommand_runs_it(capsys: pytest.CaptureFixture[str]) -> None:

@@ -260,10 +260,11 @@ def test_run_bad_input_is_one_line(
 
 
 def test_run_bad_input_traceback_with_debug(capsys: pytest.CaptureFixture[str]) -> None:
-    from odocan.sim.exceptions import ConfigurationError
-
-    with pytest.raises(ConfigurationError, match="nosuchbot"):
-        main(["--debug", "run", "--robot", "nosuchbot"])
+    assert main(["--debug", "run", "--robot", "nosuchbot"]) == 2
+    err = capsys.readouterr().err
+    assert "ProfileError" in err
+    assert "Traceback" in err
+    assert "nosuchbot" in err
 
 
 def test_run_from_a_profile_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

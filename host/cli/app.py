@@ -18,6 +18,7 @@ import importlib.util
 import os
 import signal
 import sys
+import traceback
 from collections.abc import Iterator
 from contextlib import contextmanager
 from types import FrameType
@@ -192,8 +193,10 @@ def main(argv: list[str] | None = None) -> int:
         _silence_stdout()
         return EXIT_SIGNAL_BASE + int(signal.SIGPIPE)
     except Exception as exc:
-        if debug or not is_usage_error(exc):
+        if not is_usage_error(exc):
             raise
+        if debug:  # the traceback too, but the same exit code: --debug must not turn 2 into 1
+            traceback.print_exc()
         code = int(getattr(exc, "exit_code", EXIT_USAGE))  # 1: an experiment that failed
         print(f"{'error' if code == EXIT_USAGE else 'FAIL'}: {_one_line(exc)}", file=sys.stderr)
         return code
