@@ -250,3 +250,15 @@ def test_malformed_dbc_is_one_line(tmp_path: Path, capsys: pytest.CaptureFixture
     path = tmp_path / "broken.dbc"
     path.write_text('VERSION ""\n\nBO_ sixteen FAST: 8 A\n', encoding="utf-8")
     assert_usage_error(capsys, main(["busload", "--dbc", str(path)]), "malformed DBC", str(path))
+
+
+@pytest.mark.parametrize(("can_id", "says_29_bit"), [("0x7FF", False), ("0x999", True)])
+def test_an_added_id_above_0x7ff_is_named_29_bit(
+    can_id: str, says_29_bit: bool, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """0x999 is no 11-bit ID: taken as 29-bit (lower priority, 25 more bits), the output says so
+    (an outside trial read the analysis of a typo as that of an 11-bit frame)."""
+    code, out, _ = run_cli(capsys, "busload", "--add", f"X:{can_id}:8:10")
+    assert code == 0
+    assumption = next(line for line in out.splitlines() if line.startswith("- X:"))
+    assert ("29-bit ID" in assumption) is says_29_bit

@@ -165,7 +165,7 @@ def parse_added(text: str, nodes: set[str] | None = None) -> BusMessage:
         senders=(fields[4] if len(fields) == 5 else f"({name})",),
         period_ns=period_ns,
         deadline_ns=period_ns,
-        assumption="added with --add",
+        assumption="added with --add" + (", a 29-bit ID (above 0x7FF)" if can_id > 0x7FF else ""),
     )
 
 
