@@ -39,7 +39,7 @@ import itertools
 import sys
 import time
 from contextlib import nullcontext
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -63,9 +63,15 @@ from odocan.host.judge.replay_compare import (
     starts_mid_drive,
     versus_log,
 )
+from odocan.host.judge.replay_events import (
+    clock_steps_s,
+    fed_events,
+    late_ticks,
+    unfed_truth,
+)
 from odocan.host.judge.replay_halts import fit_halts
 from odocan.host.judge.replay_lives import LifePlan, fit_first_prime, judge_lives, plan_lives
-from odocan.host.judge.replay_track import EncoderTrack
+from odocan.host.judge.replay_track import EncoderTrack, late_frames
 from odocan.host.outputs import OutputError
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.protocol.e2e import check_frames
@@ -84,7 +90,6 @@ IntArray = npt.NDArray[np.int64]
 # One fresh in-process channel per replay, numbered (not id()-named) so two runs of the same
 # command write the same bytes to --log.
 _REPLAY_CHANNELS = itertools.count(1)
-CLOCK_STEP_S = 1.0  # a log's time going back further than this: its recorder's clock was set back
 
 
 class ReplayError(OdocanError):
@@ -102,6 +107,8 @@ class ReplayInput:
     encoders: EncoderTrack
     truth: IntArray  # positions of the SIM_TRUTH frames (all of them, as logged)
     rejected_encoders: int  # WHEEL_ENCODERS frames the E2E check dropped
+    late: IntArray = field(default_factory=lambda: np.zeros(0, np.int64))  # fed anyway,
+    late_tick: IntArray = field(default_factory=lambda: np.zeros(0, np.int64))  # ``late_frames``
 
     @classmethod
     def from_log(cls, frames: FrameArrays) -> ReplayInput:
@@ -116,7 +123,8 @@ class ReplayInput:
         if len(encoders.index) == 0:
             raise ReplayError(f"none of the {total} WHEEL_ENCODERS frames passes its E2E check")
         truth = decoder.select(frames, "SIM_TRUTH").astype(np.int64)
-        return cls(accepted, encoders, truth, total - len(encoders.index))
+        late, late_tick = late_frames(frames, accepted, encoders)
+        return cls(accepted, encoders, truth, total - len(encoders.index), late, late_tick)
 
 
 def logged_integrator(frames: FrameArrays, accepted: npt.NDArray[np.bool_]) -> str | None:
@@ -156,7 +164,8 @@ class LockstepReplay:
         self.listeners = listeners
         self.loop = TickLoop(self._work, host_bus, listeners, self.clock)
         self.stopped: Stopped | None = None  # by a signal, before the log's end
-        self.fed = 0  # encoder frames fed to the firmware
+        self.fed = 0  # encoder frames fed to the firmware (the host's E2E check refused
+        self.late_fed = 0  # ``late_fed`` of them: ``replay_track.late_frames``)
         self.halted: set[int] = set()  # ticks the board runs none (``replay_lives``)
         self.resets: dict[int, bool] = {}  # encoder frame number -> reset after it is sent
         self.held: dict[int, int] = {}  # log position -> tick: fed once the ticks before ran
@@ -192,8 +201,9 @@ class LockstepReplay:
         self.loop.start_s = t0 - phase_ticks * TICK_S
         self.loop.run_to(phase_ticks)
         held = self._held_fed(frames, feed, phase_ticks)
-        hidden = _unfed_truth(frames, feed, held)
-        events = _events(enc.index, feed.truth, held)
+        hidden = unfed_truth(frames, feed.truth, held)
+        late = late_ticks(feed.late, feed.late_tick, phase_ticks, len(frames.can_id), held)
+        events = fed_events(enc.index, feed.truth, held, late)
         shift_s = clock_steps_s(frames.timestamp_s)
         due: int | None = None  # the tick whose encoder frame is on the bus, not yet run
         own = stop is None
@@ -204,15 +214,12 @@ class LockstepReplay:
                 for position, which in events:
                     # held by a halted board's FIFO: fed after the tick before the halt ran
                     self.loop.run_to(held.get(position, 0))
+                    if which == -3 and not self._late(late[position], due):
+                        continue  # before the first frame, or a halted board's: lost
                     if which >= 0:  # an encoder frame: first run the ticks before its own
                         if stop.stop_requested:
                             break
-                        tick = int(enc.tick[which]) + phase_ticks
-                        if due is not None:
-                            self.loop.run_to(tick)
-                        self.clock.advance_to(self.loop.start_s + tick * TICK_S)
-                        due = tick
-                        self.fed += 1
+                        due = self._to_tick(int(enc.tick[which]) + phase_ticks, due)
                         self._reset(which, False)
                     message = to_message(frames, position)
                     message.timestamp += float(shift_s[position])
@@ -230,6 +237,25 @@ class LockstepReplay:
                                    round(self.ticks * TICK_S, 6), round(asked_s, 6))
             if self.fed:  # none: the caller's one line says so
                 print(f"interrupted after {self.ticks * TICK_S:g} s of the log", file=sys.stderr)
+
+    def _late(self, tick: int, due: int | None) -> bool:
+        """Run the ticks before ``tick``, where a frame the host refused reached the firmware
+        (``replay_track.late_frames``), to feed it: False when it is lost (before the first fed
+        frame, or in a halted board's tick)."""
+        if due is None or tick in self.halted:
+            return False
+        self._to_tick(tick, due)
+        self.late_fed += 1
+        return True
+
+    def _to_tick(self, tick: int, due: int | None) -> int:
+        """Run the ticks before ``tick`` (none before the first frame fed: ``due`` None), set
+        the clock to its start, count the frame fed at it."""
+        if due is not None:
+            self.loop.run_to(tick)
+        self.clock.advance_to(self.loop.start_s + tick * TICK_S)
+        self.fed += 1
+        return tick
 
     def _send(self, message: can.Message, firmware_only: bool) -> None:
         """Put a log's frame on the bus, or (``_unfed_truth``) into the firmware's handle's
@@ -268,49 +294,6 @@ def _unanalysed(signum: int | None, replay: LockstepReplay, log_out: Path | None
     if log_out is not None:
         where += f"; --log {log_out}: " + ("finished, no frame" if opened else "not written")
     return interruption(signum, where)
-
-
-def clock_steps_s(timestamp_s: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
-    """What to add to each logged time so that a recorder's clock set back mid-log (the time
-    going back more than ``CLOCK_STEP_S`` from one frame to the next) does not take the replayed
-    bus back with it: the frames after such a step go on one median frame spacing after the
-    frame before it. Without it the log's frames after the step reached the replayed bus 100 s
-    "before" the replayed firmware's poses naming them, which were then never paired (the trial:
-    416 of 1000 poses compared, a firmware 1 mm off PASSed). Zero for a log whose time never
-    goes back that far (a frame late on the bus goes back by less than a cycle)."""
-    times = np.asarray(timestamp_s, dtype=np.float64)
-    if len(times) < 2:
-        return np.zeros(len(times))
-    gaps = np.diff(times)
-    forward = gaps[gaps > 0]
-    spacing = float(np.median(forward)) if len(forward) else 0.0
-    steps = np.where(gaps < -CLOCK_STEP_S, spacing - gaps, 0.0)
-    return np.concatenate(([0.0], np.cumsum(steps)))
-
-
-def _unfed_truth(frames: FrameArrays, feed: ReplayInput, held: dict[int, int]) -> set[int]:
-    """The held frames that are truth frames left off the replayed bus (a log whose firmware
-    powered up mid-drive: ``truth_compared`` False): handed to the firmware's receive queue
-    alone, since the halted board's FIFO held them (three slots: ``stall=0:1,stall=6:0.5``,
-    seed 2, kept the MOTOR_CMD, the encoder frame and the first SIM_TRUTH frame of the halt's
-    first tick); left out, the replay's FIFO took a later encoder frame in its place, no
-    trial reproduced the log, and the correct firmware was UNJUDGED (issue #11)."""
-    truth_id = contract.database().get_message_by_name("SIM_TRUTH").frame_id
-    fed = set(feed.truth.tolist())
-    return {p for p in held if p not in fed and int(frames.can_id[p]) == truth_id}
-
-
-def _events(encoders: IntArray, truth: IntArray,
-            held: dict[int, int] | None = None) -> list[tuple[int, int]]:
-    """(position in the log, k) in log order: k the encoder frame's number, -1 for truth, -2
-    for a frame a halted board's FIFO held (``LockstepReplay.held``; a truth frame not fed
-    goes to the firmware alone: ``_unfed_truth``)."""
-    held = held or {}
-    events = [(int(p), k) for k, p in enumerate(encoders.tolist())]
-    events += [(int(p), -1) for p in truth.tolist() if int(p) not in held]
-    events += [(p, -2) for p in held]
-    events.sort()
-    return events
 
 
 def diagnose(
@@ -465,7 +448,7 @@ def replay_and_analyze(
                        wall_seconds=wall_s)
     analysis.report["replay"] = {
         "log": str(log),
-        "encoder_frames_fed": len(feed.encoders.index),
+        "encoder_frames_fed": replay.fed, "encoder_frames_fed_late": replay.late_fed,
         "encoder_frames_rejected": feed.rejected_encoders,
         "truth_frames": len(feed.truth),
         "truth_compared": truth_compared,

@@ -20,6 +20,7 @@ from odocan.host.protocol.busfacts import ENC_COUNTER_LAP as LAP
 from odocan.host.protocol.busfacts import ENC_COUNTER_MASK
 from odocan.host.protocol.decode import BulkDecoder
 from odocan.sim import contract
+from odocan.sim.board import TICK_S, TX_LATENCY_S
 
 IntArray = npt.NDArray[np.int64]
 MAX_GAP_TICKS = 6000  # a gap in the log longer than 60 s is replayed as 60 s
@@ -83,3 +84,28 @@ def encoder_ticks(timestamp_s: npt.NDArray[np.float64], counter: IntArray) -> In
     step += LAP * np.maximum(0, np.rint((periods - step) / LAP)).astype(np.int64)
     step = np.minimum(step, MAX_GAP_TICKS)
     return np.concatenate(([0], np.cumsum(step))).astype(np.int64)
+
+
+def late_frames(frames: FrameArrays, accepted: npt.NDArray[np.bool_],
+                track: EncoderTrack) -> tuple[IntArray, IntArray]:
+    """The WHEEL_ENCODERS frames of ``frames`` the host's E2E check refused (late, repeated,
+    corrupt: the recording firmware's own check took some of them, a late one in particular)
+    after the track's first, and the tick at which each reached the firmware: a frame on the bus
+    at log time T was in the firmware's receive FIFO at the first tick whose start plus the
+    board's ``TX_LATENCY_S`` is at or past T (``sim.rig``: held frames due by then go on the bus
+    before the board's tick), counted from the accepted frame before it and kept between that
+    one's tick and the next's. The replay feeds them too, in log order, and the replayed
+    firmware's E2E check decides, as the recording one's did: fed the accepted frames alone, a
+    correct firmware replayed ``delay=0.3:50`` (1235 of 2000 frames fed) 0.942 mm off."""
+    encoder_id = contract.database().get_message_by_name("WHEEL_ENCODERS").frame_id
+    positions = np.flatnonzero((frames.can_id == encoder_id) & ~accepted).astype(np.int64)
+    if len(track.index) == 0 or len(positions) == 0:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    positions = positions[positions > track.index[0]]
+    before = np.searchsorted(track.index, positions) - 1
+    after_s = np.asarray(frames.timestamp_s, dtype=np.float64)[positions] \
+        - track.timestamp_s[before] - TX_LATENCY_S
+    ticks = track.tick[before] + np.maximum(0, np.ceil(np.round(after_s / TICK_S, 6)))
+    nxt = np.minimum(before + 1, len(track.tick) - 1)
+    ticks = np.where(before + 1 < len(track.tick), np.minimum(ticks, track.tick[nxt]), ticks)
+    return positions, ticks.astype(np.int64)
