@@ -16,10 +16,10 @@ from tests.dbc_typed import dbc_attribute
 
 
 def raise_raw(src: Path, dst: Path, message: str, byte_span: tuple[int, int], lsb: int,
-              from_s: float) -> int:
+              from_s: float, until_s: float = float("inf")) -> int:
     """Copy ``src`` to ``dst`` with the little-endian signed raw field in bytes
     ``byte_span`` (start, length) of ``message`` raised by ``lsb`` from ``from_s`` s after the
-    log's first frame on; the number of frames changed."""
+    log's first frame on (up to ``until_s``, excluded); the number of frames changed."""
     db = cantools.database.load_file(str(contract.DBC_PATH))
     assert isinstance(db, Database)
     target = db.get_message_by_name(message)
@@ -29,7 +29,7 @@ def raise_raw(src: Path, dst: Path, message: str, byte_span: tuple[int, int], ls
     with can.Logger(str(dst)) as out:
         for msg in can.LogReader(str(src)):
             first = msg.timestamp if first is None else first
-            if msg.arbitration_id == target.frame_id and msg.timestamp - first >= from_s:
+            if msg.arbitration_id == target.frame_id and from_s <= msg.timestamp - first < until_s:
                 data = bytearray(msg.data)
                 raw = int.from_bytes(data[start:start + length], "little", signed=True) + lsb
                 data[start:start + length] = raw.to_bytes(length, "little", signed=True)

@@ -21,7 +21,7 @@ from odocan.firmware.errors import ErrorFlag
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.analysis import HEADING_LSB_RAD, POSITION_LSB_M, Tolerance
 from odocan.host.judge.powerup import starts_at_power_up
-from odocan.host.judge.replay_track import EncoderTrack
+from odocan.host.judge.replay_track import EncoderTrack, crc_holds
 from odocan.host.judge.samples import Poses
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.protocol.e2e import check_frames
@@ -42,7 +42,7 @@ def onboard_by_tick(frames: FrameArrays, accepted: npt.NDArray[np.bool_]) -> dic
     halves = []
     for name, value, extra in (("ODOM_POSE_X", "X", "HEADING"), ("ODOM_POSE_Y", "Y", "TURNS")):
         d = decoder.decode(frames, name)
-        keep = accepted[d["index"]]
+        keep = crc_holds(frames, decoder, name, d["index"])  # every pose sent (``crc_holds``)
         ticks = track.named(d["index"][keep], d["ENC_COUNTER"][keep].astype(np.int64),
                             d["timestamp_s"][keep])
         half: dict[int, list[tuple[int, int]]] = {}

@@ -19,6 +19,7 @@ from odocan.host.judge.samples import Encoders, contract_cycle_s, named_targets
 from odocan.host.protocol.busfacts import ENC_COUNTER_LAP as LAP
 from odocan.host.protocol.busfacts import ENC_COUNTER_MASK
 from odocan.host.protocol.decode import BulkDecoder
+from odocan.host.protocol.e2e import crc8h2f_p02, e2e_messages
 from odocan.sim import contract
 from odocan.sim.board import TICK_S, TX_LATENCY_S
 
@@ -109,3 +110,18 @@ def late_frames(frames: FrameArrays, accepted: npt.NDArray[np.bool_],
     nxt = np.minimum(before + 1, len(track.tick) - 1)
     ticks = np.where(before + 1 < len(track.tick), np.minimum(ticks, track.tick[nxt]), ticks)
     return positions, ticks.astype(np.int64)
+
+
+def crc_holds(frames: FrameArrays, decoder: BulkDecoder, name: str,
+              rows: IntArray) -> npt.NDArray[np.bool_]:
+    """Which frames of message ``name`` at ``rows`` carry a right Profile 2 CRC, whatever their
+    sequence: a pose the firmware sent is one to compare with the replay's, even where the
+    host's E2E window refused it (the first two after a reboot, whose COUNTER starts again at 0:
+    left out, a pose raised 10 m there PASSed the replay, "848 identical")."""
+    config = e2e_messages(decoder.db).get(decoder.message(name).frame_id)
+    if config is None or config.data_ids is None:
+        return np.ones(len(rows), dtype=bool)
+    data = frames.data[rows]
+    ids = np.array(config.data_ids, dtype=np.uint8)[data[:, 1] & ENC_COUNTER_MASK]
+    good: npt.NDArray[np.bool_] = crc8h2f_p02(data, ids) == data[:, 0]
+    return good
