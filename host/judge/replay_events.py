@@ -66,3 +66,30 @@ def fed_events(encoders: IntArray, truth: IntArray, held: dict[int, int] | None 
     events += [(p, -3) for p in (late or {})]
     events.sort()
     return events
+
+
+def replayed_positions(log: FrameArrays, index: IntArray, replayed: FrameArrays) -> IntArray:
+    """The position on the replayed bus of each log frame at ``index`` (encoder frames, in log
+    order), matched by identifier, payload and time (the log's, less its clock steps:
+    ``clock_steps_s``), in order; ``len(replayed)`` for one not found (not fed). Not by the
+    host's E2E verdicts on the replayed bus: they read its poses too, which the replayed firmware
+    sent, so its accepted encoder frames were not the log's (984 for 976, ``delay=0.3:50,
+    busoff=5:1,reboot=12,dup=0.1``, pmir seed 1) and a life's span on it started 9 frames
+    early: its poses were paired with the life before's, 5827.7 mrad off."""
+    shift = clock_steps_s(log.timestamp_s)
+    want = [(int(log.can_id[p]), bytes(log.data[p]), round(float(log.timestamp_s[p] + shift[p]), 6))
+            for p in index.tolist()]
+    where: dict[tuple[int, bytes, float], list[int]] = {}
+    for p in np.flatnonzero(np.isin(replayed.can_id, [w[0] for w in want])).tolist()[::-1]:
+        key = (int(replayed.can_id[p]), bytes(replayed.data[p]),
+               round(float(replayed.timestamp_s[p]), 6))
+        where.setdefault(key, []).append(p)  # latest first: popped from the end in order
+    result = np.full(len(want), len(replayed), dtype=np.int64)
+    last = -1
+    for k, key in enumerate(want):
+        found = where.get(key, [])
+        while found and found[-1] <= last:
+            found.pop()
+        if found:
+            result[k] = last = found.pop()
+    return result

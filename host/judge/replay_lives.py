@@ -45,6 +45,7 @@ from odocan.host.judge.reboots import (
     summary_start,
 )
 from odocan.host.judge.replay_compare import departures, versus_log
+from odocan.host.judge.replay_events import replayed_positions
 from odocan.host.judge.replay_track import EncoderTrack
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.protocol.e2e import check_frames
@@ -183,9 +184,7 @@ def judge_lives(log: FrameArrays, accepted: npt.NDArray[np.bool_], replayed: Fra
                 tolerance: Tolerance) -> list[dict[str, Any]]:
     """Each life compared with the log's on its own: ``onboard_vs_log`` (``versus_log``), the
     stalls in it, and ``unjudged`` (why, from which stall: the part before it agrees) or None."""
-    decoder = BulkDecoder(contract.database())
-    fed = decoder.select(replayed, "WHEEL_ENCODERS")
-    fed = fed[replayed_accepted[fed]]
+    fed = replayed_positions(log, track.index, replayed)  # the log's frames on the replay's bus
     t0 = float(log.timestamp_s[0])
     bounds = [*plan.starts, len(track.index)]
     result = []
