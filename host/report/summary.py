@@ -169,6 +169,8 @@ def print_summary(
     verdict, style = ("PASS", "green") if passed else ("FAIL", "bold red")
     if passed and unjudged:  # what was judged passed, a check judged nothing: no PASS
         verdict, style = "UNJUDGED", "bold yellow"
+    if passed and (report.get("replay") or {}).get("passed") is False:  # its FAIL follows
+        verdict, style = "met", "bold"
     if report.get("stopped"):  # a signal ended it early: never a plain PASS
         verdict = f"{stopped_text(report['stopped'])}: partial drive {verdict}"
         style = "bold yellow" if passed else style
@@ -184,8 +186,7 @@ def print_summary(
 
 def _criteria_line(report: dict[str, Any], tolerance: Tolerance, pose_met: bool,
                    stuck: bool) -> str:
-    """The pose and ODOM_TWIST criteria in words, what failed first; ``stuck``: most frames
-    were E2E REPEATED, the poses accepted prove nothing of the ones refused."""
+    """The pose and ODOM_TWIST criteria in words, what failed first (``stuck``: E2E REPEATED)."""
     twist = report.get("onboard_twist_vs_reference") or {"passed": True}
     distance = report.get("onboard_distance_vs_reference") or {"passed": True}
     pose = (
@@ -208,8 +209,7 @@ def _criteria_line(report: dict[str, Any], tolerance: Tolerance, pose_met: bool,
 
 
 def _judged_verdict(report: dict[str, Any]) -> bool:
-    """The verdict of what was judged (``partial_verdict``), a stuck E2E COUNTER failing it and
-    a check on 0 samples not (``verdictfacts``: said as UNJUDGED)."""
+    """What was judged (``partial_verdict``): a stuck E2E COUNTER fails, a check on 0 not."""
     unjudged = report.get("unjudged")
     if not unjudged:
         return partial_verdict(report)

@@ -141,8 +141,9 @@ def _do_replay(args: argparse.Namespace) -> int:
     section.update(passed=not reasons and blind is None, faults=reasons,
                    unjudged=blind)
     title = f"odocan replay: {args.log} on {profile.name}, {integrator} integrator"
+    ran_passed = analysis.passed
     code = finish(analysis, args, title=title)  # prints the run's verdict (vs the reference)
-    verdict = (["FAIL: the replayed firmware departs from the log's",
+    verdict = ([f"{'FAIL' if ran_passed else 'and'}: the replayed firmware departs from the log's",
                 *(f"  - {reason}" for reason in reasons)] if reasons
                else [] if blind is None else [blind])
     if verdict:  # a departure, or nothing compared (UNJUDGED): never a PASS
