@@ -17,6 +17,7 @@ import os
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import can
 import pytest
@@ -42,7 +43,7 @@ def _run(log: Path, robot: str, seed: int, duration: float, faults: str,
     assert done.returncode == 0, done.stdout[-2000:]  # the run itself is correct
 
 
-def _replay(log: Path, report: Path) -> tuple[int, str, dict]:
+def _replay(log: Path, report: Path) -> tuple[int, str, dict[str, Any]]:
     done = _cli("replay", str(log), "--report", str(report))
     return done.returncode, done.stdout, json.loads(report.read_text())["replay"]
 

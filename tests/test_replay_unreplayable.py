@@ -59,9 +59,10 @@ def test_late_encoder_frames_are_named_not_the_build(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """Since the rig puts held frames on the bus at their release time, a 10 % share held 15 ms
-    replays faithfully; a 20 % share still makes the recording firmware take late frames: the
-    replay compares no position after the first (the log's firmware did not take its frames on
-    time) and never blames the build. It FAILed on 383.5 mrad of heading (and the log's own
+    replays faithfully; a 20 % share makes the recording firmware take late frames, which the
+    replay now feeds where they arrived (``replay_track.late_frames``): it compares the
+    positions after the first gap by their drift, PASSes, and never blames the build. It
+    FAILed on 383.5 mrad of heading (and the log's own
     "resent" poses 16.8 mm apart) until a pose could no longer name a frame logged after it
     (``EncoderTrack.named``): those were poses put at the wrong frame, not departures."""
     log = tmp_path / "late.log"
@@ -69,6 +70,6 @@ def test_late_encoder_frames_are_named_not_the_build(
     capsys.readouterr()
     code, out, _ = run_cli(capsys, "replay", str(log), "--robot", "kobuki")
     assert BUILD_DIFFERS not in out
-    assert "positions not compared (the log's firmware did not take its frames on time); " \
+    assert "after it by their position drift between gaps (max 0.0000 mm); " \
         "heading 0.0000 mrad" in out, out
     assert code == 0, out

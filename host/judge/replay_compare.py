@@ -60,6 +60,16 @@ def onboard_by_tick(frames: FrameArrays, accepted: npt.NDArray[np.bool_]) -> dic
             for t in px.keys() & py.keys()}
 
 
+def x_pose_ticks(frames: FrameArrays, track: EncoderTrack, decoder: BulkDecoder) -> IntArray:
+    """The tick of the encoder frame each ODOM_POSE_X frame with a right CRC names (-1: none
+    the log's accepted encoder sequence places, ``EncoderTrack.named``): every pose the log's
+    firmware sent, to say which were compared and why the others were not."""
+    d = decoder.decode(frames, "ODOM_POSE_X")
+    keep = crc_holds(frames, decoder, "ODOM_POSE_X", d["index"])
+    return track.named(d["index"][keep], d["ENC_COUNTER"][keep].astype(np.int64),
+                       d["timestamp_s"][keep])
+
+
 def versus_log(
     log: FrameArrays, log_accepted: npt.NDArray[np.bool_], replayed: FrameArrays,
     from_power_up: bool = False,
@@ -87,9 +97,13 @@ def versus_log(
     track = EncoderTrack.of(log, log_accepted, decoder)
     mid = not from_power_up and starts_mid_drive(log, log_accepted, old, track)
     holes = recorder_holes(log)
-    logged = int(np.count_nonzero(log_accepted[decoder.select(log, "ODOM_POSE_X")]))
-    facts: dict[str, Any] = {"logged": logged, "log_starts_mid_drive": mid, "holes": holes,
-                             "max_resent_position_diff_m": resent_position_diff_m(old)}
+    named = x_pose_ticks(log, track, decoder)
+    facts: dict[str, Any] = {"logged": len(named), "log_starts_mid_drive": mid, "holes": holes,
+                             "max_resent_position_diff_m": resent_position_diff_m(old),
+                             "not_compared": {
+                                 "unnamed": int(np.count_nonzero(named < 0)),
+                                 "unpaired": int(np.count_nonzero(
+                                     (named >= 0) & ~np.isin(named, common)))}}
     if len(common) == 0:
         return {"samples": 0, "identical": 0, "identical_before_gap": 0,
                 "max_position_diff_m": None, "max_position_diff_raw_m": None,
@@ -323,9 +337,16 @@ def compared(vs_log: dict[str, Any]) -> str:
 
 
 def not_comparable(vs_log: dict[str, Any]) -> list[str]:
-    """What the comparison with the log could not reproduce, in words: a start mid-drive, and
-    each hole of the log (the first ``SAID_HOLES``, then how many more)."""
+    """What the comparison with the log could not reproduce, in words: the poses not compared
+    and why, a start mid-drive, and each hole of the log (the first ``SAID_HOLES``, then how
+    many more)."""
     lines = []
+    left = vs_log.get("not_compared") or {}
+    if left.get("unnamed") or left.get("unpaired"):
+        lines.append(f"{left['unnamed'] + left['unpaired']} of the log's {vs_log['logged']} "
+                     f"ODOM_POSE_X frames not compared: {left['unnamed']} name an encoder frame "
+                     "the log's E2E-accepted sequence cannot place (late, refused or lost), "
+                     f"{left['unpaired']} one the replayed firmware sent no pose for")
     drift = vs_log.get("max_position_drift_between_gaps_m") is not None
     if vs_log.get("log_starts_mid_drive"):
         offset = (vs_log.get("heading_offsets_bam16") or [0])[0] * HEADING_LSB_RAD
