@@ -74,6 +74,7 @@ def test_replay_reproduces_the_run(
         "before_first_gap": 300, "max_position_diff_before_gap_m": 0.0,
         "max_resent_position_diff_m": 0.0, "max_position_drift_between_gaps_m": 0.0,
         "logged": 300, "log_starts_mid_drive": False, "holes": [], "heading_offsets_bam16": [],
+        "not_compared": {"unnamed": 0, "unpaired": 0},  # every pose of the log compared
     }
     assert (section["passed"], section["faults"], section["unjudged"]) == (True, [], None)
     # Bit-identical pose and twist frames, at the same times; the log's truth frames kept.
