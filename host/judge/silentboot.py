@@ -46,23 +46,33 @@ WHY = ("the firmware rebooted while its frames were not heard (no count page nor
 
 def silent_start(frames: FrameArrays, decoder: BulkDecoder, encoders: npt.NDArray[np.intp],
                  position: int, after: int) -> int | None:
-    """The position of the first accepted encoder frame (``encoders``) after the firmware's
-    last frame heard before a silence that ends with its frames just before the boot summary at
-    ``position`` (the life before starts at ``after``); None when no silence of ``SILENCE_S``
-    precedes the new firmware's first frame heard."""
-    heard = _firmware_frames(frames, decoder)
-    heard = heard[(heard > after) & (heard <= position)]
-    if len(heard) < 2:
-        return None
-    gaps = np.diff(frames.timestamp_s[heard])
-    loud = np.flatnonzero(gaps > SILENCE_S)
+    """The position of the first accepted encoder frame (``encoders``) the firmware booted by
+    the summary at ``position`` may have primed on after a silence (``quiet_start``; the life
+    before starts at ``after``); None when no silence of ``SILENCE_S`` precedes it."""
+    heard = firmware_frames(frames, decoder)
+    return quiet_start((heard, frames.timestamp_s[heard]),
+                       (encoders, frames.timestamp_s[encoders]), position, after)
+
+
+def quiet_start(heard: tuple[npt.ArrayLike, npt.ArrayLike],
+                encoders: tuple[npt.ArrayLike, npt.ArrayLike], position: int,
+                after: int) -> int | None:
+    """``silent_start`` on the positions and bus times of the firmware's frames (``heard``,
+    ``firmware_frames``) and of the accepted encoder frames: the first encoder frame after the
+    old firmware's last frame before the latest silence up to the summary at ``position`` (and
+    after the encoders' own silence there, when they had one), None without such a silence."""
+    at, at_s = np.asarray(heard[0], dtype=np.int64), np.asarray(heard[1], dtype=np.float64)
+    enc, enc_s = np.asarray(encoders[0], dtype=np.int64), np.asarray(encoders[1], dtype=np.float64)
+    mine = (at > after) & (at <= position)
+    at, at_s = at[mine], at_s[mine]
+    loud = np.flatnonzero(np.diff(at_s) > SILENCE_S)
     if not len(loud):
         return None
-    last = int(heard[loud[-1]])  # the old firmware's last frame before the latest silence
-    later = encoders[(encoders > last) & (encoders < heard[loud[-1] + 1])]
+    between = (enc > at[loud[-1]]) & (enc < at[loud[-1] + 1])  # the old one's last frame, the
+    later, later_s = enc[between], enc_s[between]  # new one's first heard
     if not len(later):
         return None
-    went = np.flatnonzero(np.diff(frames.timestamp_s[later]) > SILENCE_S)  # the bus was off
+    went = np.flatnonzero(np.diff(later_s) > SILENCE_S)  # the bus was off
     return int(later[went[-1] + 1]) if len(went) else int(later[0])
 
 
@@ -92,7 +102,7 @@ def primed_in_silence(enc: Encoders, onboard: Poses, t_s: float, robot: RobotPro
                           for p in order]}]
 
 
-def _firmware_frames(frames: FrameArrays, decoder: BulkDecoder) -> npt.NDArray[np.intp]:
+def firmware_frames(frames: FrameArrays, decoder: BulkDecoder) -> npt.NDArray[np.intp]:
     """Positions of the firmware's ODOM_POSE_Y frames and its ODOM_STATUS frames whose CRC
     holds, in bus order."""
     ys = decoder.select(frames, "ODOM_POSE_Y")
