@@ -83,3 +83,22 @@ def test_a_reboot_in_a_bus_off_nothing_names_is_judged_from_its_power_up(
     assert raise_raw(log, tampered, "ODOM_POSE_X", (2, 4), TAMPER_LSB, back_s) > 50
     for stream in ("always", "never"):
         assert _cli("analyze", str(tampered), "--stream", stream) == 1, stream
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "the live judge (BusMonitor) is not fixed: kobuki --seed 5 busoff=4:1,reboot=4.3, count "
+    "pages and 8 first summaries missed: the correct firmware 4.43 mm off its reference, the "
+    "one 10 mm off the same 4.43 mm (its start absorbed the offset); with no summary missed "
+    "45.67 mm (the poses before the first summary heard in the old life)"))
+def test_the_live_judge_follows_a_reboot_in_a_bus_off_nothing_names(tmp_path: Path) -> None:
+    from odocan.host.judge.analysis import POSITION_LSB_M
+    from tests.test_live_reboot import monitor_of
+
+    drive, log, tampered = tmp_path / "drive.log", tmp_path / "log.log", tmp_path / "t.log"
+    assert _cli("run", "--robot", "kobuki", "--seed", "5", "--duration", "8", "--faults",
+                "busoff=4:1,reboot=4.3", "--log", str(drive)) == 0
+    assert _strip(drive, log, 4.95, 8) >= 11
+    assert raise_raw(log, tampered, "ODOM_POSE_X", (2, 4), TAMPER_LSB, 4.95) > 50
+    right = monitor_of(log, "kobuki", "exact").tracker.vs_reference.max_dpos_m
+    wrong = monitor_of(tampered, "kobuki", "exact").tracker.vs_reference.max_dpos_m
+    assert right <= POSITION_LSB_M < 50 * POSITION_LSB_M < wrong, (right, wrong)
