@@ -61,6 +61,7 @@ def _strip(src: Path, dst: Path, from_s: float, summaries: int) -> int:
             first = msg.timestamp if first is None else first
             if msg.arbitration_id == status.frame_id and msg.timestamp - first >= from_s:
                 decoded = status.decode(bytes(msg.data), decode_choices=False)
+                assert isinstance(decoded, dict)
                 if decoded["PAGE"] == page or skipped < summaries:
                     dropped += 1
                     skipped += decoded["PAGE"] != page
