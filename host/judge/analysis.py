@@ -165,6 +165,7 @@ from odocan.host.judge.samples import (
 )
 from odocan.host.judge.setposekept import Kept, check_cut
 from odocan.host.judge.setposes import cut_lives, set_pose_cuts
+from odocan.host.judge.silentboot import primed_in_silence
 from odocan.host.judge.silentlives import SilentLife, add_silent, silent_life
 from odocan.host.judge.stallpowerup import log_power_up
 from odocan.host.judge.stallreprime import reprime_events
@@ -270,7 +271,8 @@ def analyze(
                                    max_wheel_speed_mm_s=bound,
                                    start_pose=life.set_pose and life.set_pose.start_pose(),
                                    later=acrosscut.later_word(across, lives, k, frames.timestamp_s),
-                                   backlog=acrosscut.backlog_of(across, lives, k))
+                                   backlog=acrosscut.backlog_of(across, lives, k),
+                                   silent=life.silent)
         except AnalysisError as exc:  # a life without on-board samples: reported, not compared
             failure = failure or exc
             silent.append(life)
@@ -325,14 +327,14 @@ def _analyze_life(
     max_wheel_speed_mm_s: SpeedBound = PROFILE_SPEED,
     start_pose: tuple[float, float, float] | None = None,
     later: acrosscut.Word | None = None,
-    backlog: cutreprime.Backlog | None = None,
+    backlog: cutreprime.Backlog | None = None, silent: bool = False,
 ) -> Analysis:
     """``analyze`` of one firmware life (``host.judge.reboots``); ``boot``: the frames start at
     a reboot, the firmware's pose 0 at their first encoder frame; ``rebase``: the frames are a
     life after a reboot or a set-pose, the truth is compared in its frame
     (``compare.life_origin``); ``start_pose``: a set-pose's, exact at the first encoder frame
     (``host.judge.setposes``); ``later``: the same firmware's summaries after a cut, ``backlog``:
-    its first sample names a backlog frame (``acrosscut``)."""
+    its first sample names a backlog frame (``acrosscut``); ``silent``: ``silentboot``'s life."""
     e2e, accepted = check_frames(frames, db)
     integrator, source = pick_integrator(frames, accepted, decoder, integrator)
     enc = page_numbered(frames, decoder, encoder_frames(frames, accepted, decoder))
@@ -345,7 +347,10 @@ def _analyze_life(
     first = first_placement(sent_s, enc, alive_s, pose_sent_s, onboard)  # no loss span's
     truth = truth_samples(frames, accepted, decoder, enc)
     unproven: list[dict[str, Any]] = []  # its first count pages lost: said (stallpowerup)
-    if boot:  # (a stalled MCU's first page misses the frames its FIFO overran: primed_first)
+    if silent:  # rebooted unheard: (0, 0, 0) on each frame it may have primed on (silentboot)
+        power_up, unproven = False, ([] if start_pose else primed_in_silence(
+            enc, onboard, float(np.min(sent_s)), robot, integrator))
+    elif boot:  # (a stalled MCU's first page misses the frames its FIFO overran: primed_first)
         power_up = saw_only_the_log(frames, accepted, decoder) or primed_first(
             float(np.min(sent_s, initial=np.inf)), enc, alive_s, pose_sent_s)
     elif rebase or start_pose:  # not the log's first life: its count pages only
@@ -445,8 +450,7 @@ def _analyze_life(
         ],
         **firmware_fields(frames, accepted, decoder),
         "reboots": [],
-        "onboard_vs_reference": vs_ref,
-        "onboard_vs_truth": vs_truth,
+        "onboard_vs_reference": vs_ref, "onboard_vs_truth": vs_truth,
         "onboard_twist_vs_reference": twist,
         "onboard_distance_vs_reference": distance,
         "final_onboard_pose": {  # heading_rad in (-pi, pi], heading_unwrapped_rad cumulative

@@ -39,9 +39,10 @@ frame (``Life.boot``), with E2E sequences starting afresh (a reboot is not frame
 
 A life with no on-board sample (a reboot at the very end) is reported, not compared.
 
-Known limit: without that page (other firmwares need not send it) and without the boot summary
-in the log, the life is taken to start at the next summary's frame and its first poses fall in
-the life before (and fail there).
+Without that page (other firmwares need not send it) and without the power-up pose, a reboot
+whose first summary heard ends a silence of the firmware starts after the old firmware's last
+frame and is judged from (0, 0, 0) on each frame it may have primed on (``silentboot``); else
+the life starts at that summary's frame (known limit: a reboot missed without a silence).
 
 Each new life has its own origin, so its pose is compared with the truth in that frame: the
 truth re-based at the life's power-up frame (``host.judge.compare.life_origin``, the same in the
@@ -76,6 +77,7 @@ from odocan.host.judge.liveconfig import config_text
 from odocan.host.judge.navrestart import second_evidence
 from odocan.host.judge.primed import counted_start
 from odocan.host.judge.samples import ENC_E2E_PAGE, AnalysisError, contract_cycle_s
+from odocan.host.judge.silentboot import silent_start
 from odocan.host.judge.sources import SourceWatch, two_sources_text
 from odocan.host.judge.stalls import silent_between
 from odocan.host.protocol import busfacts
@@ -95,6 +97,7 @@ class Life:
     uptime_before_s: int | None = None  # the last UPTIME the previous firmware reported
     set_pose: Any = None  # a set-pose's life (``host.judge.setposes.SetPoseCut``), not a reboot
     config: Any = None  # an applied config's life (``host.judge.configs.ConfigCut``), no reboot
+    silent: bool = False  # primed in a silence on a frame nothing names (``silentboot``)
 
 
 def split_lives(frames: FrameArrays, decoder: BulkDecoder) -> list[Life]:
@@ -111,6 +114,7 @@ def split_lives(frames: FrameArrays, decoder: BulkDecoder) -> list[Life]:
     poses, after = powerup_poses(frames, decoder), pose_enc_rows(frames, decoder)
     starts: list[int] = []
     counted_boots: list[bool] = []  # the start named by the new firmware's first count page
+    silent: list[bool] = []  # primed in a silence on a frame nothing names (``silentboot``)
     limits = [b[0] for b in boots[1:]] + [len(frames)]
     for (position, uptime_s, state, _), limit in zip(boots, limits, strict=True):
         start = summary_start(position, uptime_s, state, encoders)
@@ -122,13 +126,17 @@ def split_lives(frames: FrameArrays, decoder: BulkDecoder) -> list[Life]:
         for found in (counted, named):  # the power-up pose's word last: not stamp-bound
             if found is not None and found > (starts[-1] if starts else 0):
                 start = found
-        starts.append(start)
+        quiet = (None if counted is not None or named is not None else silent_start(
+            frames, decoder, encoders, position, starts[-1] if starts else 0))
+        silent.append(quiet is not None)
+        starts.append(start if quiet is None else quiet)
         counted_boots.append(counted is not None and start == counted)
     lives = [Life(everything[: starts[0]], boot=False)]
     for k, (position, uptime_s, _, before_s) in enumerate(boots):
         end = starts[k + 1] if k + 1 < len(starts) else len(frames)
         lives.append(Life(everything[starts[k] : end], boot=uptime_s == 0 or counted_boots[k],
-                          t_s=float(frames.timestamp_s[position]), uptime_before_s=before_s))
+                          t_s=float(frames.timestamp_s[position]), uptime_before_s=before_s,
+                          silent=silent[k]))
     return lives
 
 

@@ -211,7 +211,8 @@ def _analyze_lives(
                                     tolerance=tolerance, db=db, boot=span.boot,
                                     rebase=span.t_s is not None and span.config is None,
                                     max_wheel_speed_mm_s=bound,
-                                    start_pose=span.set_pose and span.set_pose.start_pose())
+                                    start_pose=span.set_pose and span.set_pose.start_pose(),
+                                    silent=span.silent)
         except AnalysisError as exc:  # a life without on-board samples: reported, not compared
             failure = failure or exc
             silent.append(_as_life(span))
@@ -295,6 +296,7 @@ def _life(
     db: DatabaseSpec, boot: bool, max_wheel_speed_mm_s: SpeedBound,
     rebase: bool = False, scenario: str | None = None, seed: int | None = None,
     wall_seconds: float | None = None, start_pose: tuple[float, float, float] | None = None,
+    silent: bool = False,
 ) -> tuple[dict[str, Any], float]:
     """``analysis._analyze_life``'s report of one life, and its first frame's time
     (``start_pose``: a set-pose's, exact at the life's first encoder frame)."""
@@ -303,11 +305,16 @@ def _life(
     facts = first.facts
     integrator, source = facts.integrator(integrator)
     first.check()
-    power_up = facts.saw_only_the_log() if boot else facts.starts_at_power_up(first.head)
+    power_up = not silent and (facts.saw_only_the_log() if boot
+                               else facts.starts_at_power_up(first.head))
     judge = functools.partial(
         _judged, first, frames, robot, (integrator, source), power_up, tolerance=tolerance,
         db=db, max_wheel_speed_mm_s=max_wheel_speed_mm_s, rebase=rebase, scenario=scenario,
         seed=seed, wall_seconds=wall_seconds)
+    if silent and start_pose is None:  # rebooted unheard: (0, 0, 0) on each frame (silentboot)
+        event = first.prefix.silent_event(first.first_sent_s, first.head, (robot, integrator))
+        if event:
+            return judged_from_candidates(event, lambda pose: judge(start_pose=pose))
     if not (boot or rebase or power_up or start_pose is not None) and facts.primed_late():
         event = first.prefix.event(first.first_sent_s, (robot, integrator))  # stream_primed
         if event:  # judged from each frame it may have primed on, as the whole log's judge

@@ -55,6 +55,7 @@ from odocan.host.judge.navrestart import Carried, second_evidence
 from odocan.host.judge.primed import counted_start
 from odocan.host.judge.reboots import SUMMARY_PAGE, mark_two_sources
 from odocan.host.judge.samples import ENC_E2E_PAGE, AnalysisError, contract_cycle_s
+from odocan.host.judge.silentboot import quiet_start
 from odocan.host.judge.sources import SourceWatch, two_sources_text
 from odocan.host.judge.stalls import silent_between, stalled_before
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
@@ -73,6 +74,7 @@ class LifeSpan:
     uptime_before_s: int | None = None
     set_pose: Any = None  # a set-pose's piece (``setposes.SetPoseCut``: ``stream_cuts``)
     config: Any = None  # an applied config's piece (``configs.ConfigCut``)
+    silent: bool = False  # primed in a silence on a frame nothing names (``silentboot``)
 
 
 @dataclass
@@ -92,6 +94,7 @@ class _Boot:
     stalled: bool | None = None  # stalled before its first pose (None: not told yet)
     page_at: int | None = None  # its first count page's position in the log
     by_count: bool = False  # its start is the one its first count page named (a power-up)
+    silent: bool = False  # primed in a silence on a frame nothing names (``silentboot``)
 
 
 @dataclass
@@ -210,8 +213,8 @@ class StreamLives:
         for k, (boot, start) in enumerate(self._boots):
             end = starts[k + 1] if k + 1 < len(starts) else stop
             lives.append(LifeSpan(start, end, boot=boot.uptime_s == 0 or boot.by_count,
-                                  t_s=boot.t_s,
-                                  uptime_before_s=boot.before_s))
+                                  t_s=boot.t_s, uptime_before_s=boot.before_s,
+                                  silent=boot.silent))
         return lives
 
     def finish_one_source(self, streams: tuple[int, float, str] | None = None
@@ -261,12 +264,16 @@ class StreamLives:
         self._waiting = None
         previous = self._boots[-1][1] if self._boots else 0
         start = boot.start
-        if boot.counted is not None and boot.counted > previous and not self._stalled(boot, limit):
+        counting = boot.counted is not None and not self._stalled(boot, limit)
+        if counting and boot.counted is not None and boot.counted > previous:
             start, boot.by_count = boot.counted, True
         if boot.named is not None and boot.named > previous:
             start = boot.named  # the power-up pose's word last (``reboots.split_lives``)
             boot.by_count = start == boot.counted
-        self._boots.append((boot, start))
+        quiet = None if counting or boot.named is not None else quiet_start(
+            self._alive, (self._encoders, self._enc_t), boot.position, previous)
+        boot.silent = quiet is not None  # primed in a silence (``silentboot``)
+        self._boots.append((boot, start if quiet is None else quiet))
         self._tracking = [other for other in self._tracking if other is not boot]
 
     def _track(self, chunk: FrameArrays) -> None:

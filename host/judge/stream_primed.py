@@ -29,7 +29,8 @@ from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.analysis import Analysis
 from odocan.host.judge.primedon import judged_from_each
 from odocan.host.judge.primedrange import primed_range_event
-from odocan.host.judge.samples import ENC_E2E_PAGE, encoder_frames
+from odocan.host.judge.samples import ENC_E2E_PAGE, Poses, encoder_frames
+from odocan.host.judge.silentboot import primed_in_silence
 from odocan.host.judge.stream_refusal import NotStreamable
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.sim.robot import RobotProfile
@@ -80,6 +81,17 @@ class PowerUpPrefix:
         accepted = np.concatenate([a for _, a in self.chunks])
         enc = encoder_frames(frames, accepted, self.decoder)
         return primed_range_event(frames, accepted, self.decoder, enc, t_s, judged)
+
+    def silent_event(self, t_s: float, head: Poses,
+                     judged: tuple[RobotProfile, str]) -> list[dict[str, Any]]:
+        """``silentboot.primed_in_silence`` of a life that rebooted unheard (``head``: its
+        first sample); ``NotStreamable`` when the prefix was dropped before its first pose."""
+        if self.over or not self.pose:
+            raise NotStreamable(TOO_LONG.format(frames=MAX_PREFIX_FRAMES))
+        frames = concat_frames([c for c, _ in self.chunks])
+        accepted = np.concatenate([a for _, a in self.chunks])
+        enc = encoder_frames(frames, accepted, self.decoder)
+        return primed_in_silence(enc, head, t_s, *judged)
 
 
 Pose = tuple[float, float, float]

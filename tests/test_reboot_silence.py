@@ -1,0 +1,105 @@
+"""A reboot inside a bus-off whose power-up nothing on the log names (issue #11 item 5).
+
+The firmware reset inside a bus-off of 0.5..2 s; the recorder then missed its first summaries
+and every page of WHEEL_ENCODERS E2E counts (ENC_E2E_OK, the page that names the frame it primed
+on). ``reboots.split_lives`` (and ``stream_lives``) cut the new life at the first summary heard:
+the new firmware's poses heard between the bus's return and that summary fell in the old life
+and a correct firmware FAILed (kobuki ``--seed 5 --faults busoff=4:1,reboot=4.3``, count pages
+gone: 45.7 mm and 6.3 rad off), and a first summary of UPTIME 1 had the new life's start fitted.
+Now the life starts after the silence and is judged from (0, 0, 0) on each frame it may have
+primed on (``host.judge.silentboot``): the correct firmware PASSes, whole and streamed, and the
+same log with ODOM_POSE_X raised by 10 mm after the reboot (E2E CRC recomputed by cantools,
+``tests.log_edit.raise_raw``) FAILs: no frame it may have primed on absorbs the offset.
+
+The drives are the CLI's own (``odocan run``); the edits are made here with python-can and
+cantools, the page told by the DBC (the multiplexer value of ENC_E2E_OK).
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import can
+import cantools
+import pytest
+from cantools.database.can import Database
+
+from odocan.sim import contract
+from tests.log_edit import raise_raw
+
+TAMPER_LSB = 100  # 10 mm in ODOM_POSE_X's 0.1 mm LSBs
+DRIVES = [  # (robot, seed, bus-off start s, its length s, reset s, first summaries missed)
+    ("kobuki", 5, 4.0, 1.0, 4.3, 0),
+    ("kobuki", 5, 4.0, 1.0, 4.3, 8),
+    ("kobuki", 9, 4.0, 2.0, 5.0, 8),
+    ("pmir", 5, 4.0, 0.5, 4.2, 0),
+    ("pmir", 9, 4.0, 1.5, 4.9, 8),
+]
+
+
+def _cli(*args: str) -> int:
+    done = subprocess.run([sys.executable, "-m", "odocan", *args], capture_output=True,
+                          text=True, timeout=600, check=False)
+    assert "Traceback" not in done.stderr, done.stderr
+    return done.returncode
+
+
+def _strip(src: Path, dst: Path, from_s: float, summaries: int) -> int:
+    """``src`` copied to ``dst`` without any count page from ``from_s`` s after its first frame
+    on, nor the first ``summaries`` other ODOM_STATUS frames from there; frames dropped."""
+    db = cantools.database.load_file(str(contract.DBC_PATH))
+    assert isinstance(db, Database)
+    status = db.get_message_by_name("ODOM_STATUS")
+    ids = status.get_signal_by_name("ENC_E2E_OK").multiplexer_ids
+    assert ids is not None
+    page = ids[0]
+    dropped, skipped, first = 0, 0, None
+    with can.Logger(str(dst)) as out:
+        for msg in can.LogReader(str(src)):
+            first = msg.timestamp if first is None else first
+            if msg.arbitration_id == status.frame_id and msg.timestamp - first >= from_s:
+                decoded = status.decode(bytes(msg.data), decode_choices=False)
+                assert isinstance(decoded, dict)
+                if decoded["PAGE"] == page or skipped < summaries:
+                    dropped += 1
+                    skipped += decoded["PAGE"] != page
+                    continue
+            out.on_message_received(msg)
+    return dropped
+
+
+@pytest.mark.parametrize(("robot", "seed", "off_s", "length_s", "reset_s", "summaries"), DRIVES)
+def test_a_reboot_in_a_bus_off_nothing_names_is_judged_from_its_power_up(
+        robot: str, seed: int, off_s: float, length_s: float, reset_s: float, summaries: int,
+        tmp_path: Path) -> None:
+    drive, log, tampered = tmp_path / "drive.log", tmp_path / "log.log", tmp_path / "t.log"
+    assert _cli("run", "--robot", robot, "--seed", str(seed), "--duration", "8", "--faults",
+                f"busoff={off_s}:{length_s},reboot={reset_s}", "--log", str(drive)) == 0
+    back_s = off_s + length_s - 0.05  # just before the bus's return: every page after it
+    assert _strip(drive, log, back_s, summaries) >= summaries + 3
+    for stream in ("always", "never"):
+        assert _cli("analyze", str(log), "--stream", stream) == 0, stream
+    assert raise_raw(log, tampered, "ODOM_POSE_X", (2, 4), TAMPER_LSB, back_s) > 50
+    for stream in ("always", "never"):
+        assert _cli("analyze", str(tampered), "--stream", stream) == 1, stream
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "the live judge (BusMonitor) is not fixed: kobuki --seed 5 busoff=4:1,reboot=4.3, count "
+    "pages and 8 first summaries missed: the correct firmware 4.43 mm off its reference, the "
+    "one 10 mm off the same 4.43 mm (its start absorbed the offset); with no summary missed "
+    "45.67 mm (the poses before the first summary heard in the old life)"))
+def test_the_live_judge_follows_a_reboot_in_a_bus_off_nothing_names(tmp_path: Path) -> None:
+    from odocan.host.judge.analysis import POSITION_LSB_M
+    from tests.test_live_reboot import monitor_of
+
+    drive, log, tampered = tmp_path / "drive.log", tmp_path / "log.log", tmp_path / "t.log"
+    assert _cli("run", "--robot", "kobuki", "--seed", "5", "--duration", "8", "--faults",
+                "busoff=4:1,reboot=4.3", "--log", str(drive)) == 0
+    assert _strip(drive, log, 4.95, 8) >= 11
+    assert raise_raw(log, tampered, "ODOM_POSE_X", (2, 4), TAMPER_LSB, 4.95) > 50
+    right = monitor_of(log, "kobuki", "exact").tracker.vs_reference.max_dpos_m
+    wrong = monitor_of(tampered, "kobuki", "exact").tracker.vs_reference.max_dpos_m
+    assert right <= POSITION_LSB_M < 50 * POSITION_LSB_M < wrong, (right, wrong)
