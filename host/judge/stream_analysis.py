@@ -82,6 +82,7 @@ from odocan.host.judge.stream_primed import judged_from_candidates
 from odocan.host.judge.stream_refusal import UNSETTLED
 from odocan.host.judge.stream_refusal import NotStreamable as NotStreamable
 from odocan.host.judge.stream_reprime import stream_reprimes
+from odocan.host.judge.stream_stallfirst import stream_first
 from odocan.host.judge.stream_stalls import StreamBreakCounts
 from odocan.host.judge.twosenders import LogSenders
 from odocan.host.judge.unseenrestart import restart_detail, whole_only
@@ -399,10 +400,12 @@ def _judged(
         [(a, z) for a, z, _ in spans],
         skipped=first.losses.ok_spans(power_up and start_pose is None)))
     after_span = drops.allowance(np.array([last + 1 for _, last, _ in spans], dtype=np.int64))
+    left_out = stream_first(frames, db, robot, integrator, bits,  # stallfirst
+                            (tolerance.position_m, tolerance.heading_rad))
     passed = bool(
         vs_ref["max_position_error_beyond_allowance_m"] <= tolerance.position_m
         and vs_ref["max_heading_error_rad"] <= tolerance.heading_rad
-        and twist["passed"] and distance["passed"]
+        and twist["passed"] and distance["passed"] and left_out.passed()
     )
     covered_s = facts.covered_s()
     counts = first.e2e.counts
@@ -424,7 +427,7 @@ def _judged(
             "unmatched_poses": first.poses.unmatched,
             "encoder_frames": first.encoders,
             "reference_restarts": info.segments, "unseen_restarts": 0,  # else: whole_only
-            "implausible_encoder_frames": info.refused,
+            "implausible_encoder_frames": info.refused, **left_out.counts(),
         },
         "reference_breaks": placements.as_dict(),
         "events": [
@@ -452,7 +455,7 @@ def _judged(
         "reboots": [],
         "onboard_vs_reference": vs_ref,
         "onboard_vs_truth": vs_truth,
-        "onboard_twist_vs_reference": twist,
+        "onboard_twist_vs_reference": twist, "stall_first_pose": left_out.as_dict(),
         "onboard_distance_vs_reference": distance,
         "final_onboard_pose": {
             "x_m": float(first.tail.x_m[-1]),
