@@ -163,18 +163,32 @@ def _best(pose: Pair, neighbours: tuple[Pair | None, Pair | None], enc: Encoders
 
 def _excess(pose: Pair, near: Pair, c: int, enc: Encoders, steps: OneSteps, bits: int,
             tolerance: tuple[float, float]) -> tuple[float, float]:
+    """``carried_excess`` of ``pose`` from neighbour ``near`` to frame ``c`` of ``enc``."""
+    a, b = min(near.enc, c), max(near.enc, c)
+    return carried_excess(pose, near, (enc.left[a:b + 1], enc.right[a:b + 1]), c > near.enc,
+                          (steps.geometry, steps.integrator, bits), tolerance)
+
+
+def carried_excess(pose: Pair, near: Pair, counts: tuple[np.ndarray, np.ndarray],
+                   forward: bool, robot: tuple[Geometry, str, int],
+                   tolerance: tuple[float, float]) -> tuple[float, float]:
     """How far ``pose`` lies beyond the pose of neighbour ``near`` carried over the count steps
-    to frame ``c`` (position beyond tolerance + merge allowance, heading beyond tolerance)."""
-    e = near.enc
-    a, b = min(e, c), max(e, c)
+    to a candidate frame (position beyond tolerance + merge allowance, heading beyond
+    tolerance): ``counts`` the wire counts (left, right) of the frames from the earlier of the
+    two to the later, ``forward``: the candidate is the later (``robot``: geometry,
+    integrator, wire counter bits)."""
+    geometry, integrator, bits = robot
+    left, right = (np.asarray(v, dtype=np.int64) for v in counts)
+    steps = OneSteps.of_deltas(wrap_delta(np.diff(left), bits), wrap_delta(np.diff(right), bits),
+                               geometry, integrator)
+    sign = 1.0 if forward else -1.0  # carried from the first frame to the last, or back
+    e = 0 if forward else len(left) - 1
     turn = near.heading_rad - float(steps.heading[e])  # the firmware's heading frame
-    dx = float(steps.cum_x[c] - steps.cum_x[e])
-    dy = float(steps.cum_y[c] - steps.cum_y[e])
+    dx, dy = sign * float(steps.cum_x[-1]), sign * float(steps.cum_y[-1])
     x = near.x_m + dx * math.cos(turn) - dy * math.sin(turn)
     y = near.y_m + dx * math.sin(turn) + dy * math.cos(turn)
-    heading = float(steps.heading[c]) + turn
-    allowed = merge_allowance_m(enc.left[a:b + 1], enc.right[a:b + 1], steps.geometry, bits,
-                                steps.integrator)
+    heading = float(steps.heading[len(left) - 1 - e]) + turn
+    allowed = merge_allowance_m(left, right, geometry, bits, integrator)
     return (math.hypot(pose.x_m - x, pose.y_m - y) - tolerance[0] - allowed,
             abs(pose.heading_rad - heading) - tolerance[1])
 

@@ -62,3 +62,22 @@ def stream_first(
     pose_sent_s = accepted_rows(log, accepted, decoder, "ODOM_POSE_Y")["timestamp_s"]
     kept, _ = after_stalls(onboard, sent_s, enc, pose_sent_s, alive_times(log, accepted, decoder))
     return judge_left_out(halves, kept, enc, Geometry.of(robot), integrator, bits, tolerance)
+
+
+def logged_first_wrong(frames: FrameArrays, robot: RobotProfile, integrator: str,
+                       tolerance: tuple[float, float]) -> str | None:
+    """``replay``'s word on the log's own poses sent first after a silence: the replayed
+    firmware is compared with the log at the frames the log's poses name, which such a pose
+    may not resolve (it is then never compared); judged here by the poses around it. Why it
+    FAILs, None when it does not."""
+    from odocan.firmware.encoders import WIRE_COUNTER_BITS
+    from odocan.host.protocol.dbcplan import default_plan
+
+    verdict = stream_first(lambda: [frames], default_plan(), robot, integrator,
+                           min(robot.counter_bits, WIRE_COUNTER_BITS), tolerance)
+    if verdict.passed():
+        return None
+    return (f"the log's pose sent first after a silence at {verdict.worst_at_s:.3f} s lies "
+            f"{max(verdict.worst_position_m, 0.0) * 1e3:.4g} mm, "
+            f"{max(verdict.worst_heading_rad, 0.0) * 1e3:.4g} mrad beyond the poses around it "
+            "(host.judge.stallfirst)")

@@ -1,0 +1,142 @@
+"""``stallfirst`` for the live judge (``odocan monitor``): the pose sent first after a silence,
+judged by the poses around it as it comes (issue #11: +10 m on the first pose after a stall left
+the monitor OK, its tracker leaving that sample out or never matching it).
+
+Fed every encoder frame and pose half the monitor takes (CRC right, in bus order). A pose (its
+ODOM_POSE_X and the ODOM_POSE_Y after it naming the same ENC_COUNTER) sent ``SILENCE_CYCLES``
+encoder cycles or more after the pose before it waits for its neighbours: the pose before
+(matched to the latest frame with its ENC_COUNTER at its time), with the frames after it (at most
+``stallfirst.NEAR_FRAMES``), and the next pose not itself after a silence, with the frames
+before it. ``stallfirst.carried_excess`` from either to each candidate frame; the best one
+decides. A pose without a neighbour that names a frame of the window is counted unjudged."""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from collections.abc import Callable
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from odocan.firmware.encoders import WIRE_COUNTER_BITS
+from odocan.host.judge.reference import Geometry
+from odocan.host.judge.samples import HEADING_LSB_RAD, POSITION_LSB_M, SILENCE_CYCLES
+from odocan.host.judge.stallfirst import NEAR_FRAMES, FirstVerdict, Pair, carried_excess
+
+if TYPE_CHECKING:
+    from cantools.database.can import Database
+
+    from odocan.host.judge.tracking import PoseTracker
+    from odocan.sim.robot import RobotProfile
+
+Frame = tuple[int, int, int, int]  # position, E2E COUNTER, LEFT_COUNT, RIGHT_COUNT
+
+
+class LiveFirst:
+    """The rule, frame by frame (module docstring); ``verdict``: its counts and worst."""
+
+    def __init__(self, geometry: Geometry, bits: int, integrator: Callable[[], str | None],
+                 tolerance: tuple[float, float], cycle_s: float | None) -> None:
+        self._robot = (geometry, bits)
+        self._integrator = integrator
+        self._tolerance = tolerance
+        self._quiet_s = math.inf if cycle_s is None else (SILENCE_CYCLES - 0.5) * cycle_s
+        self._recent: deque[Frame] = deque(maxlen=NEAR_FRAMES + 1)
+        self._n = 0
+        self._x: tuple[int, float, float, float] | None = None  # ENC_COUNTER, X, HEADING, t
+        self._last_t_s: float | None = None
+        self._before: tuple[Pair, list[Frame]] | None = None  # the last pose, frames from it
+        self._waiting: list[tuple[Pair, tuple[float, float] | None]] = []  # after a silence
+        self.verdict = FirstVerdict()
+
+    def on_encoders(self, counter: int, left: int, right: int) -> None:
+        frame = (self._n, counter, left, right)
+        self._n += 1
+        self._recent.append(frame)
+        if self._before is not None and len(self._before[1]) <= NEAR_FRAMES:
+            self._before[1].append(frame)
+
+    def on_pose_x(self, named: int, x_m: float, heading_rad: float, t_s: float) -> None:
+        self._x = (named, x_m, heading_rad, t_s)
+
+    def on_pose_y(self, named: int, y_m: float, turns: int) -> None:
+        if self._x is None or self._x[0] != named:
+            return
+        _, x_m, heading_rad, t_s = self._x
+        self._x = None
+        frame = next((f for f in reversed(self._recent) if f[1] == named), None)
+        pose = Pair(t_s, named, -1 if frame is None else frame[0], x_m, y_m,
+                    turns * 2 * math.pi + heading_rad)
+        last, self._last_t_s = self._last_t_s, t_s
+        if last is not None and t_s - last >= self._quiet_s:
+            self._waiting.append((pose, self._forward(pose)))
+            return
+        for waiting, forward in self._waiting:  # the next pose: the backward neighbour
+            self._judged(waiting, forward, self._backward(waiting, pose))
+        self._waiting = []
+        self._before = None if frame is None else (pose, [frame])
+
+    def _forward(self, pose: Pair) -> tuple[float, float] | None:
+        if self._before is None:
+            return None
+        near, frames = self._before
+        return self._best(pose, near, frames, forward=True)
+
+    def _backward(self, pose: Pair, near: Pair) -> tuple[float, float] | None:
+        if near.enc < 0:
+            return None
+        frames = [f for f in self._recent if f[0] <= near.enc]
+        return self._best(pose, near, frames, forward=False)
+
+    def _best(self, pose: Pair, near: Pair, frames: list[Frame], forward: bool
+              ) -> tuple[float, float] | None:
+        best: tuple[float, float] | None = None
+        integrator = self._integrator()
+        if integrator is None:  # not known yet (ODOM_STATUS): not judged
+            return None
+        left = np.array([f[2] for f in frames], dtype=np.int64)
+        right = np.array([f[3] for f in frames], dtype=np.int64)
+        robot = (self._robot[0], integrator, self._robot[1])
+        for k, frame in enumerate(frames):
+            if frame[1] != pose.named:
+                continue
+            span = slice(0, k + 1) if forward else slice(k, len(frames))
+            got = carried_excess(pose, near, (left[span], right[span]), forward, robot,
+                                 self._tolerance)
+            if best is None or max(got[0], got[1] * 1e3) < max(best[0], best[1] * 1e3):
+                best = got
+        return best
+
+    def _judged(self, pose: Pair, forward: tuple[float, float] | None,
+                backward: tuple[float, float] | None) -> None:
+        got = [g for g in (forward, backward) if g is not None]
+        verdict = self.verdict
+        if not got:
+            verdict.unjudged += 1
+            return
+        verdict.judged += 1
+        best = min(got, key=lambda g: max(g[0], g[1] * 1e3))
+        if best[0] > verdict.worst_position_m or best[1] > verdict.worst_heading_rad:
+            verdict.worst_at_s = pose.t_s
+        verdict.worst_position_m = max(verdict.worst_position_m, best[0])
+        verdict.worst_heading_rad = max(verdict.worst_heading_rad, best[1])
+
+    def wrong(self) -> list[str]:
+        """Why the monitor says POSE WRONG for this rule (empty: it does not)."""
+        v = self.verdict
+        if v.passed():
+            return []
+        return [f"the pose sent first after a silence at {v.worst_at_s:.3f} s lies "
+                f"{max(v.worst_position_m, 0.0) * 1e3:.4g} mm, "
+                f"{max(v.worst_heading_rad, 0.0) * 1e3:.4g} mrad beyond the poses around it "
+                "carried over the encoder counts (host.judge.stallfirst)"]
+
+
+def first_after_of(tracker: PoseTracker, robot: RobotProfile, db: Database) -> LiveFirst:
+    """The monitor's ``LiveFirst``: its robot, the tracker's integrator, one LSB each (the live
+    judge's limit, ``livestanding``), the DBC's encoder cycle."""
+    cycle_ms = next((m.cycle_time for m in db.messages if m.name == "WHEEL_ENCODERS"), None)
+    return LiveFirst(Geometry.of(robot), min(robot.counter_bits, WIRE_COUNTER_BITS),
+                     lambda: tracker.integrator, (POSITION_LSB_M, HEADING_LSB_RAD),
+                     None if not cycle_ms else cycle_ms / 1000.0)
