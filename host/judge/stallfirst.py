@@ -37,8 +37,9 @@ from odocan.host.judge.samples import (
     PoseHalves,
     Poses,
 )
+from odocan.host.judge.stallresume import FIFO_FRAMES, resume_excess
 
-NEAR_FRAMES = 16  # a counter cycle of ENC_COUNTER: candidates within it of a neighbour
+NEAR_FRAMES = FIFO_FRAMES  # a counter cycle of ENC_COUNTER: candidates within it of a neighbour
 
 
 @dataclass
@@ -53,9 +54,21 @@ class FirstVerdict:
     worst_position_m: float = -math.inf  # beyond tolerance + merge allowance (<= 0: within)
     worst_heading_rad: float = -math.inf  # beyond the heading tolerance
     worst_at_s: float | None = None  # bus time of the worst pose (ODOM_POSE_X)
+    resumes: int = 0  # first samples after the silence judged by ``stallresume``
+    worst_resume_m: float = -math.inf  # beyond every pose the firmware can resume at
+    resume_at_s: float | None = None  # bus time of that sample (ODOM_POSE_X)
 
     def passed(self) -> bool:
-        return self.worst_position_m <= 0.0 and self.worst_heading_rad <= 0.0
+        return (self.worst_position_m <= 0.0 and self.worst_heading_rad <= 0.0
+                and self.worst_resume_m <= 0.0)
+
+    def resumed(self, t_s: float, excess_m: float | None) -> None:
+        """``stallresume.resume_excess`` of the sample after a silence sent at ``t_s``."""
+        if excess_m is None:
+            return
+        self.resumes += 1
+        if excess_m > self.worst_resume_m:
+            self.worst_resume_m, self.resume_at_s = excess_m, t_s
 
     def counts(self) -> dict[str, int]:
         """The ``samples`` counts (``judgedfloor.judged_share``)."""
@@ -66,7 +79,9 @@ class FirstVerdict:
         return {"judged": self.judged, "unjudged": self.unjudged,
                 "max_position_beyond_m": _finite(self.worst_position_m),
                 "max_heading_beyond_rad": _finite(self.worst_heading_rad),
-                "worst_at_s": self.worst_at_s, "passed": self.passed()}
+                "worst_at_s": self.worst_at_s, "resumes": self.resumes,
+                "max_resume_beyond_m": _finite(self.worst_resume_m),
+                "resume_at_s": self.resume_at_s, "passed": self.passed()}
 
 
 def _finite(value: float) -> float | None:
@@ -130,6 +145,11 @@ def judge_left_out(
         after = next((pairs[j] for j in range(i + 1, len(pairs)) if is_kept[j]), None)
         excess = _best(pairs[i], (before, after), enc, steps, bits, tolerance)
         verdict.unmatched += pairs[i].enc < 0
+        if before is not None and after is not None and 0 <= before.enc < after.enc:
+            span = slice(before.enc, after.enc + 1)  # the stall is no set-pose: stallresume
+            verdict.resumed(after.t_s, resume_excess(
+                (before.x_m, before.y_m, before.heading_rad), (after.x_m, after.y_m),
+                (enc.left[span], enc.right[span]), (geometry, integrator, bits), tolerance[0]))
         if excess is None:
             verdict.unjudged += 1
             continue
@@ -201,6 +221,6 @@ def merged_first(parts: list[dict[str, object] | None]) -> dict[str, object]:
         return FirstVerdict().as_dict()
     worst = max(given, key=lambda p: (not p["passed"], p["max_position_beyond_m"] is not None))
     out = dict(worst)
-    for key in ("judged", "unjudged"):
-        out[key] = sum(int(p[key]) for p in given)  # type: ignore[call-overload]
+    for key in ("judged", "unjudged", "resumes"):
+        out[key] = sum(int(p.get(key) or 0) for p in given)  # type: ignore[call-overload]
     return out

@@ -27,10 +27,15 @@ def _first_said(report: dict[str, Any]) -> str:
     if not first.get("judged") and not first.get("unjudged"):
         return ""
     said = f"; {first['judged']} sent first after a silence judged by the poses around it"
-    if first.get("max_position_beyond_m") is not None and not first.get("passed", True):
+    if max(first.get("max_position_beyond_m") or 0.0,
+           first.get("max_heading_beyond_rad") or 0.0) > 0:
         said += (f" ({first['max_position_beyond_m'] * 1e3:.4g} mm, "
                  f"{max(first['max_heading_beyond_rad'], 0.0) * 1e3:.4g} mrad beyond them "
                  f"at {first['worst_at_s']:.3f} s)")
+    if first.get("max_resume_beyond_m") is not None and first["max_resume_beyond_m"] > 0:
+        said += (f"; the pose at {first['resume_at_s']:.3f} s lies "
+                 f"{first['max_resume_beyond_m'] * 1e3:.4g} mm beyond any the firmware can "
+                 "resume at from its pose before the stall (a jump, no placement)")
     if first.get("unjudged"):
         said += f", {first['unjudged']} not judged (no neighbour names a frame it may name)"
     return said
