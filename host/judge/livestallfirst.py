@@ -20,9 +20,11 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from odocan.firmware.encoders import WIRE_COUNTER_BITS
+from odocan.host.judge.breaks import MAX_MERGE_FRAMES
 from odocan.host.judge.reference import Geometry
 from odocan.host.judge.samples import HEADING_LSB_RAD, POSITION_LSB_M, SILENCE_CYCLES
 from odocan.host.judge.stallfirst import NEAR_FRAMES, FirstVerdict, Pair, carried_excess
+from odocan.host.judge.stallresume import resume_excess
 
 if TYPE_CHECKING:
     from cantools.database.can import Database
@@ -54,7 +56,7 @@ class LiveFirst:
         frame = (self._n, counter, left, right)
         self._n += 1
         self._recent.append(frame)
-        if self._before is not None and len(self._before[1]) <= NEAR_FRAMES:
+        if self._before is not None and len(self._before[1]) <= MAX_MERGE_FRAMES:
             self._before[1].append(frame)
 
     def on_pose_x(self, named: int, x_m: float, heading_rad: float, t_s: float) -> None:
@@ -74,6 +76,8 @@ class LiveFirst:
             return
         for waiting, forward in self._waiting:  # the next pose: the backward neighbour
             self._judged(waiting, forward, self._backward(waiting, pose))
+        if self._waiting and self._before is not None and frame is not None:
+            self._resumed(self._before, pose)  # the stall is no set-pose: stallresume
         self._waiting = []
         self._before = None if frame is None else (pose, [frame])
 
@@ -81,7 +85,22 @@ class LiveFirst:
         if self._before is None:
             return None
         near, frames = self._before
-        return self._best(pose, near, frames, forward=True)
+        return self._best(pose, near, frames[:NEAR_FRAMES + 1], forward=True)
+
+    def _resumed(self, before: tuple[Pair, list[Frame]], after: Pair) -> None:
+        near, frames = before
+        integrator = self._integrator()
+        span = [f for f in frames if f[0] <= after.enc]
+        if integrator is None or not span or span[-1][0] != after.enc:
+            return  # frames beyond the window (a stall over MAX_MERGE_FRAMES): not judged here
+        self.verdict.resumed(after.t_s, resume_excess(
+            (near.x_m, near.y_m, near.heading_rad), (after.x_m, after.y_m),
+            (np.array([f[2] for f in span]), np.array([f[3] for f in span])),
+            (self._robot[0], integrator, self._robot[1]), self._tolerance[0]))
+
+    def new_life(self) -> None:
+        """A reboot or an applied set-pose: the pose before it vouches for nothing after."""
+        self._before = None
 
     def _backward(self, pose: Pair, near: Pair) -> tuple[float, float] | None:
         if near.enc < 0:
@@ -124,13 +143,17 @@ class LiveFirst:
 
     def wrong(self) -> list[str]:
         """Why the monitor says POSE WRONG for this rule (empty: it does not)."""
-        v = self.verdict
-        if v.passed():
-            return []
-        return [f"the pose sent first after a silence at {v.worst_at_s:.3f} s lies "
-                f"{max(v.worst_position_m, 0.0) * 1e3:.4g} mm, "
-                f"{max(v.worst_heading_rad, 0.0) * 1e3:.4g} mrad beyond the poses around it "
-                "carried over the encoder counts (host.judge.stallfirst)"]
+        v, said = self.verdict, []
+        if max(v.worst_position_m, v.worst_heading_rad) > 0:
+            said.append(f"the pose sent first after a silence at {v.worst_at_s:.3f} s lies "
+                        f"{max(v.worst_position_m, 0.0) * 1e3:.4g} mm, "
+                        f"{max(v.worst_heading_rad, 0.0) * 1e3:.4g} mrad beyond the poses "
+                        "around it carried over the encoder counts (host.judge.stallfirst)")
+        if v.worst_resume_m > 0:
+            said.append(f"the pose at {v.resume_at_s:.3f} s lies {v.worst_resume_m * 1e3:.4g} "
+                        "mm beyond any the firmware can resume at from its pose before the "
+                        "stall: a jump, no placement (host.judge.stallresume)")
+        return said
 
 
 def first_after_of(tracker: PoseTracker, robot: RobotProfile, db: Database) -> LiveFirst:

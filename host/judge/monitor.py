@@ -301,6 +301,7 @@ class BusMonitor:
                                            self._bus_time_s)
             if applied is not None:
                 pose = apply_set_pose(self.tracker, *applied)
+                self.first_after.new_life()
                 event = set_pose_event(self._bus_time_s, pose, applied[1])
                 self.events.append(self.kept.applied(event, *applied, self.tracker.enc_seq))
         elif int(s["REQUEST_ID"]) == self._config_id:
@@ -400,6 +401,7 @@ class BusMonitor:
         lost = rebooted(self, self.config, self._bus_time_s)  # its configs were in its RAM
         detail += ": " + src.start_new_life(self.tracker, self.e2e, self.db, uptime_s, state, seq)
         self.distance.new_life()
+        self.first_after.new_life()
         since_s = self.sources.life_from_s - SAME_TICK_S  # its first ticks' (bootticks)
         self.tracker.withdraw_from(since_s)  # its poses vs the old reference
         self.twist.new_life(since_s)  # its first ticks' twists
