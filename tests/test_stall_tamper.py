@@ -11,9 +11,15 @@ The outside trial's edits, each frame re-signed (``tests/log_edit``, CRCs by can
   it PASSed, and the judged line counted it neither judged nor sent ("949 of 949" of 950
   poses logged).
 
-Both FAIL now (``host.judge.stallfirst``: the first pose after a silence is judged by the poses
-around it, carried over the log's encoder counts). The same drives untampered PASS in every
-judge. The count of poses logged is read here from the log itself (python-can), not from odocan.
+- H2: +10 mm (or +400 mm) on ODOM_POSE_X of every pose after the stall (from the second on,
+  the first left as it was): absorbed as the reference's placement after the stall, within the
+  454.5 mm merge allowance (a bound on the offset's length), analyze and the monitor PASSed.
+
+All FAIL now (``host.judge.stallfirst``: the first pose after a silence is judged by the poses
+around it, carried over the log's encoder counts; ``host.judge.stallresume``: the pose after a
+stall must be one the firmware can resume at from its own pose before it). The same drives
+untampered PASS in every judge. The count of poses logged is read here from the log itself
+(python-can), not from odocan.
 """
 
 from __future__ import annotations
@@ -27,7 +33,7 @@ from pathlib import Path
 import can
 import pytest
 
-from tests.log_edit import drop_frames, raise_raw_once
+from tests.log_edit import drop_frames, raise_raw, raise_raw_once
 from tests.test_live_reboot import monitor_of
 
 PMIR_DRIVE = ["--robot", "pmir", "--seed", "7", "--scenario", "figure8", "--duration", "25",
@@ -78,6 +84,14 @@ def kobuki_first_off(tmp_path_factory: pytest.TempPathFactory, kobuki_silence: P
     times = raise_raw_once(kobuki_silence, out, "ODOM_POSE_X", POSE_X, 100, 11.0)  # +10 mm
     assert len(times) == 1
     assert 11.0 <= times[0] < 11.01
+    return out
+
+
+@pytest.fixture(scope="module", params=[100, 4000], ids=["10mm", "400mm"])
+def pmir_jumped(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory,
+                pmir_stall: Path) -> Path:
+    out = tmp_path_factory.mktemp("pmir_jump") / "jumped.log"
+    assert raise_raw(pmir_stall, out, "ODOM_POSE_X", POSE_X, request.param, 13.015) > 500
     return out
 
 
@@ -156,3 +170,14 @@ def test_the_monitor_passes_the_untampered_drives(pmir_stall: Path,
     assert _monitor_state(pmir_stall, "pmir") not in ("POSE WRONG", "DISTANCE WRONG",
                                                       "TWIST WRONG")
     assert _monitor_state(kobuki_silence, "kobuki") == "OK"
+
+
+@pytest.mark.parametrize("stream", JUDGES)
+def test_an_offset_after_a_stall_is_no_placement(pmir_jumped: Path, stream: str) -> None:
+    done = _analyze(pmir_jumped, "pmir", stream)
+    assert done.returncode == 1, done.stdout[-2000:]
+    assert "beyond any the firmware can resume at" in done.stdout
+
+
+def test_the_monitor_says_pose_wrong_for_an_offset_after_a_stall(pmir_jumped: Path) -> None:
+    assert _monitor_state(pmir_jumped, "pmir") == "POSE WRONG"
