@@ -134,16 +134,14 @@ def judge_left_out(
                  for e, x, y in zip(kept.enc, kept.x_m, kept.y_m, strict=True)}
     pairs = pose_pairs(halves)
     is_kept = [(p.enc, round(p.x_m, 6), round(p.y_m, 6)) in kept_keys for p in pairs]
-    dl = wrap_delta(np.diff(enc.left.astype(np.int64)), bits)
-    dr = wrap_delta(np.diff(enc.right.astype(np.int64)), bits)
-    steps = OneSteps.of_deltas(dl, dr, geometry, integrator)
+    robot = (geometry, integrator, bits)
     quiet = (SILENCE_CYCLES - 0.5) * enc.cycle_s
     for i in range(1, len(pairs)):
         if is_kept[i] or pairs[i].t_s - pairs[i - 1].t_s < quiet:
             continue
         before = next((pairs[j] for j in range(i - 1, -1, -1) if is_kept[j]), None)
         after = next((pairs[j] for j in range(i + 1, len(pairs)) if is_kept[j]), None)
-        excess = _best(pairs[i], (before, after), enc, steps, bits, tolerance)
+        excess = _best(pairs[i], (before, after), enc, robot, tolerance)
         verdict.unmatched += pairs[i].enc < 0
         if before is not None and after is not None and 0 <= before.enc < after.enc:
             span = slice(before.enc, after.enc + 1)  # the stall is no set-pose: stallresume
@@ -162,7 +160,7 @@ def judge_left_out(
 
 
 def _best(pose: Pair, neighbours: tuple[Pair | None, Pair | None], enc: Encoders,
-          steps: OneSteps, bits: int, tolerance: tuple[float, float]
+          robot: tuple[Geometry, str, int], tolerance: tuple[float, float]
           ) -> tuple[float, float] | None:
     """The smallest (position, heading) excess of ``pose`` over its candidates (module
     docstring), None without one."""
@@ -175,18 +173,18 @@ def _best(pose: Pair, neighbours: tuple[Pair | None, Pair | None], enc: Encoders
         for c in range(max(lo, 0), min(hi, len(enc.index) - 1) + 1):
             if int(enc.counter[c]) != pose.named:
                 continue
-            got = _excess(pose, near, c, enc, steps, bits, tolerance)
+            got = _excess(pose, near, c, enc, robot, tolerance)
             if best is None or max(got[0], got[1] * 1e3) < max(best[0], best[1] * 1e3):
                 best = got
     return best
 
 
-def _excess(pose: Pair, near: Pair, c: int, enc: Encoders, steps: OneSteps, bits: int,
+def _excess(pose: Pair, near: Pair, c: int, enc: Encoders, robot: tuple[Geometry, str, int],
             tolerance: tuple[float, float]) -> tuple[float, float]:
     """``carried_excess`` of ``pose`` from neighbour ``near`` to frame ``c`` of ``enc``."""
     a, b = min(near.enc, c), max(near.enc, c)
     return carried_excess(pose, near, (enc.left[a:b + 1], enc.right[a:b + 1]), c > near.enc,
-                          (steps.geometry, steps.integrator, bits), tolerance)
+                          robot, tolerance)
 
 
 def carried_excess(pose: Pair, near: Pair, counts: tuple[np.ndarray, np.ndarray],
