@@ -181,3 +181,14 @@ def test_an_offset_after_a_stall_is_no_placement(pmir_jumped: Path, stream: str)
 
 def test_the_monitor_says_pose_wrong_for_an_offset_after_a_stall(pmir_jumped: Path) -> None:
     assert _monitor_state(pmir_jumped, "pmir") == "POSE WRONG"
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "pre-existing on main, not fixed here: a correct kobuki firmware through a 3 s stall "
+    "(it refuses the merged step and re-primes, COUNTER_RESET) is POSE WRONG in the monitor, "
+    "1104.7 mm and 1481.7 mrad off its reference (seed 1, default drive; figure8: 1173.2 mm); "
+    "analyze PASSes it in all three modes"))
+def test_the_monitor_passes_a_correct_kobuki_through_a_3_s_stall(tmp_path: Path) -> None:
+    log = _run(tmp_path / "ks.log", [*KOBUKI_DRIVE, "--faults", "stall=10:3"])
+    assert _analyze(log, "kobuki", "auto").returncode == 0
+    assert _monitor_state(log, "kobuki") not in ("POSE WRONG", "DISTANCE WRONG", "TWIST WRONG")
