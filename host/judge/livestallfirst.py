@@ -23,6 +23,7 @@ from odocan.firmware.encoders import WIRE_COUNTER_BITS
 from odocan.host.judge.breaks import MAX_MERGE_FRAMES
 from odocan.host.judge.reference import Geometry
 from odocan.host.judge.samples import HEADING_LSB_RAD, POSITION_LSB_M, SILENCE_CYCLES
+from odocan.host.judge.senderseq import QUEUED_GAP_CYCLES
 from odocan.host.judge.stallfirst import NEAR_FRAMES, FirstVerdict, Pair, carried_excess
 from odocan.host.judge.stallresume import resume_excess
 
@@ -44,10 +45,12 @@ class LiveFirst:
         self._integrator = integrator
         self._tolerance = tolerance
         self._quiet_s = math.inf if cycle_s is None else (SILENCE_CYCLES - 0.5) * cycle_s
+        self._cycle_s = 0.0 if cycle_s is None else cycle_s
         self._recent: deque[Frame] = deque(maxlen=NEAR_FRAMES + 1)
         self._n = 0
         self._x: tuple[int, float, float, float] | None = None  # ENC_COUNTER, X, HEADING, t
-        self._last_t_s: float | None = None
+        self._last_t_s: float | None = None  # the last ODOM_POSE_X's bus time
+        self._quiet = False  # that X came after a silence
         self._before: tuple[Pair, list[Frame]] | None = None  # the last pose, frames from it
         self._waiting: list[tuple[Pair, tuple[float, float] | None]] = []  # after a silence
         self.verdict = FirstVerdict()
@@ -61,6 +64,8 @@ class LiveFirst:
 
     def on_pose_x(self, named: int, x_m: float, heading_rad: float, t_s: float) -> None:
         self._x = (named, x_m, heading_rad, t_s)
+        self._last_t_s, self._quiet = t_s, (self._last_t_s is not None
+                                            and t_s - self._last_t_s >= self._quiet_s)
 
     def on_pose_y(self, named: int, y_m: float, turns: int) -> None:
         if self._x is None or self._x[0] != named:
@@ -70,10 +75,11 @@ class LiveFirst:
         frame = next((f for f in reversed(self._recent) if f[1] == named), None)
         pose = Pair(t_s, named, -1 if frame is None else frame[0], x_m, y_m,
                     turns * 2 * math.pi + heading_rad)
-        last, self._last_t_s = self._last_t_s, t_s
-        if last is not None and t_s - last >= self._quiet_s:
+        if self._quiet:  # since the X before it (any, paired or not)
             self._waiting.append((pose, self._forward(pose)))
             return
+        self._waiting = [w for w in self._waiting  # let out in a burst: held back, no stall
+                         if t_s - w[0].t_s >= QUEUED_GAP_CYCLES * self._cycle_s]
         for waiting, forward in self._waiting:  # the next pose: the backward neighbour
             self._judged(waiting, forward, self._backward(waiting, pose))
         if self._waiting and self._before is not None and frame is not None:

@@ -16,7 +16,9 @@ the counts), the position by the same integrator. Candidates are the frames with
 COUNTER is the one the sample named; the carried pose is its neighbours' own, which the
 reference judges in turn, so a neighbour cannot vouch for a pose it does not reach.
 
-A left-out sample without a neighbour on either side, or with no candidate frame, is counted
+A pose let out in a burst (``senderseq.queued_frames``: a busy bus held it back, the firmware
+did not stall) is not this rule's. A left-out sample without a neighbour on either side, or with
+no candidate frame, is counted
 as not judged (``FirstVerdict.unjudged``), never as judged."""
 
 from __future__ import annotations
@@ -37,6 +39,7 @@ from odocan.host.judge.samples import (
     PoseHalves,
     Poses,
 )
+from odocan.host.judge.senderseq import queued_frames
 from odocan.host.judge.stallresume import FIFO_FRAMES, resume_excess
 
 NEAR_FRAMES = FIFO_FRAMES  # a counter cycle of ENC_COUNTER: candidates within it of a neighbour
@@ -90,7 +93,7 @@ def _finite(value: float) -> float | None:
 
 @dataclass(frozen=True)
 class Pair:
-    """One pose as sent: its ODOM_POSE_X and the ODOM_POSE_Y after it naming the same frame."""
+    """One pose as sent: its ODOM_POSE_X and the ODOM_POSE_Y nearest it naming the same frame."""
 
     t_s: float  # ODOM_POSE_X's bus time
     named: int  # ENC_COUNTER
@@ -98,23 +101,31 @@ class Pair:
     x_m: float
     y_m: float
     heading_rad: float
+    quiet_s: float = 0.0  # since the ODOM_POSE_X before it (any: paired or not)
+    queued: bool = False  # its X in a burst (``senderseq.queued_frames``)
 
 
-def pose_pairs(halves: PoseHalves) -> list[Pair]:
-    """Every ODOM_POSE_X with the first ODOM_POSE_Y at or after it that names the same
-    ENC_COUNTER, in bus order (an X without one is no pose)."""
+def pose_pairs(halves: PoseHalves, cycle_s: float) -> list[Pair]:
+    """Every ODOM_POSE_X with the ODOM_POSE_Y nearest it in time, within an encoder cycle
+    (``cycle_s``), that names the same ENC_COUNTER, in bus order (an X without one is no
+    pose); each with the time since the X before it and whether its X came in a burst."""
     px, py = halves.px, halves.py
+    tx = np.asarray(px["timestamp_s"], dtype=np.float64)
     ty = np.asarray(py["timestamp_s"], dtype=np.float64)
+    queued = queued_frames(tx, cycle_s)
     pairs = []
-    for k in range(len(px["timestamp_s"])):
-        t = float(px["timestamp_s"][k])
-        m = int(np.searchsorted(ty, t, side="left"))
-        if m >= len(ty) or int(py["ENC_COUNTER"][m]) != int(px["ENC_COUNTER"][k]):
+    for k in range(len(tx)):
+        t, named = float(tx[k]), int(px["ENC_COUNTER"][k])
+        lo, hi = np.searchsorted(ty, [t - cycle_s, t + cycle_s])
+        near = [m for m in range(int(lo), int(hi)) if int(py["ENC_COUNTER"][m]) == named]
+        if not near:
             continue
-        pairs.append(Pair(t, int(px["ENC_COUNTER"][k]), int(halves.ex[k]),
-                          float(px["X"][k]) * POSITION_LSB_M, float(py["Y"][m]) * POSITION_LSB_M,
+        m = min(near, key=lambda j: abs(float(ty[j]) - t))
+        pairs.append(Pair(t, named, int(halves.ex[k]), float(px["X"][k]) * POSITION_LSB_M,
+                          float(py["Y"][m]) * POSITION_LSB_M,
                           float(py["TURNS"][m]) * 2 * math.pi
-                          + float(px["HEADING"][k]) * HEADING_LSB_RAD))
+                          + float(px["HEADING"][k]) * HEADING_LSB_RAD,
+                          t - float(tx[k - 1]) if k else 0.0, bool(queued[k])))
     return pairs
 
 
@@ -132,12 +143,12 @@ def judge_left_out(
         return verdict
     kept_keys = {(int(e), round(float(x), 6), round(float(y), 6))
                  for e, x, y in zip(kept.enc, kept.x_m, kept.y_m, strict=True)}
-    pairs = pose_pairs(halves)
+    pairs = pose_pairs(halves, enc.cycle_s)
     is_kept = [(p.enc, round(p.x_m, 6), round(p.y_m, 6)) in kept_keys for p in pairs]
     robot = (geometry, integrator, bits)
     quiet = (SILENCE_CYCLES - 0.5) * enc.cycle_s
-    for i in range(1, len(pairs)):
-        if is_kept[i] or pairs[i].t_s - pairs[i - 1].t_s < quiet:
+    for i in range(1, len(pairs)):  # a burst's pose was held back by the bus: no stall
+        if is_kept[i] or pairs[i].queued or pairs[i].quiet_s < quiet:
             continue
         before = next((pairs[j] for j in range(i - 1, -1, -1) if is_kept[j]), None)
         after = next((pairs[j] for j in range(i + 1, len(pairs)) if is_kept[j]), None)
