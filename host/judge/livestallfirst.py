@@ -37,7 +37,22 @@ Frame = tuple[int, int, int, int]  # position, E2E COUNTER, LEFT_COUNT, RIGHT_CO
 
 
 class LiveFirst:
-    """The rule, frame by frame (module docstring); ``verdict``: its counts and worst."""
+    """The rule, frame by frame (module docstring); ``verdict``: its counts and worst.
+    Every attribute is declared here (a mypyc-compiled class under ODOCAN_ACCEL=1)."""
+
+    _robot: tuple[Geometry, int]
+    _integrator: Callable[[], str | None]
+    _tolerance: tuple[float, float]
+    _quiet_s: float
+    _cycle_s: float
+    _recent: deque[Frame]
+    _n: int
+    _x: tuple[int, float, float, float] | None  # ENC_COUNTER, X, HEADING, t
+    _last_t_s: float | None  # the last ODOM_POSE_X's bus time
+    _quiet: bool  # that X came after a silence
+    _before: tuple[Pair, list[Frame]] | None  # the last pose, the frames from it
+    _waiting: list[tuple[Pair, tuple[float, float] | None]]  # poses after a silence
+    verdict: FirstVerdict
 
     def __init__(self, geometry: Geometry, bits: int, integrator: Callable[[], str | None],
                  tolerance: tuple[float, float], cycle_s: float | None) -> None:
@@ -46,13 +61,13 @@ class LiveFirst:
         self._tolerance = tolerance
         self._quiet_s = math.inf if cycle_s is None else (SILENCE_CYCLES - 0.5) * cycle_s
         self._cycle_s = 0.0 if cycle_s is None else cycle_s
-        self._recent: deque[Frame] = deque(maxlen=NEAR_FRAMES + 1)
+        self._recent = deque(maxlen=NEAR_FRAMES + 1)
         self._n = 0
-        self._x: tuple[int, float, float, float] | None = None  # ENC_COUNTER, X, HEADING, t
-        self._last_t_s: float | None = None  # the last ODOM_POSE_X's bus time
-        self._quiet = False  # that X came after a silence
-        self._before: tuple[Pair, list[Frame]] | None = None  # the last pose, frames from it
-        self._waiting: list[tuple[Pair, tuple[float, float] | None]] = []  # after a silence
+        self._x = None
+        self._last_t_s = None
+        self._quiet = False
+        self._before = None
+        self._waiting = []
         self.verdict = FirstVerdict()
 
     def on_encoders(self, counter: int, left: int, right: int) -> None:
