@@ -420,9 +420,9 @@ def _analyze_life(
             "truth_compared": len(truth_series["truth_x_m"]),
             "unmatched_poses": unmatched,
             "encoder_frames": len(enc.index),
-            "reference_restarts": ref_all.restarts, **left_out.counts(),
+            "reference_restarts": ref_all.restarts,
             "unseen_restarts": len(ref_all.unseen_restarts),  # new starts: unseenrestart
-            "implausible_encoder_frames": ref_all.implausible_frames,
+            "implausible_encoder_frames": ref_all.implausible_frames, **left_out.counts(),
         },
         "reference_breaks": ref_all.placements.as_dict(),
         "events": [
