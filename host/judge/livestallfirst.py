@@ -12,6 +12,7 @@ decides. A pose without a neighbour that names a frame of the window is counted 
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections import deque
 from collections.abc import Callable
@@ -33,7 +34,7 @@ if TYPE_CHECKING:
     from odocan.host.judge.tracking import PoseTracker
     from odocan.sim.robot import RobotProfile
 
-Frame = tuple[int, int, int, int]  # position, E2E COUNTER, LEFT_COUNT, RIGHT_COUNT
+Frame = tuple[int, int, int, int, float]  # position, E2E COUNTER, LEFT, RIGHT, bus time
 
 
 class LiveFirst:
@@ -70,8 +71,8 @@ class LiveFirst:
         self._waiting = []
         self.verdict = FirstVerdict()
 
-    def on_encoders(self, counter: int, left: int, right: int) -> None:
-        frame = (self._n, counter, left, right)
+    def on_encoders(self, counter: int, left: int, right: int, t_s: float) -> None:
+        frame = (self._n, counter, left, right, t_s)
         self._n += 1
         self._recent.append(frame)
         if self._before is not None and len(self._before[1]) <= MAX_MERGE_FRAMES:
@@ -95,6 +96,8 @@ class LiveFirst:
             return
         self._waiting = [w for w in self._waiting  # let out in a burst: held back, no stall
                          if t_s - w[0].t_s >= QUEUED_GAP_CYCLES * self._cycle_s]
+        if self._waiting and not self._heard_all(frame):  # a gap of the log: not a stall
+            self._waiting = []
         for waiting, forward in self._waiting:  # the next pose: the backward neighbour
             self._judged(waiting, forward, self._backward(waiting, pose))
         if self._waiting and self._before is not None and frame is not None:
@@ -118,6 +121,17 @@ class LiveFirst:
             (near.x_m, near.y_m, near.heading_rad), (after.x_m, after.y_m),
             (np.array([f[2] for f in span]), np.array([f[3] for f in span])),
             (self._robot[0], integrator, self._robot[1]), self._tolerance[0]))
+
+    def _heard_all(self, frame: Frame | None) -> bool:
+        """Every encoder frame from the pose before the silence to ``frame`` heard, on time
+        (``stallfirst.heard_all``): the firmware was silent, not the logger."""
+        if self._before is None or frame is None:
+            return frame is not None  # judged backward only (a reboot, a set-pose)
+        span = [f for f in self._before[1] if f[0] <= frame[0]]
+        if not span or span[-1][0] != frame[0]:
+            return False
+        return all((b[1] - a[1]) % 16 == 1 and b[4] - a[4] < 1.5 * self._cycle_s
+                   for a, b in itertools.pairwise(span))
 
     def new_life(self) -> None:
         """A reboot or an applied set-pose: the pose before it vouches for nothing after."""

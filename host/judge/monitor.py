@@ -315,7 +315,7 @@ class BusMonitor:
         frame = (int(s["COUNTER"]), int(s["LEFT_COUNT"]), int(s["RIGHT_COUNT"]), self._bus_time_s,
                  int(s.get("CTRL_UPTIME", 0)))
         self.tracker.on_encoders(*frame)
-        self.first_after.on_encoders(*frame[:3])
+        self.first_after.on_encoders(*frame[:4])
         if self.robot.unjudged:  # the page contradicts the default: not judged (liverobot)
             return
         self.distance.on_encoders(self.tracker, *frame)

@@ -152,6 +152,8 @@ def judge_left_out(
             continue
         before = next((pairs[j] for j in range(i - 1, -1, -1) if is_kept[j]), None)
         after = next((pairs[j] for j in range(i + 1, len(pairs)) if is_kept[j]), None)
+        if before is not None and after is not None and not heard_all(enc, before, after):
+            continue  # a gap of the log (frames the logger missed): no stall of this rule's
         excess = _best(pairs[i], (before, after), enc, robot, tolerance)
         verdict.unmatched += pairs[i].enc < 0
         if before is not None and after is not None and 0 <= before.enc < after.enc:
@@ -168,6 +170,17 @@ def judge_left_out(
         verdict.worst_position_m = max(verdict.worst_position_m, excess[0])
         verdict.worst_heading_rad = max(verdict.worst_heading_rad, excess[1])
     return verdict
+
+
+def heard_all(enc: Encoders, before: Pair, after: Pair) -> bool:
+    """Whether the log holds every encoder frame from ``before``'s to ``after``'s, on time (no
+    sender sequence number skipped, none a cycle and a half late): the firmware was silent while
+    the frames went on (a stall), not the logger (a gap of the log, its own rules)."""
+    if before.enc < 0 or after.enc <= before.enc or enc.cycle_s is None:
+        return False
+    span = slice(before.enc, after.enc + 1)
+    return bool(np.all(np.diff(enc.seq[span]) == 1)
+                and np.all(np.diff(enc.timestamp_s[span]) < 1.5 * enc.cycle_s))
 
 
 def _best(pose: Pair, neighbours: tuple[Pair | None, Pair | None], enc: Encoders,
