@@ -140,7 +140,10 @@ def test_every_judge_passes_the_right_firmware(seed: int, faults: str, tmp_path:
 
 
 ABSORBED = "analyze PASSes X raised 10 mm from 2.0 s: absorbed (a placement?), not analysed"
-TAMPER_PASSES = {"delay=0.3:55", "delay=0.5:100", "delay=0.5:100,dup=0.1"}  # measured, seed 703
+# measured, seed 703: 0.3:55's unfilled gaps of the log keep gapbound's allowance (27 mm) and
+# absorb the 10 mm; 0.5:100 (with and without dup) FAIL since holds need evidence (stalls.
+# frozen_breaks) and frames held back 10 periods fill their gap (gapfill.MAX_LATE_PERIODS)
+TAMPER_PASSES = {"delay=0.3:55"}
 
 
 @pytest.mark.parametrize(("seed", "faults"), [

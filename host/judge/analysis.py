@@ -341,7 +341,7 @@ def _analyze_life(
     onboard, sent_s = acrosscut.without_first(onboard, sent_s) if backlog else (onboard, sent_s)
     pose_sent_s = accepted_rows(frames, accepted, decoder, "ODOM_POSE_Y")["timestamp_s"]
     alive_s = alive_times(frames, accepted, decoder)
-    onboard, stalls = after_stalls(onboard, sent_s, enc, pose_sent_s, alive_s)
+    onboard, stalls = after_stalls(onboard, sent_s, enc, pose_sent_s, alive_s, halves)
     first = first_placement(sent_s, enc, alive_s, pose_sent_s, onboard)  # no loss span's
     truth = truth_samples(frames, accepted, decoder, enc)
     unproven: list[dict[str, Any]] = []  # its first count pages lost: said (stallpowerup)

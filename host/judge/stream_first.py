@@ -107,7 +107,8 @@ class FirstPass:
             self.accepted[name] += int(np.count_nonzero(accepted[index]))
         enc = self.numbering.feed(chunk, accepted)
         self.encoders += len(enc.index)
-        self.stalls = self.stalls or StreamStalls(enc.cycle_s)
+        self.stalls = self.stalls or StreamStalls(enc.cycle_s,
+                                                  named_again=self.poses.named_again)
         samples, sent = self.poses.feed(chunk, accepted, enc)
         self.first_sent_s = min(self.first_sent_s, float(np.min(sent, initial=math.inf)))
         watermark = min(float(chunk.timestamp_s[-1]), self.poses.open_sent_s())

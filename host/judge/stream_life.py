@@ -163,7 +163,7 @@ def life_chunks(
         enc = numbering.feed(chunk, accepted)
         if on_encoders is not None:
             on_encoders(enc)
-        stalls = stalls or StreamStalls(enc.cycle_s)
+        stalls = stalls or StreamStalls(enc.cycle_s, named_again=poses.named_again)
         g = count + np.arange(len(enc.index), dtype=np.int64)
         count += len(g)
         if tap is not None:

@@ -69,6 +69,7 @@ class StreamStalls:
     _pose_t: npt.NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))  # ODOM_POSE_Y
     _breaks: set[int] = field(default_factory=set)
     _last_given: tuple[int, int] | None = None  # the last sample given out: enc, seq
+    named_again: set[int] | None = None  # frames named again (StreamPoses'), None: every one
 
     def feed(
         self, samples: dict[str, np.ndarray], sent_s: npt.NDArray[np.float64],
@@ -168,7 +169,9 @@ class StreamStalls:
         enc, seq = given["enc"], given["seq"]
         if self._last_given is not None:
             enc, seq = np.r_[self._last_given[0], enc], np.r_[self._last_given[1], seq]
-        self._breaks.update(frozen_breaks(enc, seq).tolist())
+        again = None if self.named_again is None else np.array(
+            [e in self.named_again for e in enc.tolist()], dtype=bool)
+        self._breaks.update(frozen_breaks(enc, seq, named_again=again).tolist())
         self._last_given = (int(enc[-1]), int(seq[-1]))
 
 
