@@ -125,7 +125,7 @@ def late_in_chunk(chunk: FrameArrays, decoder: BulkDecoder, enc: Encoders, offse
     if not refused.any() or enc.cycle_s is None:
         return empty, empty, empty
     decoded = decoder.decode(chunk, "WHEEL_ENCODERS")
-    pick = np.flatnonzero(refused & _crc_holds(chunk, decoder, rows))
+    pick = np.flatnonzero(refused & crc_holds(chunk, decoder, rows))
     k = np.searchsorted(enc.index, rows[pick] + offset) - 1 + len(prior[0])
     pick, k = pick[k >= 0], k[k >= 0]  # none accepted before: nothing to place them after
     seq_a, time_a, counter_a = on_time_anchors(recent_anchors(prior, enc, None), enc.cycle_s)
@@ -160,9 +160,11 @@ NO_ANCHORS: Anchors = (np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.float64
                        np.zeros(0, dtype=np.int64))
 
 
-def _crc_holds(chunk: FrameArrays, decoder: BulkDecoder, rows: IntArray
-               ) -> npt.NDArray[np.bool_]:
-    message = decoder.message("WHEEL_ENCODERS")
+def crc_holds(chunk: FrameArrays, decoder: BulkDecoder, rows: IntArray,
+              name: str = "WHEEL_ENCODERS") -> npt.NDArray[np.bool_]:
+    """Which frames ``rows`` (of message ``name``) have a right Profile 2 CRC: the sender's,
+    whatever the host's E2E window said of their COUNTER (False: unprotected)."""
+    message = decoder.message(name)
     config = e2e_messages(decoder.db).get(message.frame_id)
     if config is None or config.data_ids is None:
         return np.zeros(len(rows), dtype=bool)  # unprotected: a frame refused is not the sender's
