@@ -33,7 +33,17 @@ from tests.log_edit import raise_raw
 KOBUKI = load("kobuki")
 POSITION_LSB_M, HEADING_LSB_RAD = 1e-4, 2 * math.pi / 65536
 TAMPER_LSB = 100  # 10 mm in ODOM_POSE_X's 0.1 mm LSBs
-JUDGE_WRONG = "issue #11: the judge's model of the frames taken under delay + busoff/long delay"
+JUDGE_WRONG = ("issue #11: the judge's model of the frames the firmware took under delay + busoff "
+               "/ long delay differs (its E2E window and bus-off receive order); analyze's "
+               "reference is off the correct firmware by ")
+# measured after the stall/hold/gap-fill fixes (offline analyze, seed 703; main alike in heading)
+OFF = {
+    "delay=0.5:150": "209 mm, 183 mrad (the late COUNTER 8-10 taken, the on-time 7 refused)",
+    "delay=0.5:100,busoff=1:1": "32 mm, 102 mrad, distance 673 mm",
+    "delay=0.3:55,dup=0.1,busoff=1.2:0.8,reboot=2.5": "52 mm, 31 mrad, distance 542 mm",
+    "delay=0.3:55,busoff=1:1": "40 mm, 74 mrad",
+    "delay=0.3:55,dup=0.1,busoff=1:1": "45 mm, 78 mrad, distance 570 mm",
+}
 
 # (seed, faults, the judge wrongly FAILs it today): the trial's three, then a sweep of
 # delay P:MS x busoff x dup (measured: every delay with busoff=1:1 FAILs, delay alone PASSes
@@ -52,8 +62,8 @@ DRIVES = [
 
 
 def _params(drives: list[tuple[int, str, bool]]) -> list[object]:
-    xfail = pytest.mark.xfail(strict=True, reason=JUDGE_WRONG)
-    return [pytest.param(seed, faults, id=f"{seed}-{faults}", marks=[xfail] if wrong else [])
+    return [pytest.param(seed, faults, id=f"{seed}-{faults}", marks=[pytest.mark.xfail(
+        strict=True, reason=JUDGE_WRONG + OFF.get(faults, "?"))] if wrong else [])
             for seed, faults, wrong in drives]
 
 
