@@ -58,6 +58,10 @@ DRIVES = [
     (703, "delay=0.3:55,dup=0.1,busoff=1:1", True),
     (703, "delay=0.5:100", False),
     (703, "delay=0.5:100,dup=0.1", False),
+    # the sweep beyond 703 (kobuki seeds 1-2): main PASSed seed 1's tamper on both
+    (1, "delay=0.5:100", False),
+    (1, "delay=0.5:150", False),
+    (2, "delay=0.5:100", False),
 ]
 
 
@@ -155,8 +159,16 @@ def test_every_judge_passes_the_right_firmware(seed: int, faults: str, tmp_path:
 # back 10 periods left gaps unfilled (gapfill.MAX_LATE_PERIODS): each placement absorbed it.
 
 
+TAMPER_ABSORBED = {(2, "delay=0.5:100"): (
+    "issue #11: a pose 10 mm off from 2.0 s PASSes: 7 of 66.5 poses judged (the rest name "
+    "encoder frames the host refused), a reboot fitted at 1.00 s, and a gap's placement "
+    "absorbs 9.97 mm within 11.92 mm allowed")}
+
+
 @pytest.mark.parametrize(("seed", "faults"), [
-    pytest.param(s, f, id=f"{s}-{f}") for s, f, _ in DRIVES])
+    pytest.param(s, f, id=f"{s}-{f}", marks=[pytest.mark.xfail(
+        strict=True, reason=TAMPER_ABSORBED[(s, f)])] if (s, f) in TAMPER_ABSORBED else [])
+    for s, f, _ in DRIVES])
 def test_a_pose_10_mm_off_fails(seed: int, faults: str, tmp_path: Path,
                                 capsys: pytest.CaptureFixture[str]) -> None:
     log, tampered = tmp_path / "drive.log", tmp_path / "tampered.log"
