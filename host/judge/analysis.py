@@ -154,7 +154,6 @@ from odocan.host.judge.samples import (
     WIRE_COUNTER_BITS,
     AnalysisError,
     Encoders,
-    accepted_rows,
     encoder_frames,
     flood_named,
     onboard_samples,
@@ -170,7 +169,7 @@ from odocan.host.judge.silentlives import SilentLife, add_silent, silent_life
 from odocan.host.judge.stallfirst import STALL_DETAIL, judge_left_out
 from odocan.host.judge.stallpowerup import log_power_up
 from odocan.host.judge.stallreprime import reprime_events
-from odocan.host.judge.stalls import after_stalls, alive_times, first_placement, primed_first
+from odocan.host.judge.stalls import after_stalls, first_placement, primed_first, signs_of_life
 from odocan.host.judge.twins import twin_allowance_of
 from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.protocol.decode import BulkDecoder
@@ -337,9 +336,8 @@ def _analyze_life(
     enc, halves = flood_named(frames, accepted, decoder, enc, floodnames.of_robot(robot))
     onboard, unmatched, sent_s = onboard_samples(frames, accepted, decoder, enc, halves)
     onboard, sent_s = acrosscut.without_first(onboard, sent_s) if backlog else (onboard, sent_s)
-    pose_sent_s = accepted_rows(frames, accepted, decoder, "ODOM_POSE_Y")["timestamp_s"]
-    alive_s = alive_times(frames, accepted, decoder)
-    onboard, stalls = after_stalls(onboard, sent_s, enc, pose_sent_s, alive_s)
+    pose_sent_s, alive_s = signs_of_life(frames, accepted, decoder)  # poses: CRC right too
+    onboard, stalls = after_stalls(onboard, sent_s, enc, pose_sent_s, alive_s, halves)
     left_out = judge_left_out(halves, onboard, enc, Geometry.of(robot), integrator, min(
         robot.counter_bits, WIRE_COUNTER_BITS), (tolerance.position_m, tolerance.heading_rad))
     first = first_placement(sent_s, enc, alive_s, pose_sent_s, onboard)  # no loss span's
