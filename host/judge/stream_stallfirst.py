@@ -21,13 +21,12 @@ from odocan.host.judge.holepages import page_numbered
 from odocan.host.judge.reference import Geometry
 from odocan.host.judge.samples import (
     SILENCE_CYCLES,
-    accepted_rows,
     encoder_frames,
     flood_named,
     onboard_samples,
 )
 from odocan.host.judge.stallfirst import FirstVerdict, judge_left_out
-from odocan.host.judge.stalls import after_stalls, alive_times
+from odocan.host.judge.stalls import after_stalls, signs_of_life
 from odocan.host.protocol.decode import BulkDecoder
 from odocan.host.protocol.e2e import check_frames
 
@@ -59,9 +58,10 @@ def stream_first(
     enc = page_numbered(log, decoder, encoder_frames(log, accepted, decoder))
     enc, halves = flood_named(log, accepted, decoder, enc, floodnames.of_robot(robot))
     onboard, _, sent_s = onboard_samples(log, accepted, decoder, enc, halves)
-    pose_sent_s = accepted_rows(log, accepted, decoder, "ODOM_POSE_Y")["timestamp_s"]
-    kept, _ = after_stalls(onboard, sent_s, enc, pose_sent_s, alive_times(log, accepted, decoder))
-    return judge_left_out(halves, kept, enc, Geometry.of(robot), integrator, bits, tolerance)
+    pose_sent_s, alive_s = signs_of_life(log, accepted, decoder)  # poses: CRC right too
+    kept, _ = after_stalls(onboard, sent_s, enc, pose_sent_s, alive_s, halves)
+    return judge_left_out(halves, kept, enc, Geometry.of(robot), integrator, bits, tolerance,
+                          pose_sent_s)
 
 
 def logged_first_wrong(frames: FrameArrays, robot: RobotProfile, integrator: str,
