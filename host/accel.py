@@ -38,13 +38,15 @@ MANIFEST = "manifest.txt"  # written last: a build directory without it is not a
 
 # The per-frame path (cProfile of bench/bridge_frames.py), and the bases of its classes (a
 # compiled class's base is compiled too). Not here: host.judge.reference (numpy's types: mypyc
-# refuses wrap_delta's constrained TypeVar), code generated at run time (livedecode, liveplan:
-# exec'd, interpreted whichever way its module is loaded).
+# refuses wrap_delta's constrained TypeVar; its per-frame step, host.judge.refodometry, is here),
+# code generated at run time (livedecode, liveplan: exec'd, interpreted whichever way its module
+# is loaded).
 _JUDGE = PACKAGE / "host" / "judge"  # every live judge (host.judge.live*)
 MODULES = (
     *(f"host.judge.{p.stem}" for p in sorted(_JUDGE.glob("live*.py"))),
     *(f"host.judge.{name}" for name in ("tracking", "sources", "posewrongs", "bootticks",
-                                        "gapseen", "distance", "reprimereplay", "statuslatch")),
+                                        "gapseen", "distance", "reprimereplay", "statuslatch",
+                                        "refodometry")),
     *(f"host.mqtt.{name}" for name in ("telemetry", "liveplan", "livedecode", "topics",
                                        "errorbatch", "liveroutes", "livecommands", "lsbround",
                                        "framehold")),

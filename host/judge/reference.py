@@ -14,6 +14,10 @@ counts are exact integers, so the reference heading carries no accumulated round
 * ``exact`` (seeds 003/004): x += dS sinc(dtheta/2) cos((phi_{k-1} + phi_k) / 2), the ICC rotation
   written as a chord (identical to R (sin phi_k - sin phi_{k-1}), R = dS/dtheta, without the
   0/0 at dtheta = 0: the straight case is sinc(0) = 1 and the spin case is dS = 0).
+
+``ReferenceOdometry``, ``chord_factor`` and ``INTEGRATORS`` live in ``host.judge.refodometry``
+(no numpy there: compiled by mypyc under ``ODOCAN_ACCEL=1``, the live judges' per-frame step) and
+are re-exported here.
 """
 
 from __future__ import annotations
@@ -26,10 +30,12 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.firmware.config import MAX_WHEEL_SPEED_DEFAULT_MM_S
+from odocan.host.judge.refodometry import INTEGRATORS as INTEGRATORS  # re-exported
+from odocan.host.judge.refodometry import ReferenceOdometry as ReferenceOdometry
+from odocan.host.judge.refodometry import chord_factor as chord_factor
 from odocan.host.protocol.busfacts import ENC_PERIOD_US as ENCODER_PERIOD_US
 from odocan.sim.robot import RobotProfile
 
-INTEGRATORS = ("euler", "rk2", "exact")
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
 D = TypeVar("D", int, IntArray)
@@ -86,87 +92,6 @@ class PoseArrays:
     y_m: FloatArray
     heading_rad: FloatArray  # unwrapped
     distance_m: FloatArray
-
-
-def chord_factor(dheading_rad: float) -> float:
-    """sin(u)/u with u = dtheta/2: the exact-arc chord over the arc length (1 at dtheta = 0)."""
-    u = 0.5 * dheading_rad
-    if abs(u) < 1e-4:  # series: the next term u^4/120 < 1e-18
-        return 1.0 - u * u / 6.0
-    return math.sin(u) / u
-
-
-class ReferenceOdometry:
-    """Step-by-step float64 odometry from raw wrapping counters."""
-
-    def __init__(
-        self,
-        geometry: Geometry,
-        integrator: str,
-        counter_bits: int,
-        *,
-        x_m: float = 0.0,
-        y_m: float = 0.0,
-        heading_rad: float = 0.0,
-    ) -> None:
-        if integrator not in INTEGRATORS:
-            raise ValueError(f"unknown integrator {integrator!r} (known: {', '.join(INTEGRATORS)})")
-        self.geometry = geometry
-        self.integrator = integrator
-        self.counter_bits = counter_bits
-        self.x_m, self.y_m, self.distance_m = x_m, y_m, 0.0
-        self._heading0_rad = heading_rad
-        self._cum_left = self._cum_right = 0
-        self._prev: tuple[int, int] | None = None
-        # the wheels' travel per count (m; the geometry is frozen: its properties read once,
-        # not twice per step)
-        self._m_left, self._m_right = geometry.m_per_count_left, geometry.m_per_count_right
-        self._k_left = self._m_left / geometry.wheelbase_m
-        self._k_right = self._m_right / geometry.wheelbase_m
-
-    @property
-    def heading_rad(self) -> float:
-        """Unwrapped heading (rad)."""
-        return self._heading_at(self._cum_left, self._cum_right)
-
-    def place(self, x_m: float, y_m: float, heading_rad: float) -> None:
-        """Move the pose to (``x_m``, ``y_m``, ``heading_rad``); the steps go on from it."""
-        self.x_m, self.y_m = x_m, y_m
-        self._heading0_rad += heading_rad - self.heading_rad
-
-    def _heading_at(self, cum_left: int, cum_right: int) -> float:
-        return self._heading0_rad + self._k_right * cum_right - self._k_left * cum_left
-
-    def step_counts(self, left_count: int, right_count: int) -> bool:
-        """Integrate from raw counters; the first call only primes. True when a step was made."""
-        if self._prev is None:
-            self._prev = (left_count, right_count)
-            return False
-        d_left = wrap_delta(left_count - self._prev[0], self.counter_bits)
-        d_right = wrap_delta(right_count - self._prev[1], self.counter_bits)
-        self._prev = (left_count, right_count)
-        self.step_deltas(d_left, d_right)
-        return True
-
-    def step_deltas(self, d_left: int, d_right: int) -> None:
-        """Integrate one step of count deltas (per encoder frame of every robot a live judge
-        follows: the headings as ``_heading_at`` computes them, written out)."""
-        ds = path_m = 0.5 * (d_left * self._m_left + d_right * self._m_right)
-        heading0, k_left, k_right = self._heading0_rad, self._k_left, self._k_right
-        heading_old = heading0 + k_right * self._cum_right - k_left * self._cum_left
-        cum_left = self._cum_left = self._cum_left + d_left
-        cum_right = self._cum_right = self._cum_right + d_right
-        heading_new = heading0 + k_right * cum_right - k_left * cum_left
-        if self.integrator == "euler":
-            direction = heading_new
-        else:
-            direction = 0.5 * (heading_old + heading_new)
-            if self.integrator == "exact":  # ``chord_factor`` in line (per step)
-                u = 0.5 * (heading_new - heading_old)
-                ds *= 1.0 - u * u / 6.0 if abs(u) < 1e-4 else math.sin(u) / u
-        self.x_m += ds * math.cos(direction)
-        self.y_m += ds * math.sin(direction)
-        self.distance_m += abs(path_m)
 
 
 def integrate(
