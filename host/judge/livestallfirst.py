@@ -16,6 +16,7 @@ import itertools
 import math
 from collections import deque
 from collections.abc import Callable
+from dataclasses import replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -34,6 +35,7 @@ if TYPE_CHECKING:
     from odocan.host.judge.tracking import PoseTracker
     from odocan.sim.robot import RobotProfile
 
+MAX_MARKS = 64  # verdicts kept to take back: more silences than a late reboot's tell spans
 Frame = tuple[int, int, int, int, float]  # position, E2E COUNTER, LEFT, RIGHT, bus time
 
 
@@ -53,6 +55,7 @@ class LiveFirst:
     _quiet: bool  # that X came after a silence
     _before: tuple[Pair, list[Frame]] | None  # the last pose, the frames from it
     _waiting: list[tuple[Pair, tuple[float, float] | None]]  # poses after a silence
+    _marks: deque[tuple[float, FirstVerdict]]  # the verdict before each pose that moved it
     verdict: FirstVerdict
 
     def __init__(self, geometry: Geometry, bits: int, integrator: Callable[[], str | None],
@@ -69,6 +72,7 @@ class LiveFirst:
         self._quiet = False
         self._before = None
         self._waiting = []
+        self._marks = deque(maxlen=MAX_MARKS)
         self.verdict = FirstVerdict()
 
     def on_encoders(self, counter: int, left: int, right: int, t_s: float) -> None:
@@ -117,6 +121,7 @@ class LiveFirst:
         span = [f for f in frames if f[0] <= after.enc]
         if integrator is None or not span or span[-1][0] != after.enc:
             return  # frames beyond the window (a stall over MAX_MERGE_FRAMES): not judged here
+        self._mark(after.t_s)
         self.verdict.resumed(after.t_s, resume_excess(
             (near.x_m, near.y_m, near.heading_rad), (after.x_m, after.y_m),
             (np.array([f[2] for f in span]), np.array([f[3] for f in span])),
@@ -132,6 +137,15 @@ class LiveFirst:
             return False
         return all((b[1] - a[1]) % 16 == 1 and b[4] - a[4] < 1.5 * self._cycle_s
                    for a, b in itertools.pairwise(span))
+
+    def withdraw_from(self, t_s: float) -> None:
+        """A reboot told late: what poses from bus time ``t_s`` on moved was not one life's
+        (``Tracker.withdraw_from``; a new firmware's first pose after its boot is no resume)."""
+        while self._marks and self._marks[-1][0] >= t_s:
+            self.verdict = self._marks.pop()[1]
+
+    def _mark(self, t_s: float) -> None:
+        self._marks.append((t_s, replace(self.verdict)))
 
     def new_life(self) -> None:
         """A reboot or an applied set-pose: the pose before it vouches for nothing after."""
@@ -165,6 +179,7 @@ class LiveFirst:
     def _judged(self, pose: Pair, forward: tuple[float, float] | None,
                 backward: tuple[float, float] | None) -> None:
         got = [g for g in (forward, backward) if g is not None]
+        self._mark(pose.t_s)
         verdict = self.verdict
         if not got:
             verdict.unjudged += 1

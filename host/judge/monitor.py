@@ -404,6 +404,8 @@ class BusMonitor:
         self.first_after.new_life()
         since_s = self.sources.life_from_s - SAME_TICK_S  # its first ticks' (bootticks)
         self.tracker.withdraw_from(since_s)  # its poses vs the old reference
+        # its first pose is no resume (livestallfirst): from its boot, UPTIME's whole seconds
+        self.first_after.withdraw_from(min(since_s, self._bus_time_s - uptime_s - 1.0))
         self.twist.new_life(since_s)  # its first ticks' twists
         self.set_pose.forget(since_s)  # the new firmware's kept
         self.kept.forget()

@@ -49,6 +49,12 @@ STALL_DETAIL = ("the firmware was silent or held its pose (a stall): it took the
                 "(stallresume), by no more than the worst merge error there plus the tolerance "
                 "(reference_breaks)")
 NEAR_FRAMES = FIFO_FRAMES  # a counter cycle of ENC_COUNTER: candidates within it of a neighbour
+# A neighbour vouches only from near: ``before`` the last pose sent before the silence, ``after``
+# within this many encoder cycles of the pose. A kept sample further off (the poses between
+# refused, e.g. reordered by a delaying bus) has an alias of the named ENC_COUNTER in every
+# 16-frame window, so carrying its pose there FAILed a correct firmware (kobuki seed 2,
+# delay=0.5:100,stall=2:1: 762 mm "beyond" at 3.021 s, 4 of 42 poses kept).
+NEAR_CYCLES = 4
 
 
 @dataclass
@@ -164,6 +170,7 @@ def judge_left_out(
             continue
         before = next((pairs[j] for j in range(i - 1, -1, -1) if is_kept[j]), None)
         after = next((pairs[j] for j in range(i + 1, len(pairs)) if is_kept[j]), None)
+        before, after = _near(pairs[i], before, after, enc.cycle_s)
         if before is not None and after is not None and not heard_all(enc, before, after):
             continue  # a gap of the log (frames the logger missed): no stall of this rule's
         excess = _best(pairs[i], (before, after), enc, robot, tolerance)
@@ -182,6 +189,17 @@ def judge_left_out(
         verdict.worst_position_m = max(verdict.worst_position_m, excess[0])
         verdict.worst_heading_rad = max(verdict.worst_heading_rad, excess[1])
     return verdict
+
+
+def _near(pose: Pair, before: Pair | None, after: Pair | None, cycle_s: float
+          ) -> tuple[Pair | None, Pair | None]:
+    """``before`` and ``after`` where they may vouch for ``pose`` (``NEAR_CYCLES``), else None."""
+    slack_s = NEAR_CYCLES * cycle_s
+    if before is not None and pose.t_s - before.t_s > pose.quiet_s + slack_s:
+        before = None
+    if after is not None and after.t_s - pose.t_s > slack_s:
+        after = None
+    return before, after
 
 
 def _since_sent(pose_sent_s: FloatArray, t_s: float) -> float:
