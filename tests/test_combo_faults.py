@@ -43,6 +43,9 @@ OFF = {
     "delay=0.3:55,dup=0.1,busoff=1.2:0.8,reboot=2.5": "52 mm, 31 mrad, distance 542 mm",
     "delay=0.3:55,busoff=1:1": "40 mm, 74 mrad",
     "delay=0.3:55,dup=0.1,busoff=1:1": "45 mm, 78 mrad, distance 570 mm",
+    # a stall under a delaying bus (the lead's sweep after the merges; main 483b364a alike)
+    "delay=0.5:100,stall=2:1": "40.2 mm, 67.1 mrad (seed 703)",
+    "stall=1.5:0.5,delay=0.3:55": "0.05 mm, 3.75 mrad (seed 2)",
 }
 
 # (seed, faults, the judge wrongly FAILs it today): the trial's three, then a sweep of
@@ -62,6 +65,9 @@ DRIVES = [
     (1, "delay=0.5:100", False),
     (1, "delay=0.5:150", False),
     (2, "delay=0.5:100", False),
+    (703, "delay=0.5:100,stall=2:1", True),
+    (2, "delay=0.5:100,stall=2:1", False),  # stallfirst FAILed it 762 mm once merged
+    (2, "stall=1.5:0.5,delay=0.3:55", True),
 ]
 
 
@@ -162,7 +168,11 @@ def test_every_judge_passes_the_right_firmware(seed: int, faults: str, tmp_path:
 TAMPER_ABSORBED = {(2, "delay=0.5:100"): (
     "issue #11: a pose 10 mm off from 2.0 s PASSes: 7 of 66.5 poses judged (the rest name "
     "encoder frames the host refused), a reboot fitted at 1.00 s, and a gap's placement "
-    "absorbs 9.97 mm within 11.92 mm allowed")}
+    "absorbs 9.97 mm within 11.92 mm allowed"),
+    (2, "delay=0.5:100,stall=2:1"): (
+    "issue #11: a pose 10 mm off from 2.0 s PASSes: 4 of 42.5 poses judged (9.4 %), a reboot "
+    "the drive has not 'fitted at 1.00 s', the pose first after the stall not judged (no near "
+    "neighbour): the 50 raised poses are none of the 4")}
 
 
 @pytest.mark.parametrize(("seed", "faults"), [
