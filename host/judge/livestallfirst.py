@@ -15,9 +15,9 @@ from __future__ import annotations
 import itertools
 import math
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import replace
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -56,6 +56,7 @@ class LiveFirst:
     _before: tuple[Pair, list[Frame]] | None  # the last pose, the frames from it
     _waiting: list[tuple[Pair, tuple[float, float] | None]]  # poses after a silence
     _marks: deque[tuple[float, FirstVerdict]]  # the verdict before each pose that moved it
+    _reprimes: set[tuple[float, int]]  # stall_reprime events taken (bus time, encoder frame)
     verdict: FirstVerdict
 
     def __init__(self, geometry: Geometry, bits: int, integrator: Callable[[], str | None],
@@ -73,6 +74,7 @@ class LiveFirst:
         self._before = None
         self._waiting = []
         self._marks = deque(maxlen=MAX_MARKS)
+        self._reprimes = set()
         self.verdict = FirstVerdict()
 
     def on_encoders(self, counter: int, left: int, right: int, t_s: float) -> None:
@@ -144,12 +146,28 @@ class LiveFirst:
         while self._marks and self._marks[-1][0] >= t_s:
             self.verdict = self._marks.pop()[1]
 
+    def untie(self, events: Iterable[dict[str, Any]]) -> None:
+        """A re-prime after a stall (a ``stall_reprime`` event, told once its evidence came):
+        the firmware left the motion out, so the poses around its first pose vouch for nothing
+        from that frame on (a staged APPLY taken just after a stall, re-primed after it, was
+        POSE WRONG 2.72 mm: test_cut_reprime_latched); each taken once."""
+        for event in events:
+            key = (float(event["t_s"]), int(event.get("encoder_frame", -1)))
+            if event["kind"] == "stall_reprime" and key not in self._reprimes:
+                self._reprimes.add(key)
+                self.withdraw_from(key[0] - self._cycle_s)
+
     def _mark(self, t_s: float) -> None:
         self._marks.append((t_s, replace(self.verdict)))
 
     def new_life(self) -> None:
-        """A reboot or an applied set-pose: the pose before it vouches for nothing after."""
+        """A reboot or an applied set-pose: the pose before it vouches for nothing after, and
+        a pose waiting for its next is judged by neither (the next is in the new frame: a
+        staged APPLY taken just after a stall FAILed a correct firmware 2.72 mm,
+        test_cut_reprime_latched): counted unjudged."""
         self._before = None
+        self.verdict.unjudged += len(self._waiting)
+        self._waiting = []
 
     def _backward(self, pose: Pair, near: Pair) -> tuple[float, float] | None:
         if near.enc < 0:

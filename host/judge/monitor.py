@@ -433,6 +433,7 @@ class BusMonitor:
             self._judge_waited()  # without the page: the default's judges (liverobot)
         if self.settle.quiet(now_s):  # nothing heard for a hold's time: judged now (livesettle)
             self.release_held()
+        self.first_after.untie(self.events)  # its re-primes after a stall (livestallfirst)
         nodes = node_ages(self.db, self.messages, now_s)
         state, why = verdict(self, nodes.get(FIRMWARE_NODE))  # (monitorverdict)
         if state == "OK" and (stale := summary_stale_why(self, now_s)):
