@@ -69,13 +69,16 @@ def logged_first_wrong(frames: FrameArrays, robot: RobotProfile, integrator: str
     """``replay``'s word on the log's own poses sent first after a silence: the replayed
     firmware is compared with the log at the frames the log's poses name, which such a pose
     may not resolve (it is then never compared); judged here by the poses around it. Why it
-    FAILs, None when it does not."""
+    FAILs, None when it does not. Only the neighbours' rule: the resume rule (``stallresume``)
+    is the whole log's here, across reboots a replay does not cut (a new life's first pose is
+    no resume of the old: a correct reboot FAILed, test_faults_mcu), and the replay compares
+    every later pose itself."""
     from odocan.firmware.encoders import WIRE_COUNTER_BITS
     from odocan.host.protocol.dbcplan import default_plan
 
     verdict = stream_first(lambda: [frames], default_plan(), robot, integrator,
                            min(robot.counter_bits, WIRE_COUNTER_BITS), tolerance)
-    if verdict.passed():
+    if max(verdict.worst_position_m, verdict.worst_heading_rad) <= 0:
         return None
     return (f"the log's pose sent first after a silence at {verdict.worst_at_s:.3f} s lies "
             f"{max(verdict.worst_position_m, 0.0) * 1e3:.4g} mm, "
