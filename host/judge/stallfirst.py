@@ -267,8 +267,12 @@ def carried_excess(pose: Pair, near: Pair, counts: tuple[np.ndarray, np.ndarray]
     y = near.y_m + dx * math.sin(turn) + dy * math.cos(turn)
     heading = float(steps.heading[len(left) - 1 - e]) + turn
     allowed = merge_allowance_m(left, right, geometry, bits, integrator)
-    return (math.hypot(pose.x_m - x, pose.y_m - y) - tolerance[0] - allowed,
-            abs(pose.heading_rad - heading) - tolerance[1])
+    # the neighbour is rounded to the wire's LSBs too (the tolerance covers the pose's own):
+    # its rounding box and its heading's half LSB over the carried way (kobuki, a 1 s stall:
+    # a correct firmware FAILed 0.00097 mm beyond without them)
+    rounding_m = math.sqrt(2) * 0.5 * POSITION_LSB_M + 0.5 * HEADING_LSB_RAD * math.hypot(dx, dy)
+    return (math.hypot(pose.x_m - x, pose.y_m - y) - tolerance[0] - allowed - rounding_m,
+            abs(pose.heading_rad - heading) - tolerance[1] - 0.5 * HEADING_LSB_RAD)
 
 
 def merged_first(parts: list[dict[str, object] | None]) -> dict[str, object]:
