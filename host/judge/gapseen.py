@@ -465,11 +465,11 @@ class PageEvidence:
             self.keeper.status(frame, values.get(row))
 
 
-def crc_holds(frames: FrameArrays, decoder: BulkDecoder, rows: IntArray
-              ) -> npt.NDArray[np.bool_]:
-    """Which ODOM_STATUS frames at ``rows`` carry a right CRC, whatever their sequence (a page
-    the host's E2E window refused after the bus lost a few is as good evidence)."""
-    message = decoder.message("ODOM_STATUS")
+def crc_holds(frames: FrameArrays, decoder: BulkDecoder, rows: IntArray,
+              name: str = "ODOM_STATUS") -> npt.NDArray[np.bool_]:
+    """Which frames of message ``name`` at ``rows`` carry a right CRC, whatever their sequence
+    (a page the host's E2E window refused after the bus lost a few is as good evidence)."""
+    message = decoder.message(name)
     config = e2e_messages(decoder.db).get(message.frame_id)
     if config is None or config.data_ids is None:
         return np.ones(len(rows), dtype=bool)

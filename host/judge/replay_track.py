@@ -15,11 +15,11 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
+from odocan.host.judge import gapseen
 from odocan.host.judge.samples import Encoders, contract_cycle_s, named_targets
 from odocan.host.protocol.busfacts import ENC_COUNTER_LAP as LAP
 from odocan.host.protocol.busfacts import ENC_COUNTER_MASK
 from odocan.host.protocol.decode import BulkDecoder
-from odocan.host.protocol.e2e import crc8h2f_p02, e2e_messages
 from odocan.sim import contract
 from odocan.sim.board import TICK_S, TX_LATENCY_S
 
@@ -115,13 +115,7 @@ def late_frames(frames: FrameArrays, accepted: npt.NDArray[np.bool_],
 def crc_holds(frames: FrameArrays, decoder: BulkDecoder, name: str,
               rows: IntArray) -> npt.NDArray[np.bool_]:
     """Which frames of message ``name`` at ``rows`` carry a right Profile 2 CRC, whatever their
-    sequence: a pose the firmware sent is one to compare with the replay's, even where the
-    host's E2E window refused it (the first two after a reboot, whose COUNTER starts again at 0:
-    left out, a pose raised 10 m there PASSed the replay, "848 identical")."""
-    config = e2e_messages(decoder.db).get(decoder.message(name).frame_id)
-    if config is None or config.data_ids is None:
-        return np.ones(len(rows), dtype=bool)
-    data = frames.data[rows]
-    ids = np.array(config.data_ids, dtype=np.uint8)[data[:, 1] & ENC_COUNTER_MASK]
-    good: npt.NDArray[np.bool_] = crc8h2f_p02(data, ids) == data[:, 0]
-    return good
+    sequence (``gapseen.crc_holds``): a pose the firmware sent is one to compare with the
+    replay's, even where the host's E2E window refused it (the first two after a reboot, whose
+    COUNTER starts again at 0: left out, a pose raised 10 m there PASSed the replay)."""
+    return gapseen.crc_holds(frames, decoder, rows, name)
