@@ -24,19 +24,64 @@ def raise_raw(src: Path, dst: Path, message: str, byte_span: tuple[int, int], ls
     assert isinstance(db, Database)
     target = db.get_message_by_name(message)
     ids = [int(v) for v in dbc_attribute(target, "E2EDataIDs").split(",")]
-    start, length = byte_span
     changed, first = 0, None
     with can.Logger(str(dst)) as out:
         for msg in can.LogReader(str(src)):
             first = msg.timestamp if first is None else first
             if msg.arbitration_id == target.frame_id and from_s <= msg.timestamp - first < until_s:
-                data = bytearray(msg.data)
-                raw = int.from_bytes(data[start:start + length], "little", signed=True) + lsb
-                data[start:start + length] = raw.to_bytes(length, "little", signed=True)
-                crc = compute_profile2_crc(bytes(data), ids[data[1] & 0xF])
-                assert crc is not None
-                data[0] = crc
-                msg.data = data
+                msg.data = _raised(msg.data, byte_span, lsb, ids)
                 changed += 1
             out.on_message_received(msg)
     return changed
+
+
+def _raised(payload: bytes | bytearray, byte_span: tuple[int, int], lsb: int,
+            ids: list[int]) -> bytearray:
+    """``payload`` with the signed little-endian field at ``byte_span`` raised by ``lsb`` and its
+    E2E Profile 2 CRC recomputed (the Data ID its COUNTER selects from ``ids``)."""
+    data, (start, length) = bytearray(payload), byte_span
+    raw = int.from_bytes(data[start:start + length], "little", signed=True) + lsb
+    data[start:start + length] = raw.to_bytes(length, "little", signed=True)
+    crc = compute_profile2_crc(bytes(data), ids[data[1] & 0xF])
+    assert crc is not None
+    data[0] = crc
+    return data
+
+
+def raise_raw_once(src: Path, dst: Path, message: str, byte_span: tuple[int, int], lsb: int,
+                   from_s: float, count: int = 1) -> list[float]:
+    """As ``raise_raw`` but only on the first ``count`` frames of ``message`` at or after
+    ``from_s`` s; the (relative) times of the frames changed."""
+    db = cantools.database.load_file(str(contract.DBC_PATH))
+    assert isinstance(db, Database)
+    target = db.get_message_by_name(message)
+    ids = [int(v) for v in dbc_attribute(target, "E2EDataIDs").split(",")]
+    changed: list[float] = []
+    first = None
+    with can.Logger(str(dst)) as out:
+        for msg in can.LogReader(str(src)):
+            first = msg.timestamp if first is None else first
+            if (msg.arbitration_id == target.frame_id and msg.timestamp - first >= from_s
+                    and len(changed) < count):
+                msg.data = _raised(msg.data, byte_span, lsb, ids)
+                changed.append(msg.timestamp - first)
+            out.on_message_received(msg)
+    return changed
+
+
+def drop_frames(src: Path, dst: Path, messages: tuple[str, ...], from_s: float,
+                to_s: float) -> int:
+    """Copy ``src`` to ``dst`` without the frames of ``messages`` whose time after the log's
+    first frame lies in [from_s, to_s): the firmware's output fallen silent; the number dropped."""
+    db = cantools.database.load_file(str(contract.DBC_PATH))
+    assert isinstance(db, Database)
+    ids = {db.get_message_by_name(name).frame_id for name in messages}
+    dropped, first = 0, None
+    with can.Logger(str(dst)) as out:
+        for msg in can.LogReader(str(src)):
+            first = msg.timestamp if first is None else first
+            if msg.arbitration_id in ids and from_s <= msg.timestamp - first < to_s:
+                dropped += 1
+                continue
+            out.on_message_received(msg)
+    return dropped

@@ -154,7 +154,6 @@ from odocan.host.judge.samples import (
     WIRE_COUNTER_BITS,
     AnalysisError,
     Encoders,
-    accepted_rows,
     encoder_frames,
     flood_named,
     onboard_samples,
@@ -167,9 +166,10 @@ from odocan.host.judge.setposekept import Kept, check_cut
 from odocan.host.judge.setposes import cut_lives, set_pose_cuts
 from odocan.host.judge.silentboot import primed_in_silence
 from odocan.host.judge.silentlives import SilentLife, add_silent, silent_life
+from odocan.host.judge.stallfirst import STALL_DETAIL, judge_left_out
 from odocan.host.judge.stallpowerup import log_power_up
 from odocan.host.judge.stallreprime import reprime_events
-from odocan.host.judge.stalls import after_stalls, alive_times, first_placement, primed_first
+from odocan.host.judge.stalls import after_stalls, first_placement, primed_first, signs_of_life
 from odocan.host.judge.twins import twin_allowance_of
 from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.protocol.decode import BulkDecoder
@@ -179,11 +179,6 @@ from odocan.sim.robot import RobotProfile
 
 if TYPE_CHECKING:  # a cantools Database or a plan of it (host.protocol.dbcplan)
     from odocan.host.protocol.dbcplan import DatabaseSpec
-
-STALL_DETAIL = ("the firmware was silent or held its pose (a stall): it took the frames it "
-                "missed as one step or several, so the reference's position is placed again "
-                "after it, by no more than the worst merge error there plus the tolerance "
-                "(reference_breaks)")
 
 
 @dataclass(frozen=True)
@@ -341,9 +336,11 @@ def _analyze_life(
     enc, halves = flood_named(frames, accepted, decoder, enc, floodnames.of_robot(robot))
     onboard, unmatched, sent_s = onboard_samples(frames, accepted, decoder, enc, halves)
     onboard, sent_s = acrosscut.without_first(onboard, sent_s) if backlog else (onboard, sent_s)
-    pose_sent_s = accepted_rows(frames, accepted, decoder, "ODOM_POSE_Y")["timestamp_s"]
-    alive_s = alive_times(frames, accepted, decoder)
-    onboard, stalls = after_stalls(onboard, sent_s, enc, pose_sent_s, alive_s)
+    pose_sent_s, alive_s = signs_of_life(frames, accepted, decoder)  # poses: CRC right too
+    onboard, stalls = after_stalls(onboard, sent_s, enc, pose_sent_s, alive_s, halves)
+    left_out = judge_left_out(halves, onboard, enc, Geometry.of(robot), integrator, min(
+        robot.counter_bits, WIRE_COUNTER_BITS), (tolerance.position_m, tolerance.heading_rad),
+        pose_sent_s)
     first = first_placement(sent_s, enc, alive_s, pose_sent_s, onboard)  # no loss span's
     truth = truth_samples(frames, accepted, decoder, enc)
     unproven: list[dict[str, Any]] = []  # its first count pages lost: said (stallpowerup)
@@ -402,7 +399,7 @@ def _analyze_life(
         vs_ref["max_position_error_beyond_allowance_m"] <= tolerance.position_m
         and vs_ref["max_heading_error_rad"] <= tolerance.heading_rad
         and twist["passed"]
-        and distance["passed"]
+        and distance["passed"] and left_out.passed()
     )
     report = {
         "robot": robot_dict(robot),
@@ -424,7 +421,7 @@ def _analyze_life(
             "encoder_frames": len(enc.index),
             "reference_restarts": ref_all.restarts,
             "unseen_restarts": len(ref_all.unseen_restarts),  # new starts: unseenrestart
-            "implausible_encoder_frames": ref_all.implausible_frames,
+            "implausible_encoder_frames": ref_all.implausible_frames, **left_out.counts(),
         },
         "reference_breaks": ref_all.placements.as_dict(),
         "events": [
@@ -451,7 +448,7 @@ def _analyze_life(
         **firmware_fields(frames, accepted, decoder),
         "reboots": [],
         "onboard_vs_reference": vs_ref, "onboard_vs_truth": vs_truth,
-        "onboard_twist_vs_reference": twist,
+        "onboard_twist_vs_reference": twist, "stall_first_pose": left_out.as_dict(),
         "onboard_distance_vs_reference": distance,
         "final_onboard_pose": {  # heading_rad in (-pi, pi], heading_unwrapped_rad cumulative
             "x_m": float(onboard.x_m[-1]),

@@ -18,8 +18,8 @@ been narrower), its steps are the fine path's merged in runs over frames of know
 over any runs merged, the reference's one merged step among them). Premises, as everywhere in
 the judge: a frame whose CRC holds is the sender's (a forgery is ``samples``' twins' business:
 a filled frame must also be a plausible step from its neighbours, else the gap keeps its
-``gapbound`` allowance); a frame is held back fewer than 8 periods (``e2e_periods``' rule) and
-never sent early, so its sequence number is the one of its COUNTER in (est - 8, est + 1], est
+``gapbound`` allowance); a frame is held back fewer than 15 periods (``MAX_LATE_PERIODS``) and
+never sent early, so its sequence number is the one of its COUNTER in (est - 15, est + 1], est
 its periods on the sender's grid: counted from the least late of the last ``ANCHOR_FRAMES``
 accepted frames before it on the bus (time - sequence number * cycle the least); two frames of
 one number must agree (else unknown); the firmware takes its frames in sequence order (E2E:
@@ -37,10 +37,17 @@ worst case (135 mm on kobuki, seed 305, ``delay=0.1:20``, 10 s: a firmware addin
 after each lock-out passed; ``tests/test_lockout_fill``). Counted from the least late accepted
 frame (late by L periods, 0 <= L < 8), est = s + (d - L) for a frame of number s late by d
 periods (0 <= d < 8), within a rounding: when L <= d + 1 (always when one of the last 64
-accepted frames was on time) s is in (est - 8, est + 1] and is found; otherwise s lies above
-est + 1 and s - 16 below est - 8, so the frame is left unplaced and its gap keeps
+accepted frames was on time) s is in (est - 15, est + 1] and is found when d - L < 15 (a frame
+held back 15 periods or more is beyond the rule's premise); otherwise s lies above est + 1,
+so the frame is left unplaced and its gap keeps
 ``gapbound``'s allowance: a frame is never given a wrong number. The live judge applies the
 same rule frame by frame (``host.judge.livefill``).
+
+The bound was 8 periods (half a COUNTER cycle); a ``delay`` of 100 ms on a 10 ms encoder period
+(10 periods) then left every held-back frame unplaced, its gap kept ``gapbound``'s allowance,
+and that absorbed a pose 10 mm off (seed 703, ``delay=0.5:100``: PASSed); 15 (twice the merge
+error's 8, one lap less one) places frames held back up to 14 periods behind the least late
+anchor (issue #11).
 """
 
 from __future__ import annotations
@@ -61,7 +68,7 @@ from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.protocol.e2e import crc8h2f_p02, e2e_messages
 
 COUNTER_MODULO = ENC_COUNTER_LAP  # 16
-MAX_LATE_PERIODS = 8  # a frame held back fewer periods than this (half a COUNTER cycle)
+MAX_LATE_PERIODS = 15  # a frame held back fewer periods than this (one COUNTER cycle less one)
 ANCHOR_FRAMES = 64  # accepted frames an anchor is chosen among (the least late on the grid)
 Counts = tuple[int, int]  # (left, right) wire counts
 # accepted frames: sequence numbers, bus times, COUNTERs
@@ -94,7 +101,8 @@ def late_seq(counter: IntArray, sent_s: np.ndarray, anchor: Anchors, cycle_s: fl
     """Sender sequence numbers of refused frames (COUNTER, bus time) after accepted frames
     (``anchor``: sequence number, bus time, COUNTER; a number is its COUNTER's residue shifted
     as the anchor's, the first accepted frame being number 0 whatever its COUNTER): the number
-    of their COUNTER in (est - 8, est + 1]; -1 where it lies further back (held back too long
+    of their COUNTER in (est - MAX_LATE_PERIODS, est + 1]; -1
+    where it lies further back (held back too long
     to be placed)."""
     anchor_seq, anchor_s, anchor_counter = anchor
     est = anchor_seq + np.floor((sent_s - anchor_s) / cycle_s + 0.5).astype(np.int64)
@@ -117,7 +125,7 @@ def late_in_chunk(chunk: FrameArrays, decoder: BulkDecoder, enc: Encoders, offse
     if not refused.any() or enc.cycle_s is None:
         return empty, empty, empty
     decoded = decoder.decode(chunk, "WHEEL_ENCODERS")
-    pick = np.flatnonzero(refused & _crc_holds(chunk, decoder, rows))
+    pick = np.flatnonzero(refused & crc_holds(chunk, decoder, rows))
     k = np.searchsorted(enc.index, rows[pick] + offset) - 1 + len(prior[0])
     pick, k = pick[k >= 0], k[k >= 0]  # none accepted before: nothing to place them after
     seq_a, time_a, counter_a = on_time_anchors(recent_anchors(prior, enc, None), enc.cycle_s)
@@ -152,9 +160,11 @@ NO_ANCHORS: Anchors = (np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.float64
                        np.zeros(0, dtype=np.int64))
 
 
-def _crc_holds(chunk: FrameArrays, decoder: BulkDecoder, rows: IntArray
-               ) -> npt.NDArray[np.bool_]:
-    message = decoder.message("WHEEL_ENCODERS")
+def crc_holds(chunk: FrameArrays, decoder: BulkDecoder, rows: IntArray,
+              name: str = "WHEEL_ENCODERS") -> npt.NDArray[np.bool_]:
+    """Which frames ``rows`` (of message ``name``) have a right Profile 2 CRC: the sender's,
+    whatever the host's E2E window said of their COUNTER (False: unprotected)."""
+    message = decoder.message(name)
     config = e2e_messages(decoder.db).get(message.frame_id)
     if config is None or config.data_ids is None:
         return np.zeros(len(rows), dtype=bool)  # unprotected: a frame refused is not the sender's

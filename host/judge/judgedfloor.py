@@ -11,7 +11,8 @@ seen with the chance that its pose was judged, so below one half the judge is mo
 miss it than to see it, and an error that lasts is seen only after the next judged sample.
 The floor is ``JUDGED_FLOOR`` of the poses sent (judged + unmatched; the poses a stall's
 re-placement or a reboot's start leave out are not counted as sent: they are judged by their
-own rules): the verdict is UNJUDGED, ``passed`` false (exit 1), and says how many were judged.
+own rules; the first pose after a silence is counted, judged by ``stallfirst`` or not): the
+verdict is UNJUDGED, ``passed`` false (exit 1), and says how many were judged.
 
 The floor is for poses left out because of twins (encoder frames a second CRC-right sender
 offered: a forger, or a second robot): it applies when the twins outnumber the poses judged,
@@ -43,8 +44,9 @@ def judged_share(report: dict[str, Any]) -> tuple[int, float] | None:
     samples = report.get("samples") or {}
     if "onboard" not in samples:
         return None
-    judged = int(samples["onboard"])
-    return judged, judged + int(samples.get("unmatched_poses") or 0) / 2
+    judged = int(samples["onboard"]) + int(samples.get("stall_first_judged") or 0)
+    return judged, judged + int(samples.get("unmatched_poses") or 0) / 2 + int(
+        samples.get("stall_first_unjudged") or 0) - int(samples.get("stall_first_unmatched") or 0)
 
 
 def mark_floor(report: dict[str, Any]) -> dict[str, Any]:

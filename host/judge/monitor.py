@@ -73,6 +73,7 @@ from odocan.host.judge.liverobot import (
 )
 from odocan.host.judge.livesetpose import SetPoseFollower, apply_set_pose, set_pose_event
 from odocan.host.judge.livesettle import SettleHold
+from odocan.host.judge.livestallfirst import first_after_of
 from odocan.host.judge.livetwins import CRC_RIGHT_REFUSED, refused_encoders
 from odocan.host.judge.livetwist import LiveTwist
 from odocan.host.judge.messagestats import MessageStats
@@ -124,6 +125,7 @@ class BusMonitor:
         self.settle = SettleHold(self.e2e, self.db)
         self._e2e_configs = e2e_messages(self.db)
         self.tracker = PoseTracker(Geometry.of(robot), robot.counter_bits, integrator)
+        self.first_after = first_after_of(self.tracker, robot, self.db)  # livestallfirst
         self.distance = LiveDistance(robot)  # ODOM_TWIST DISTANCE (host.judge.livedistance)
         self.twist = LiveTwist(Geometry.of(robot), robot.counter_bits)  # its speeds (livetwist)
         self.messages: dict[str, MessageStats] = {}
@@ -299,6 +301,7 @@ class BusMonitor:
                                            self._bus_time_s)
             if applied is not None:
                 pose = apply_set_pose(self.tracker, *applied)
+                self.first_after.new_life()
                 event = set_pose_event(self._bus_time_s, pose, applied[1])
                 self.events.append(self.kept.applied(event, *applied, self.tracker.enc_seq))
         elif int(s["REQUEST_ID"]) == self._config_id:
@@ -312,6 +315,7 @@ class BusMonitor:
         frame = (int(s["COUNTER"]), int(s["LEFT_COUNT"]), int(s["RIGHT_COUNT"]), self._bus_time_s,
                  int(s.get("CTRL_UPTIME", 0)))
         self.tracker.on_encoders(*frame)
+        self.first_after.on_encoders(*frame[:4])
         if self.robot.unjudged:  # the page contradicts the default: not judged (liverobot)
             return
         self.distance.on_encoders(self.tracker, *frame)
@@ -328,10 +332,13 @@ class BusMonitor:
     def _on_pose_x(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
         self.tracker.on_pose_x(int(s["ENC_COUNTER"]), float(s["X"]), float(s["HEADING"]),
                                counter=int(s["COUNTER"]), t_s=self._bus_time_s)
+        self.first_after.on_pose_x(int(s["ENC_COUNTER"]), float(s["X"]), float(s["HEADING"]),
+                                   self._bus_time_s)
 
     def _on_pose_y(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
         self.tracker.on_pose_y(int(s["ENC_COUNTER"]), float(s["Y"]), int(s["TURNS"]),
                                counter=int(s["COUNTER"]), t_s=self._bus_time_s)
+        self.first_after.on_pose_y(int(s["ENC_COUNTER"]), float(s["Y"]), int(s["TURNS"]))
 
     def _on_truth(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
         part = int(s["PART"])
@@ -394,8 +401,11 @@ class BusMonitor:
         lost = rebooted(self, self.config, self._bus_time_s)  # its configs were in its RAM
         detail += ": " + src.start_new_life(self.tracker, self.e2e, self.db, uptime_s, state, seq)
         self.distance.new_life()
+        self.first_after.new_life()
         since_s = self.sources.life_from_s - SAME_TICK_S  # its first ticks' (bootticks)
         self.tracker.withdraw_from(since_s)  # its poses vs the old reference
+        # its first pose is no resume (livestallfirst): from its boot, UPTIME's whole seconds
+        self.first_after.withdraw_from(min(since_s, self._bus_time_s - uptime_s - 1.0))
         self.twist.new_life(since_s)  # its first ticks' twists
         self.set_pose.forget(since_s)  # the new firmware's kept
         self.kept.forget()
@@ -423,6 +433,7 @@ class BusMonitor:
             self._judge_waited()  # without the page: the default's judges (liverobot)
         if self.settle.quiet(now_s):  # nothing heard for a hold's time: judged now (livesettle)
             self.release_held()
+        self.first_after.untie(self.events)  # its re-primes after a stall (livestallfirst)
         nodes = node_ages(self.db, self.messages, now_s)
         state, why = verdict(self, nodes.get(FIRMWARE_NODE))  # (monitorverdict)
         if state == "OK" and (stale := summary_stale_why(self, now_s)):

@@ -68,6 +68,7 @@ def verdict(model: BusMonitor, firmware: dict[str, Any] | None) -> tuple[str, li
     if model.tracker.awaiting_boot:
         return "UNVERIFIED", ["rebooted: waiting for the encoder frame it primed on"]
     for state, why in (("POSE WRONG", partial(pose_wrong_why, model.tracker)),  # livestanding
+                       ("POSE WRONG", model.first_after.wrong),  # livestallfirst
                        ("DISTANCE WRONG", model.distance.verdict),  # latched, in this order
                        ("TWIST WRONG", model.twist.verdict),  # LINEAR_VEL, ANGULAR_VEL
                        ("HELD", model.settle.why)):  # frames not judged yet: livesettle
@@ -85,6 +86,7 @@ def reported_verdict(model: BusMonitor, reported: str) -> tuple[str, list[str]]:
     said = f"firmware reports {reported} ({reason_text(str(model.status.get('reason', '?')))})"
     if reported == "DEGRADED":
         for state, why in (("POSE WRONG", _pose_wrong_degraded(model)),
+                           ("POSE WRONG", model.first_after.wrong()),  # livestallfirst
                            ("DISTANCE WRONG", model.distance.verdict()),
                            ("TWIST WRONG", model.twist.verdict())):
             if why:

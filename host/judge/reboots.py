@@ -79,6 +79,7 @@ from odocan.host.judge.primed import counted_start
 from odocan.host.judge.samples import ENC_E2E_PAGE, AnalysisError, contract_cycle_s
 from odocan.host.judge.silentboot import silent_start
 from odocan.host.judge.sources import SourceWatch, two_sources_text
+from odocan.host.judge.stallfirst import merged_first
 from odocan.host.judge.stalls import silent_between
 from odocan.host.protocol import busfacts
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
@@ -325,7 +326,8 @@ _FIRST_WINDOW = 64  # summaries tried at once after one that was not quiet (doub
 # --- one report of the lives ----------------------------------------------------------------
 
 _SUMMED_SAMPLES = ("onboard", "truth", "truth_compared", "unmatched_poses", "encoder_frames",
-                   "reference_restarts", "implausible_encoder_frames")
+                   "reference_restarts", "implausible_encoder_frames", "stall_first_judged",
+                   "stall_first_unjudged", "stall_first_unmatched")
 _TIME_SERIES = ("t_s", "truth_t_s", "gap_start_t_s", "gap_end_t_s", "restart_t_s")
 
 
@@ -342,9 +344,11 @@ def merge(
     reboots of the ``silent`` lives (no on-board sample) are reported with 0 samples."""
     report = dict(reports[0])
     last = reports[-1]
-    report["samples"] = {key: sum(r["samples"][key] for r in reports) for key in _SUMMED_SAMPLES}
+    report["samples"] = {key: sum(r["samples"].get(key, 0) for r in reports)
+                         for key in _SUMMED_SAMPLES}
     report["onboard_vs_reference"] = _worst([r["onboard_vs_reference"] for r in reports])
     report["reference_breaks"] = merged_breaks([r["reference_breaks"] for r in reports])
+    report["stall_first_pose"] = merged_first([r.get("stall_first_pose") for r in reports])
     truths = [r["onboard_vs_truth"] for r in reports]
     report["onboard_vs_truth"] = _worst(truths)
     report["onboard_vs_truth"]["distance_travelled_m"] = float(

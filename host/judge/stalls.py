@@ -9,11 +9,13 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
+from odocan.host.judge.gapfill import crc_holds
 from odocan.host.judge.samples import (
     SILENCE_CYCLES,
     Encoders,
     FloatArray,
     IntArray,
+    PoseHalves,
     Poses,
     queued_frames,
 )
@@ -22,7 +24,7 @@ from odocan.host.protocol.decode import BulkDecoder
 
 def after_stalls(
     onboard: Poses, sent_s: FloatArray, enc: Encoders, pose_sent_s: FloatArray | None = None,
-    alive_s: FloatArray | None = None,
+    alive_s: FloatArray | None = None, halves: PoseHalves | None = None,
 ) -> tuple[Poses, IntArray]:
     """Samples sent after the firmware was silent for ``SILENCE_CYCLES`` encoder cycles or more
     (no ODOM_POSE_Y at all: ``pose_sent_s``, every one's bus time, also those that name the
@@ -36,8 +38,9 @@ def after_stalls(
     pose (``_frozen``). The first sample too when the firmware was silent before it after its
     other frames (``alive_s``: e.g. its ODOM_STATUS while INIT, ``first_after_stall``): the
     restart is then at the frame after the first it could have primed on (a lone sample so
-    placed is kept: ``_lone_break``). Returns the samples kept and those encoder frames
-    (sorted)."""
+    placed is kept: ``_lone_break``). ``halves``: the pose frames and the frames they name, a
+    hold's evidence (``named_again``, ``frozen_breaks``; None: no evidence asked).
+    Returns the samples kept and those encoder frames (sorted)."""
     if enc.cycle_s is None or len(sent_s) == 0:
         return onboard, np.zeros(0, dtype=np.int64)
     if len(sent_s) == 1:
@@ -66,7 +69,10 @@ def after_stalls(
                  onboard.heading_rad[keep], onboard.heading_raw[keep])
     queued_by_sample = np.zeros(len(sent_s), dtype=bool)
     queued_by_sample[order] = queued
-    frozen = _frozen(kept, enc, queued_by_sample[keep])
+    evidence = None if halves is None else hold_evidence(
+        named_again(halves, len(enc.seq))[kept.enc], sent_s[keep],
+        sent if pose_sent_s is None else pose_sent_s, enc.cycle_s)
+    frozen = _frozen(kept, enc, queued_by_sample[keep], evidence)
     restarts = [onboard.enc[order[after - 1]] + 1, frozen]
     if primed is not None:
         restarts.append(np.array([primed + 1], dtype=np.int64))
@@ -185,6 +191,25 @@ def alive_times(frames: FrameArrays, accepted: npt.NDArray[np.bool_],
     return times
 
 
+def pose_sent_times(frames: FrameArrays, accepted: npt.NDArray[np.bool_],
+                    decoder: BulkDecoder) -> FloatArray:
+    """The bus times of the firmware's ODOM_POSE_Y frames (the silence rules' ``pose_sent_s``):
+    those accepted and those the host's E2E refused whose CRC holds (issue #11). A frame a
+    ``delay`` fault reordered is refused as a wrong sequence (a later one came first), yet the
+    firmware sent it: counted as silence, 140 ms of poses refused on ``delay=0.3:55`` (seed
+    703) made a stall the firmware never had, whose placement absorbed a pose 10 mm off."""
+    rows = decoder.select(frames, "ODOM_POSE_Y")
+    sent = accepted[rows] | crc_holds(frames, decoder, rows, "ODOM_POSE_Y")
+    times: FloatArray = np.sort(frames.timestamp_s[rows[sent]]).astype(np.float64)
+    return times
+
+
+def signs_of_life(frames: FrameArrays, accepted: npt.NDArray[np.bool_],
+                  decoder: BulkDecoder) -> tuple[FloatArray, FloatArray]:
+    """(``pose_sent_times``, ``alive_times``) of a log."""
+    return pose_sent_times(frames, accepted, decoder), alive_times(frames, accepted, decoder)
+
+
 def frames_on_time(enc: Encoders, lo: IntArray, hi: IntArray) -> IntArray:
     """How many of the encoder frames ``lo[k]`` .. ``hi[k]`` - 1 (positions in ``enc``) came on
     time: not ``queued_frames`` (a busy bus let them out in a burst). A firmware that missed
@@ -199,27 +224,86 @@ def frames_on_time(enc: Encoders, lo: IntArray, hi: IntArray) -> IntArray:
     return counted
 
 
-def _frozen(onboard: Poses, enc: Encoders, queued: npt.NDArray[np.bool_]) -> IntArray:
+def _frozen(onboard: Poses, enc: Encoders, queued: npt.NDArray[np.bool_],
+            evidence: npt.NDArray[np.bool_] | None = None) -> IntArray:
     """Encoder frames after a sample whose next sample names a frame ``SILENCE_CYCLES`` or more
     periods later while the log holds ``SILENCE_CYCLES`` frames between that came on time
     (``frames_on_time``): the firmware held its pose on one frame (it kept naming it) and then
     took the frames since as one step, as after a stall."""
     heard = frames_on_time(enc, onboard.enc[:-1] + 1, onboard.enc[1:] + 1)
-    return frozen_breaks(onboard.enc, enc.seq[onboard.enc], queued, heard)
+    return frozen_breaks(onboard.enc, enc.seq[onboard.enc], queued, heard, evidence)
 
 
 def frozen_breaks(sample_enc: IntArray, sample_seq: IntArray,
                   queued: npt.NDArray[np.bool_] | None = None,
-                  heard: IntArray | None = None) -> IntArray:
+                  heard: IntArray | None = None,
+                  evidence: npt.NDArray[np.bool_] | None = None) -> IntArray:
     """``_frozen`` of consecutive samples (their encoder frames in the log and sequence
     numbers, in encoder order; ``queued``: which came in a burst, None: none did; ``heard``: the
-    frames on time between each two, None: every frame between, as when none came in a burst)."""
+    frames on time between each two, None: every frame between, as when none came in a burst;
+    ``evidence``: per two consecutive samples, ``hold_evidence``'s, None: every pair has it).
+
+    A hold needs evidence (issue #11, rule 5): a firmware that held its pose kept naming the
+    frame it held on, so a pose frame after the sample named that frame again; or it was silent
+    between the two on the bus (a stall whose burst of queued poses the silence rule does not
+    count, ``tests/test_apply_after_stall.py``). Two samples far
+    apart in the log are no evidence alone: under a ``delay`` fault the host refuses most pose
+    and encoder frames (reordered), the samples left are sparse, and a hold invented between two
+    of them placed the reference again at the later one, absorbing a pose 10 mm off (seed 703,
+    ``delay=0.5:100``: 12 of 73 poses judged, a tamper from 2.0 s PASSed)."""
     on_time = np.diff(sample_enc) if heard is None else heard
     held = (np.diff(sample_seq) >= SILENCE_CYCLES) & (on_time >= SILENCE_CYCLES)
+    if evidence is not None:
+        held &= evidence
     if queued is not None:
         held &= ~queued[1:]  # a queued sample was made long before it was sent: not evidence
     frozen: IntArray = sample_enc[:-1][held] + 1
     return frozen
+
+
+def named_again(halves: PoseHalves, frames: int) -> npt.NDArray[np.bool_]:
+    """Per encoder frame (of ``frames``), whether two accepted pose frames of one kind or more
+    named it (``halves``: ``samples.pose_halves``): a hold's evidence (``frozen_breaks``)."""
+    again = np.zeros(frames, dtype=bool)
+    for named in (halves.ex, halves.ey):
+        counts = np.bincount(named[named >= 0], minlength=frames)
+        again |= counts[:frames] >= 2
+    return again
+
+
+def hold_evidence(again: npt.NDArray[np.bool_], sent_s: FloatArray, pose_sent_s: FloatArray,
+                  cycle_s: float | None) -> npt.NDArray[np.bool_]:
+    """``frozen_breaks``' evidence per two consecutive samples (in encoder order): the first's
+    frame named again (``again``, per sample: ``named_again``), or no pose frame sent
+    (``pose_sent_s``, sorted) for ``SILENCE_CYCLES`` - 0.5 cycles or more between the two
+    samples' send times (``sent_s``)."""
+    if cycle_s is None or len(sent_s) < 2:
+        return np.asarray(again[:-1], dtype=bool)
+    return again[:-1] | quiet_between(sent_s[:-1], sent_s[1:], pose_sent_s, cycle_s)
+
+
+def quiet_between(t0_s: FloatArray, t1_s: FloatArray, pose_sent_s: FloatArray,
+                  cycle_s: float) -> npt.NDArray[np.bool_]:
+    """Per pair (t0, t1): ``quiet_in`` of the silences of ``pose_sent_s`` (sorted): two
+    consecutive times ``SILENCE_CYCLES`` - 0.5 cycles apart or more (as ``silent``)."""
+    gap = np.flatnonzero(np.diff(pose_sent_s) >= (SILENCE_CYCLES - 0.5) * cycle_s)
+    return quiet_in(t0_s, t1_s, pose_sent_s[gap], pose_sent_s[gap + 1], cycle_s)
+
+
+def quiet_in(t0_s: FloatArray, t1_s: FloatArray, starts_s: FloatArray, ends_s: FloatArray,
+             cycle_s: float) -> npt.NDArray[np.bool_]:
+    """Per pair (t0, t1): whether the silences (``starts_s`` .. ``ends_s``, sorted) within it
+    leave less than ``SILENCE_CYCLES`` cycles of it talked: the firmware that talked longer
+    between two samples named the frames of that time (its poses the host could not pair are
+    sparse samples, no hold; 75 ms without a pose in 1.5 s of ``delay=0.5:100`` held none)."""
+    if len(starts_s) == 0:
+        return np.zeros(len(t0_s), dtype=bool)
+    quiet_sum = np.concatenate(([0.0], np.cumsum(ends_s - starts_s)))
+    j0 = np.searchsorted(starts_s, t0_s, side="left")
+    j1 = np.maximum(np.searchsorted(ends_s, t1_s, side="right"), j0)
+    quiet: npt.NDArray[np.bool_] = (j1 > j0) & (
+        quiet_sum[j1] - quiet_sum[j0] >= (t1_s - t0_s) - SILENCE_CYCLES * cycle_s)
+    return quiet
 
 
 def silent(

@@ -199,6 +199,7 @@ class StreamPoses:
     _given_below: float = -np.inf  # samples of sequence numbers below this are given out
     causal: bool = True  # a frame names only an encoder frame before it (held ones carried)
     resent: set[int] = field(default_factory=set)  # frames a differing resend names (resent.py)
+    named_again: set[int] = field(default_factory=set)  # frames two of a kind named (a hold's)
     _last_pose: dict[str, tuple[int, dict[str, float]]] = field(default_factory=dict)
 
     def feed(
@@ -289,6 +290,8 @@ class StreamPoses:
         for i, (gi, si, t) in enumerate(zip(g[hits].tolist(), seq[hits].tolist(),
                                             halves.timestamp_s[hits].tolist(), strict=True)):
             row = {k: v[i] for k, v in columns.items()}
+            if gi in firsts or last[0] == gi:  # stalls.named_again
+                self.named_again.add(gi)
             if si >= self._given_below and gi not in firsts:
                 firsts[gi] = (si, row, t)
             elif (gi in firsts or last[0] == gi) and resent_differs(

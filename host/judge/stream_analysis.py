@@ -35,7 +35,7 @@ import numpy as np
 from odocan.host.io.frames import concat_frames
 from odocan.host.io.logs import CHUNK_FRAMES, FrameArrays, iter_log, warn_on_stderr
 from odocan.host.judge import acrosscut
-from odocan.host.judge.analysis import STALL_DETAIL, Tolerance
+from odocan.host.judge.analysis import Tolerance
 from odocan.host.judge.breaks import placed_offsets
 from odocan.host.judge.configs import ConfigPages, in_force
 from odocan.host.judge.distance import DistanceJudge
@@ -54,6 +54,7 @@ from odocan.host.judge.samples import (
     require_messages,
 )
 from odocan.host.judge.setposekept import Kept, check_cut
+from odocan.host.judge.stallfirst import STALL_DETAIL
 from odocan.host.judge.stallreprime import detail as reprime_detail
 from odocan.host.judge.stream import StreamE2E
 from odocan.host.judge.stream_carry import CarriedSpans, carried
@@ -82,6 +83,7 @@ from odocan.host.judge.stream_primed import judged_from_candidates
 from odocan.host.judge.stream_refusal import UNSETTLED
 from odocan.host.judge.stream_refusal import NotStreamable as NotStreamable
 from odocan.host.judge.stream_reprime import stream_reprimes
+from odocan.host.judge.stream_stallfirst import stream_first
 from odocan.host.judge.stream_stalls import StreamBreakCounts
 from odocan.host.judge.twosenders import LogSenders
 from odocan.host.judge.unseenrestart import restart_detail, whole_only
@@ -406,10 +408,12 @@ def _judged(
         [(a, z) for a, z, _ in spans],
         skipped=first.losses.ok_spans(power_up and start_pose is None)))
     after_span = drops.allowance(np.array([last + 1 for _, last, _ in spans], dtype=np.int64))
+    left_out = stream_first(frames, db, robot, integrator, bits,  # stallfirst
+                            (tolerance.position_m, tolerance.heading_rad))
     passed = bool(
         vs_ref["max_position_error_beyond_allowance_m"] <= tolerance.position_m
         and vs_ref["max_heading_error_rad"] <= tolerance.heading_rad
-        and twist["passed"] and distance["passed"]
+        and twist["passed"] and distance["passed"] and left_out.passed()
     )
     covered_s = facts.covered_s()
     counts = first.e2e.counts
@@ -431,7 +435,7 @@ def _judged(
             "unmatched_poses": first.poses.unmatched,
             "encoder_frames": first.encoders,
             "reference_restarts": info.segments, "unseen_restarts": 0,  # else: whole_only
-            "implausible_encoder_frames": info.refused,
+            "implausible_encoder_frames": info.refused, **left_out.counts(),
         },
         "reference_breaks": placements.as_dict(),
         "events": [
@@ -459,7 +463,7 @@ def _judged(
         "reboots": [],
         "onboard_vs_reference": vs_ref,
         "onboard_vs_truth": vs_truth,
-        "onboard_twist_vs_reference": twist,
+        "onboard_twist_vs_reference": twist, "stall_first_pose": left_out.as_dict(),
         "onboard_distance_vs_reference": distance,
         "final_onboard_pose": {
             "x_m": float(first.tail.x_m[-1]),

@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from odocan.host.io.logs import FrameArrays
+from odocan.host.judge.gapfill import crc_holds
 from odocan.host.judge.gapseen import PageEvidence
 from odocan.host.judge.samples import (
     REQUIRED,
@@ -107,12 +108,14 @@ class FirstPass:
             self.accepted[name] += int(np.count_nonzero(accepted[index]))
         enc = self.numbering.feed(chunk, accepted)
         self.encoders += len(enc.index)
-        self.stalls = self.stalls or StreamStalls(enc.cycle_s)
+        self.stalls = self.stalls or StreamStalls(enc.cycle_s,
+                                                  named_again=self.poses.named_again)
         samples, sent = self.poses.feed(chunk, accepted, enc)
         self.first_sent_s = min(self.first_sent_s, float(np.min(sent, initial=math.inf)))
         watermark = min(float(chunk.timestamp_s[-1]), self.poses.open_sent_s())
         pose_y = self.decoder.select(chunk, "ODOM_POSE_Y")
-        pose_t = chunk.timestamp_s[pose_y[accepted[pose_y]]]
+        pose_t = chunk.timestamp_s[pose_y[accepted[pose_y] | crc_holds(  # stalls.pose_sent_times
+            chunk, self.decoder, pose_y, "ODOM_POSE_Y")]]
         status = self.decoder.select(chunk, "ODOM_STATUS")
         self.before_first.feed(chunk.timestamp_s[status[accepted[status]]], enc.timestamp_s,
                                pose_t, enc.cycle_s)

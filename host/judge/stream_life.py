@@ -20,6 +20,7 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
+from odocan.host.judge.gapfill import crc_holds
 from odocan.host.judge.nearthreshold import least_of
 from odocan.host.judge.reference import Geometry, SpeedBound
 from odocan.host.judge.samples import WIRE_COUNTER_BITS, Encoders
@@ -163,7 +164,7 @@ def life_chunks(
         enc = numbering.feed(chunk, accepted)
         if on_encoders is not None:
             on_encoders(enc)
-        stalls = stalls or StreamStalls(enc.cycle_s)
+        stalls = stalls or StreamStalls(enc.cycle_s, named_again=poses.named_again)
         g = count + np.arange(len(enc.index), dtype=np.int64)
         count += len(g)
         if tap is not None:
@@ -177,7 +178,8 @@ def life_chunks(
         samples, sent = poses.feed(chunk, accepted, enc)
         watermark = min(float(chunk.timestamp_s[-1]), poses.open_sent_s())
         pose_y = decoder.select(chunk, "ODOM_POSE_Y")
-        pose_t = chunk.timestamp_s[pose_y[accepted[pose_y]]]
+        pose_t = chunk.timestamp_s[pose_y[accepted[pose_y] | crc_holds(  # stalls.pose_sent_times
+            chunk, decoder, pose_y, "ODOM_POSE_Y")]]
         placed = _placed(stalls.feed(samples, sent, enc.timestamp_s, watermark, pose_t), rows)
         told = _truth(truth.feed(chunk, accepted, enc)[0], rows, e0,
                       _truth_floor(truth, count - 1))

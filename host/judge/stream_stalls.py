@@ -35,9 +35,9 @@ from odocan.host.judge.gapbound import period_bounds
 from odocan.host.judge.gapseen import NOTHING, Seen
 from odocan.host.judge.lossgate import Gate, gated_counts
 from odocan.host.judge.reference import PROFILE_SPEED, Geometry, SpeedBound, wrap_delta
-from odocan.host.judge.samples import Encoders
+from odocan.host.judge.samples import SILENCE_CYCLES, Encoders
 from odocan.host.judge.spanfill import filled_span_allowance_m
-from odocan.host.judge.stalls import frozen_breaks, silent
+from odocan.host.judge.stalls import frozen_breaks, quiet_in, silent
 
 COLUMNS = ("enc", "x_m", "y_m", "heading_rad", "heading_raw", "seq")
 
@@ -68,7 +68,11 @@ class StreamStalls:
     _prev: tuple[float, int, int] | None = None  # last taken: sent, enc, encoders before it
     _pose_t: npt.NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))  # ODOM_POSE_Y
     _breaks: set[int] = field(default_factory=set)
-    _last_given: tuple[int, int] | None = None  # the last sample given out: enc, seq
+    _last_given: tuple[int, int, float] | None = None  # the last given out: enc, seq, sent
+    named_again: set[int] | None = None  # frames named again (StreamPoses'), None: every one
+    _sent_of: dict[int, float] = field(default_factory=dict)  # a sample's send time, by enc
+    _quiet: list[tuple[float, float]] = field(default_factory=list)  # pose silences (s, s)
+    _last_pose_t: float = np.nan  # the last pose time fed (a silence across chunks)
 
     def feed(
         self, samples: dict[str, np.ndarray], sent_s: npt.NDArray[np.float64],
@@ -86,6 +90,11 @@ class StreamStalls:
                                                and float(pose_t_s[0]) < self._prev[0]):
                 self.exact = False  # the whole log's searchsorted on them: unsorted, or late
             self._pose_t = np.concatenate((self._pose_t, pose_t_s))
+            if self.cycle_s is not None:  # stalls.quiet_between's silences, as they come
+                times = np.r_[self._last_pose_t, pose_t_s]
+                gap = np.flatnonzero(np.diff(times) >= (SILENCE_CYCLES - 0.5) * self.cycle_s)
+                self._quiet += zip(times[gap].tolist(), times[gap + 1].tolist(), strict=True)
+                self._last_pose_t = float(pose_t_s[-1])
         if len(encoder_t_s):
             if encoder_t_s[0] < self._last_enc_t or np.any(np.diff(encoder_t_s) < 0):
                 self.exact = False
@@ -96,6 +105,7 @@ class StreamStalls:
         if self._prev is not None and len(sent_s) and float(np.min(sent_s)) < self._prev[0]:
             self.exact = False  # sent before a sample already taken
         self._buffer = _cat(self._buffer, {k: samples[k] for k in COLUMNS})
+        self._sent_of.update(zip(samples["enc"].tolist(), sent_s.tolist(), strict=True))
         self._sent = np.concatenate((self._sent, sent_s))
         self._take(self._sent < watermark_s)
         return self._give()
@@ -168,8 +178,17 @@ class StreamStalls:
         enc, seq = given["enc"], given["seq"]
         if self._last_given is not None:
             enc, seq = np.r_[self._last_given[0], enc], np.r_[self._last_given[1], seq]
-        self._breaks.update(frozen_breaks(enc, seq).tolist())
-        self._last_given = (int(enc[-1]), int(seq[-1]))
+        sent = np.array([self._sent_of.pop(e, np.nan) for e in enc.tolist()])
+        if self._last_given is not None:
+            sent[0] = self._last_given[2]
+        evidence = None
+        if self.named_again is not None:  # stalls.hold_evidence
+            again = np.array([e in self.named_again for e in enc[:-1].tolist()], dtype=bool)
+            quiet = np.array(self._quiet, dtype=np.float64).reshape(-1, 2)
+            evidence = again | quiet_in(sent[:-1], sent[1:], quiet[:, 0], quiet[:, 1],
+                                         self.cycle_s)
+        self._breaks.update(frozen_breaks(enc, seq, evidence=evidence).tolist())
+        self._last_given = (int(enc[-1]), int(seq[-1]), float(sent[-1]))
 
 
 @dataclass

@@ -8,16 +8,37 @@ from __future__ import annotations
 
 from typing import Any
 
+from odocan.host.judge.judgedfloor import judged_share
+
 
 def judged_fact(report: dict[str, Any]) -> tuple[str, str] | None:
     """The ``judged`` line: poses compared of those sent; None without the count."""
     samples = report.get("samples") or {}
     if "judged_fraction" not in samples:
         return None
-    judged = int(samples["onboard"])
-    sent = judged + int(samples.get("unmatched_poses") or 0) / 2
+    judged, sent = judged_share(report) or (0, 0.0)
     return "judged", (f"{judged} of {sent:g} on-board poses compared with the reference "
-                      f"({100 * samples['judged_fraction']:.4g} %)")
+                      f"({100 * samples['judged_fraction']:.4g} %)" + _first_said(report))
+
+
+def _first_said(report: dict[str, Any]) -> str:
+    """The poses sent first after a silence (``host.judge.stallfirst``), when there were any."""
+    first = report.get("stall_first_pose") or {}
+    if not first.get("judged") and not first.get("unjudged"):
+        return ""
+    said = f"; {first['judged']} sent first after a silence judged by the poses around it"
+    if max(first.get("max_position_beyond_m") or 0.0,
+           first.get("max_heading_beyond_rad") or 0.0) > 0:
+        said += (f" ({first['max_position_beyond_m'] * 1e3:.4g} mm, "
+                 f"{max(first['max_heading_beyond_rad'], 0.0) * 1e3:.4g} mrad beyond them "
+                 f"at {first['worst_at_s']:.3f} s)")
+    if first.get("max_resume_beyond_m") is not None and first["max_resume_beyond_m"] > 0:
+        said += (f"; the pose at {first['resume_at_s']:.3f} s lies "
+                 f"{first['max_resume_beyond_m'] * 1e3:.4g} mm beyond any the firmware can "
+                 "resume at from its pose before the stall (a jump, no placement)")
+    if first.get("unjudged"):
+        said += f", {first['unjudged']} not judged (no neighbour names a frame it may name)"
+    return said
 
 
 def placed_fact(report: dict[str, Any]) -> tuple[str, str] | None:

@@ -38,6 +38,7 @@ from odocan.host.judge.replay import (
     replay_and_analyze,
 )
 from odocan.host.judge.replay_compare import compared, departures, not_comparable, unjudged
+from odocan.host.judge.stream_stallfirst import logged_first_wrong
 from odocan.host.outputs import check_distinct
 from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
@@ -132,6 +133,9 @@ def _do_replay(args: argparse.Namespace) -> int:
     _print_versus_log(section)
     analysis.report["inputs"] = choice.recorded(log_inputs(args.log, profile, integrator, None))
     reasons, blind = _judged(section, args.tolerance)
+    reasons += [why] if (why := logged_first_wrong(  # never compared otherwise: stallfirst
+        frames, profile, integrator, (args.tolerance.position_m, args.tolerance.heading_rad))
+    ) else []
     if (told := pose_streams(frames, default_plan()).told()) is not None:  # whose poses?
         blind = f"{blind}; {told[2]}" if blind else f"UNJUDGED: {told[2]}"
         reasons = []  # two robots' frames were fed (all the log's encoder frames): no FAIL

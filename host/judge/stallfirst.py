@@ -1,0 +1,288 @@
+"""The first sample after a stall, judged by its neighbours (issue #11, rule 5).
+
+``stalls.after_stalls`` leaves out the first sample a firmware sent after a silence: it may
+name a frame of its backlog (its FIFO kept the first frames after it halted), which ENC_COUNTER
+cannot resolve, so the reference cannot place it on one frame. Left out unjudged, it let any
+pose through: +10 m on that one frame PASSed every judge. It is not free, though. The frame it
+names has its ENC_COUNTER and lies either in the backlog, a few frames after the last sample
+before the silence (``before``), which the firmware reached from that sample by the log's own
+count steps (it had not yet merged the frames it missed); or among the frames it took after it
+ran again, a few frames before the next sample (``after``), which it reached from there by the
+count steps. So the sample must sit within the tolerance, plus the worst merge of those few
+frames (``breaks.merge_allowance_m``: its mailbox may have dropped some), of the pose carried
+from one of its neighbours over the steps to one candidate frame: the heading exact (linear in
+the counts), the position by the same integrator. Candidates are the frames within
+``NEAR_FRAMES`` of a neighbour (the counter's cycle, longer than any receive FIFO) whose E2E
+COUNTER is the one the sample named; the carried pose is its neighbours' own, which the
+reference judges in turn, so a neighbour cannot vouch for a pose it does not reach.
+
+A pose let out in a burst (``senderseq.queued_frames``: a busy bus held it back, the firmware
+did not stall) is not this rule's. A left-out sample without a neighbour on either side, or with
+no candidate frame, is counted
+as not judged (``FirstVerdict.unjudged``), never as judged."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from odocan.host.judge.breaks import merge_allowance_m
+from odocan.host.judge.losses import OneSteps
+from odocan.host.judge.reference import Geometry, wrap_delta
+from odocan.host.judge.samples import (
+    HEADING_LSB_RAD,
+    POSITION_LSB_M,
+    SILENCE_CYCLES,
+    Encoders,
+    FloatArray,
+    PoseHalves,
+    Poses,
+)
+from odocan.host.judge.senderseq import queued_frames
+from odocan.host.judge.stallresume import FIFO_FRAMES, resume_excess
+
+STALL_DETAIL = ("the firmware was silent or held its pose (a stall): it took the frames it "
+                "missed as one step or several, so the reference's position is placed again "
+                "after it, at a pose the firmware can resume at from its own before the stall "
+                "(stallresume), by no more than the worst merge error there plus the tolerance "
+                "(reference_breaks)")
+NEAR_FRAMES = FIFO_FRAMES  # a counter cycle of ENC_COUNTER: candidates within it of a neighbour
+# A neighbour vouches only from near: ``before`` the last pose sent before the silence, ``after``
+# within this many encoder cycles of the pose. A kept sample further off (the poses between
+# refused, e.g. reordered by a delaying bus) has an alias of the named ENC_COUNTER in every
+# 16-frame window, so carrying its pose there FAILed a correct firmware (kobuki seed 2,
+# delay=0.5:100,stall=2:1: 762 mm "beyond" at 3.021 s, 4 of 42 poses kept).
+NEAR_CYCLES = 4
+
+
+@dataclass
+class FirstVerdict:
+    """The poses sent first after a silence that the samples lack: how many were judged by a
+    neighbour, how many could not be, and the worst excess (m, rad) beyond the tolerance (and
+    allowance) of those judged (each at its best candidate)."""
+
+    judged: int = 0
+    unjudged: int = 0
+    unmatched: int = 0  # of both, those ``match_encoder`` left unmatched (``unmatched_poses``)
+    worst_position_m: float = -math.inf  # beyond tolerance + merge allowance (<= 0: within)
+    worst_heading_rad: float = -math.inf  # beyond the heading tolerance
+    worst_at_s: float | None = None  # bus time of the worst pose (ODOM_POSE_X)
+    resumes: int = 0  # first samples after the silence judged by ``stallresume``
+    worst_resume_m: float = -math.inf  # beyond every pose the firmware can resume at
+    resume_at_s: float | None = None  # bus time of that sample (ODOM_POSE_X)
+
+    def passed(self) -> bool:
+        return (self.worst_position_m <= 0.0 and self.worst_heading_rad <= 0.0
+                and self.worst_resume_m <= 0.0)
+
+    def resumed(self, t_s: float, excess_m: float | None) -> None:
+        """``stallresume.resume_excess`` of the sample after a silence sent at ``t_s``."""
+        if excess_m is None:
+            return
+        self.resumes += 1
+        if excess_m > self.worst_resume_m:
+            self.worst_resume_m, self.resume_at_s = excess_m, t_s
+
+    def counts(self) -> dict[str, int]:
+        """The ``samples`` counts (``judgedfloor.judged_share``)."""
+        return {"stall_first_judged": self.judged, "stall_first_unjudged": self.unjudged,
+                "stall_first_unmatched": self.unmatched}
+
+    def as_dict(self) -> dict[str, object]:
+        return {"judged": self.judged, "unjudged": self.unjudged,
+                "max_position_beyond_m": _finite(self.worst_position_m),
+                "max_heading_beyond_rad": _finite(self.worst_heading_rad),
+                "worst_at_s": self.worst_at_s, "resumes": self.resumes,
+                "max_resume_beyond_m": _finite(self.worst_resume_m),
+                "resume_at_s": self.resume_at_s, "passed": self.passed()}
+
+
+def _finite(value: float) -> float | None:
+    return value if math.isfinite(value) else None
+
+
+@dataclass(frozen=True)
+class Pair:
+    """One pose as sent: its ODOM_POSE_X and the ODOM_POSE_Y nearest it naming the same frame."""
+
+    t_s: float  # ODOM_POSE_X's bus time
+    named: int  # ENC_COUNTER
+    enc: int  # the encoder frame ``match_encoder`` gave the X half (-1: none)
+    x_m: float
+    y_m: float
+    heading_rad: float
+    quiet_s: float = 0.0  # since the ODOM_POSE_X before it (any: paired or not)
+    queued: bool = False  # its X in a burst (``senderseq.queued_frames``)
+
+
+def pose_pairs(halves: PoseHalves, cycle_s: float) -> list[Pair]:
+    """Every ODOM_POSE_X with the ODOM_POSE_Y nearest it in time, within an encoder cycle
+    (``cycle_s``), that names the same ENC_COUNTER, in bus order (an X without one is no
+    pose); each with the time since the X before it and whether its X came in a burst."""
+    px, py = halves.px, halves.py
+    tx = np.asarray(px["timestamp_s"], dtype=np.float64)
+    ty = np.asarray(py["timestamp_s"], dtype=np.float64)
+    queued = queued_frames(tx, cycle_s)
+    pairs = []
+    for k in range(len(tx)):
+        t, named = float(tx[k]), int(px["ENC_COUNTER"][k])
+        lo, hi = np.searchsorted(ty, [t - cycle_s, t + cycle_s])
+        near = [m for m in range(int(lo), int(hi)) if int(py["ENC_COUNTER"][m]) == named]
+        if not near:
+            continue
+        m = min(near, key=lambda j: abs(float(ty[j]) - t))
+        pairs.append(Pair(t, named, int(halves.ex[k]), float(px["X"][k]) * POSITION_LSB_M,
+                          float(py["Y"][m]) * POSITION_LSB_M,
+                          float(py["TURNS"][m]) * 2 * math.pi
+                          + float(px["HEADING"][k]) * HEADING_LSB_RAD,
+                          t - float(tx[k - 1]) if k else 0.0, bool(queued[k])))
+    return pairs
+
+
+def judge_left_out(
+    halves: PoseHalves, kept: Poses, enc: Encoders, geometry: Geometry, integrator: str,
+    bits: int, tolerance: tuple[float, float], pose_sent_s: FloatArray | None = None,
+) -> FirstVerdict:
+    """Judge every pose sent first after a silence of ``SILENCE_CYCLES`` encoder cycles or
+    more (as ``stalls.silent`` reads one) that the samples ``kept`` lack: left out by
+    ``after_stalls``, unmatched by ``match_encoder`` (its backlog frame's counter unresolved),
+    or dropped as a second pose naming a frame (module docstring); ``tolerance``: (position m,
+    heading rad). ``pose_sent_s`` (``stalls.pose_sent_times``: every CRC-right ODOM_POSE_Y,
+    those the E2E check refused too) narrows the silence: under a reordering bus the poses
+    refused as out of sequence were sent all the same (delay=0.5:100, kobuki seed 2: the quiet
+    read from the accepted halves alone FAILed a correct firmware 163.9 mm)."""
+    verdict = FirstVerdict()
+    if enc.cycle_s is None or len(enc.index) < 2 or len(kept.enc) == 0:
+        return verdict
+    kept_keys = {(int(e), round(float(x), 6), round(float(y), 6))
+                 for e, x, y in zip(kept.enc, kept.x_m, kept.y_m, strict=True)}
+    pairs = pose_pairs(halves, enc.cycle_s)
+    if pose_sent_s is not None and len(pose_sent_s):
+        pairs = [replace(p, quiet_s=min(p.quiet_s, _since_sent(pose_sent_s, p.t_s)))
+                 for p in pairs]
+    is_kept = [(p.enc, round(p.x_m, 6), round(p.y_m, 6)) in kept_keys for p in pairs]
+    robot = (geometry, integrator, bits)
+    quiet = (SILENCE_CYCLES - 0.5) * enc.cycle_s
+    for i in range(1, len(pairs)):  # a burst's pose was held back by the bus: no stall
+        if is_kept[i] or pairs[i].queued or pairs[i].quiet_s < quiet:
+            continue
+        before = next((pairs[j] for j in range(i - 1, -1, -1) if is_kept[j]), None)
+        after = next((pairs[j] for j in range(i + 1, len(pairs)) if is_kept[j]), None)
+        before, after = _near(pairs[i], before, after, enc.cycle_s)
+        if before is not None and after is not None and not heard_all(enc, before, after):
+            continue  # a gap of the log (frames the logger missed): no stall of this rule's
+        excess = _best(pairs[i], (before, after), enc, robot, tolerance)
+        verdict.unmatched += pairs[i].enc < 0
+        if before is not None and after is not None and 0 <= before.enc < after.enc:
+            span = slice(before.enc, after.enc + 1)  # the stall is no set-pose: stallresume
+            verdict.resumed(after.t_s, resume_excess(
+                (before.x_m, before.y_m, before.heading_rad), (after.x_m, after.y_m),
+                (enc.left[span], enc.right[span]), (geometry, integrator, bits), tolerance[0]))
+        if excess is None:
+            verdict.unjudged += 1
+            continue
+        verdict.judged += 1
+        if excess[0] > verdict.worst_position_m or excess[1] > verdict.worst_heading_rad:
+            verdict.worst_at_s = pairs[i].t_s
+        verdict.worst_position_m = max(verdict.worst_position_m, excess[0])
+        verdict.worst_heading_rad = max(verdict.worst_heading_rad, excess[1])
+    return verdict
+
+
+def _near(pose: Pair, before: Pair | None, after: Pair | None, cycle_s: float
+          ) -> tuple[Pair | None, Pair | None]:
+    """``before`` and ``after`` where they may vouch for ``pose`` (``NEAR_CYCLES``), else None."""
+    slack_s = NEAR_CYCLES * cycle_s
+    if before is not None and pose.t_s - before.t_s > pose.quiet_s + slack_s:
+        before = None
+    if after is not None and after.t_s - pose.t_s > slack_s:
+        after = None
+    return before, after
+
+
+def _since_sent(pose_sent_s: FloatArray, t_s: float) -> float:
+    """Seconds from the latest pose frame sent before ``t_s`` (inf: none)."""
+    k = int(np.searchsorted(pose_sent_s, t_s)) - 1
+    return t_s - float(pose_sent_s[k]) if k >= 0 else math.inf
+
+
+def heard_all(enc: Encoders, before: Pair, after: Pair) -> bool:
+    """Whether the log holds every encoder frame from ``before``'s to ``after``'s, on time (no
+    sender sequence number skipped, none a cycle and a half late): the firmware was silent while
+    the frames went on (a stall), not the logger (a gap of the log, its own rules)."""
+    if before.enc < 0 or after.enc <= before.enc or enc.cycle_s is None:
+        return False
+    span = slice(before.enc, after.enc + 1)
+    return bool(np.all(np.diff(enc.seq[span]) == 1)
+                and np.all(np.diff(enc.timestamp_s[span]) < 1.5 * enc.cycle_s))
+
+
+def _best(pose: Pair, neighbours: tuple[Pair | None, Pair | None], enc: Encoders,
+          robot: tuple[Geometry, str, int], tolerance: tuple[float, float]
+          ) -> tuple[float, float] | None:
+    """The smallest (position, heading) excess of ``pose`` over its candidates (module
+    docstring), None without one."""
+    best: tuple[float, float] | None = None
+    for near, forward in zip(neighbours, (True, False), strict=True):
+        if near is None or near.enc < 0:
+            continue
+        lo, hi = (near.enc, near.enc + NEAR_FRAMES) if forward else (
+            near.enc - NEAR_FRAMES, near.enc)
+        for c in range(max(lo, 0), min(hi, len(enc.index) - 1) + 1):
+            if int(enc.counter[c]) != pose.named:
+                continue
+            got = _excess(pose, near, c, enc, robot, tolerance)
+            if best is None or max(got[0], got[1] * 1e3) < max(best[0], best[1] * 1e3):
+                best = got
+    return best
+
+
+def _excess(pose: Pair, near: Pair, c: int, enc: Encoders, robot: tuple[Geometry, str, int],
+            tolerance: tuple[float, float]) -> tuple[float, float]:
+    """``carried_excess`` of ``pose`` from neighbour ``near`` to frame ``c`` of ``enc``."""
+    a, b = min(near.enc, c), max(near.enc, c)
+    return carried_excess(pose, near, (enc.left[a:b + 1], enc.right[a:b + 1]), c > near.enc,
+                          robot, tolerance)
+
+
+def carried_excess(pose: Pair, near: Pair, counts: tuple[np.ndarray, np.ndarray],
+                   forward: bool, robot: tuple[Geometry, str, int],
+                   tolerance: tuple[float, float]) -> tuple[float, float]:
+    """How far ``pose`` lies beyond the pose of neighbour ``near`` carried over the count steps
+    to a candidate frame (position beyond tolerance + merge allowance, heading beyond
+    tolerance): ``counts`` the wire counts (left, right) of the frames from the earlier of the
+    two to the later, ``forward``: the candidate is the later (``robot``: geometry,
+    integrator, wire counter bits)."""
+    geometry, integrator, bits = robot
+    left, right = (np.asarray(v, dtype=np.int64) for v in counts)
+    steps = OneSteps.of_deltas(wrap_delta(np.diff(left), bits), wrap_delta(np.diff(right), bits),
+                               geometry, integrator)
+    sign = 1.0 if forward else -1.0  # carried from the first frame to the last, or back
+    e = 0 if forward else len(left) - 1
+    turn = near.heading_rad - float(steps.heading[e])  # the firmware's heading frame
+    dx, dy = sign * float(steps.cum_x[-1]), sign * float(steps.cum_y[-1])
+    x = near.x_m + dx * math.cos(turn) - dy * math.sin(turn)
+    y = near.y_m + dx * math.sin(turn) + dy * math.cos(turn)
+    heading = float(steps.heading[len(left) - 1 - e]) + turn
+    allowed = merge_allowance_m(left, right, geometry, bits, integrator)
+    # the neighbour is rounded to the wire's LSBs too (the tolerance covers the pose's own):
+    # its rounding box and its heading's half LSB over the carried way (kobuki, a 1 s stall:
+    # a correct firmware FAILed 0.00097 mm beyond without them)
+    rounding_m = math.sqrt(2) * 0.5 * POSITION_LSB_M + 0.5 * HEADING_LSB_RAD * math.hypot(dx, dy)
+    return (math.hypot(pose.x_m - x, pose.y_m - y) - tolerance[0] - allowed - rounding_m,
+            abs(pose.heading_rad - heading) - tolerance[1] - 0.5 * HEADING_LSB_RAD)
+
+
+def merged_first(parts: list[dict[str, object] | None]) -> dict[str, object]:
+    """One ``FirstVerdict.as_dict`` of several lives' (``reboots.merge``): counts summed, the
+    worst life's excess (a failed one first)."""
+    given = [p for p in parts if p]
+    if not given:
+        return FirstVerdict().as_dict()
+    worst = max(given, key=lambda p: (not p["passed"], p["max_position_beyond_m"] is not None))
+    out = dict(worst)
+    for key in ("judged", "unjudged", "resumes"):
+        out[key] = sum(int(p.get(key) or 0) for p in given)  # type: ignore[call-overload]
+    return out
