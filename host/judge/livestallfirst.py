@@ -164,10 +164,14 @@ class LiveFirst:
         """A reboot or an applied set-pose: the pose before it vouches for nothing after, and
         a pose waiting for its next is judged by neither (the next is in the new frame: a
         staged APPLY taken just after a stall FAILed a correct firmware 2.72 mm,
-        test_cut_reprime_latched): counted unjudged."""
+        test_cut_reprime_latched): counted unjudged. The new life's first pose is not this
+        rule's, as offline (``stallfirst.judge_left_out`` from a life's second pose): a reset
+        halted before its first pose names a backlog frame beyond the window, whose alias the
+        next pose carried back to said POSE WRONG 3839 mrad (test_reset_then_halt)."""
         self._before = None
         self.verdict.unjudged += len(self._waiting)
         self._waiting = []
+        self._last_t_s = None  # a life's first pose is the reboot rules' (stallfirst: from 1)
 
     def _backward(self, pose: Pair, near: Pair) -> tuple[float, float] | None:
         if near.enc < 0:
