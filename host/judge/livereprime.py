@@ -19,7 +19,9 @@ the next on-board pose (``livedark.DarkRestarts.owe``, as at a step near the thr
 ``livenewstart`` fits its start over a second of samples), told by an event with
 ``stallreprime.detail``; the firmware's own DEGRADED state shows. Not declared (or no word in
 time): the samples held are judged as they would have been, by the stall's position placement,
-the heading exact.
+the heading exact. The stall's first pose may name no frame (its backlog's ENC_COUNTER beyond
+the window's age bound): no sample then, and the next one, a hold's, not a silence's, is the
+first held (``unnamed_first``).
 
 A declared re-prime is held to where the frames the firmware took put it, as ``analyze``
 holds it (``reprimereplay``): its pose before the stall (its last sample compared, or the
@@ -56,6 +58,8 @@ import itertools
 import math
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
+
 from odocan.host.judge.livefloodnames import beyond_why
 from odocan.host.judge.livepose import FramePose
 from odocan.host.judge.livereprimecount import (
@@ -66,11 +70,11 @@ from odocan.host.judge.livereprimecount import (
     primed_detail,
 )
 from odocan.host.judge.livestart import start_reference
-from odocan.host.judge.livewindow import CYCLE_S, window_counts
+from odocan.host.judge.livewindow import CYCLE_S, silent_since, window_counts
 from odocan.host.judge.nearthreshold import AFTER_PERIODS, COUNTER_RESET_BIT, SUMMARY_PAGE
 from odocan.host.judge.primedon import PRIMED_KIND
 from odocan.host.judge.reprimereplay import Odometry, QuietFrames
-from odocan.host.judge.samples import POSITION_LSB_M
+from odocan.host.judge.samples import POSITION_LSB_M, SILENCE_CYCLES
 from odocan.host.judge.stallreprime import FIFO_SPAN, R_SPAN, certain, detail, possible
 
 if TYPE_CHECKING:
@@ -186,6 +190,34 @@ class ReprimeHold:
             self._primed = anchor is not None and (last is None or anchor is not last[0])
             self._frozen = self.quiet.frozen
             self._power_up = self._tracker.raw.odometry is None  # its origin told at release
+
+    def unnamed_first(self, pose: FramePose, y: Half, queued: bool, last_s: float | None
+                      ) -> bool:
+        """Whether the sample ``pose`` (its ODOM_POSE_Y half ``y``; the sample before it sent
+        at ``last_s``), not left out by the stall rule (no silence just before it, a hold), is
+        held as the first sample after a long stall (``stalled``, ``holds``): so when the
+        firmware was silent from ``last_s`` to a pose it sent before this one that named no
+        frame (its backlog's, whose ENC_COUNTER the window's age bound leaves unresolved:
+        ``livehalves`` drops it, as ``analyze`` leaves it unmatched). That pose was the
+        stall's first; this sample is the first kept, as after a first sample left out (issue
+        #11: a correct kobuki through a 3 s stall, re-primed by its word, was judged with the
+        exact heading, POSE WRONG by 1104.7 mm / 1481.7 mrad, pmir through 3.8, 4.1, 4.3 s
+        by up to 1339 mm, where ``analyze`` re-primed with it and PASSed)."""
+        if (last_s is None or self._from_s != math.inf
+                or y.t_s - last_s < (SILENCE_CYCLES - 0.5) * CYCLE_S):  # (the common case)
+            return False
+        tracker = self._tracker
+        ys = tracker.pairs.halves["y"]
+        sent = ys.col("t_s")
+        k = int(np.searchsorted(sent, last_s, side="right"))
+        if k >= len(sent) or float(sent[k]) >= y.t_s:  # no pose sent between: not this case
+            return False
+        first_s = float(sent[k])  # the stall's first pose, unnamed
+        if not silent_since(last_s, first_s, ys, tracker.window):
+            return False
+        self.stalled(pose.seq, first_s, tracker.first.talked_before(first_s),
+                     tracker.raw.gate.least)
+        return self.holds(pose, y, queued)
 
     def _anchored(self) -> FramePose | None:
         """Where the firmware was before the stall, on its frame: its last sample compared, or

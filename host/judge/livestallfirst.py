@@ -152,8 +152,10 @@ class LiveFirst:
         from that frame on (a staged APPLY taken just after a stall, re-primed after it, was
         POSE WRONG 2.72 mm: test_cut_reprime_latched); each taken once."""
         for event in events:
+            if event["kind"] != "stall_reprime":  # (a set-pose's encoder_frame may be None)
+                continue
             key = (float(event["t_s"]), int(event.get("encoder_frame", -1)))
-            if event["kind"] == "stall_reprime" and key not in self._reprimes:
+            if key not in self._reprimes:
                 self._reprimes.add(key)
                 self.withdraw_from(key[0] - self._cycle_s)
 

@@ -285,13 +285,15 @@ class PoseTracker:
             return None
         if self.reprime.holds(pose, y, queued):  # the firmware's word after a long stall
             return None
-        started = self.raw.odometry is not None
-        if (self.stall.last_t_s is None and left_out_first(self, pose, y.t_s, queued)) or (
+        started, last_s = self.raw.odometry is not None, self.stall.last_t_s  # (before it)
+        if (last_s is None and left_out_first(self, pose, y.t_s, queued)) or (
                 self._left_out(pose.seq, y.t_s, queued, started)):  # livefirst, livestall
             if self.raw.odometry is not None or not self.reference_starts:  # (power-up too)
                 self.reprime.stalled(pose.seq, y.t_s, self.first.talked_before(y.t_s),
                                      self.raw.gate.least)
             return None
+        if started and self.reprime.unnamed_first(pose, y, queued, last_s):
+            return None  # the first kept after a long stall whose first named no frame
         lives = self.lives  # a life's start (a boot's frame, the integrator): livestart
         if (not started or lives.boot is not None) and lives.waits(pose, self.now_s):
             return None
