@@ -29,7 +29,7 @@ from odocan.host.judge.samples import (
     encoder_frames,
     onboard_samples,
 )
-from odocan.host.judge.stalls import after_stalls
+from odocan.host.judge.stalls import after_stalls, pose_sent_times
 from odocan.host.judge.stream_life import placed_chunks
 from odocan.host.judge.stream_place import (
     PlacedChunk,
@@ -58,8 +58,7 @@ def placement_inputs(
     _, accepted = check_frames(frames, db)
     enc = encoder_frames(frames, accepted, decoder)
     onboard, _, sent = onboard_samples(frames, accepted, decoder, enc)
-    pose_y = decoder.select(frames, "ODOM_POSE_Y")
-    pose_sent = frames.timestamp_s[pose_y[accepted[pose_y]]]
+    pose_sent = pose_sent_times(frames, accepted, decoder)  # CRC-right refused ones too
     onboard, breaks = after_stalls(onboard, sent, enc, pose_sent)
     e0 = int(onboard.enc[0])
     geometry = Geometry.of(robot)
