@@ -168,6 +168,8 @@ def judge_left_out(
     for i in range(1, len(pairs)):  # a burst's pose was held back by the bus: no stall
         if is_kept[i] or pairs[i].queued or pairs[i].quiet_s < quiet:
             continue
+        if not heard_through(enc, pairs[i].t_s - pairs[i].quiet_s, pairs[i].t_s):
+            continue  # the logger was deaf too (a gap of the log): not a stall, its own rules
         before = next((pairs[j] for j in range(i - 1, -1, -1) if is_kept[j]), None)
         after = next((pairs[j] for j in range(i + 1, len(pairs)) if is_kept[j]), None)
         before, after = _near(pairs[i], before, after, enc.cycle_s)
@@ -217,6 +219,20 @@ def heard_all(enc: Encoders, before: Pair, after: Pair) -> bool:
     span = slice(before.enc, after.enc + 1)
     return bool(np.all(np.diff(enc.seq[span]) == 1)
                 and np.all(np.diff(enc.timestamp_s[span]) < 1.5 * enc.cycle_s))
+
+
+def heard_through(enc: Encoders, t0_s: float, t1_s: float) -> bool:
+    """Whether the log holds the encoder frames from bus time ``t0_s`` to ``t1_s`` one by one
+    (no sender sequence number skipped, none more than a cycle and a half after the one before
+    or the span's ends): the firmware was silent while the logger heard on. A recorder that
+    lost 6.8 s of everything (``tests/files/recorder_gap16_pmir.blf``) made a silence whose
+    first pose the neighbours' rule judged across the gap: a correct firmware FAILed 274.4 mm."""
+    if enc.cycle_s is None:
+        return False
+    lo, hi = np.searchsorted(enc.timestamp_s, [t0_s, t1_s], side="right")
+    times = np.r_[t0_s, enc.timestamp_s[lo:hi], t1_s]
+    return bool(np.all(np.diff(enc.seq[lo:hi]) == 1)
+                and np.all(np.diff(times) < 1.5 * enc.cycle_s))
 
 
 def _best(pose: Pair, neighbours: tuple[Pair | None, Pair | None], enc: Encoders,
