@@ -26,7 +26,14 @@ from odocan.host.judge.breaks import MAX_MERGE_FRAMES
 from odocan.host.judge.reference import Geometry
 from odocan.host.judge.samples import HEADING_LSB_RAD, POSITION_LSB_M, SILENCE_CYCLES
 from odocan.host.judge.senderseq import QUEUED_GAP_CYCLES
-from odocan.host.judge.stallfirst import NEAR_FRAMES, FirstVerdict, Pair, carried_excess
+from odocan.host.judge.stallfirst import (
+    NEAR_FRAMES,
+    FirstVerdict,
+    Pair,
+    better,
+    carried_excess,
+    decided,
+)
 from odocan.host.judge.stallresume import resume_excess
 
 if TYPE_CHECKING:
@@ -194,22 +201,19 @@ class LiveFirst:
             if frame[1] != pose.named:
                 continue
             span = slice(0, k + 1) if forward else slice(k, len(frames))
-            got = carried_excess(pose, near, (left[span], right[span]), forward, robot,
-                                 self._tolerance)
-            if best is None or max(got[0], got[1] * 1e3) < max(best[0], best[1] * 1e3):
-                best = got
+            best = better(best, carried_excess(pose, near, (left[span], right[span]), forward,
+                                               robot, self._tolerance))
         return best
 
     def _judged(self, pose: Pair, forward: tuple[float, float] | None,
                 backward: tuple[float, float] | None) -> None:
-        got = [g for g in (forward, backward) if g is not None]
         self._mark(pose.t_s)
         verdict = self.verdict
-        if not got:
+        best = decided(forward, backward)  # beyond on one side alone: not judged
+        if best is None:
             verdict.unjudged += 1
             return
         verdict.judged += 1
-        best = min(got, key=lambda g: max(g[0], g[1] * 1e3))
         if best[0] > verdict.worst_position_m or best[1] > verdict.worst_heading_rad:
             verdict.worst_at_s = pose.t_s
         verdict.worst_position_m = max(verdict.worst_position_m, best[0])

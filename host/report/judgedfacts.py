@@ -37,7 +37,8 @@ def _first_said(report: dict[str, Any]) -> str:
                  f"{first['max_resume_beyond_m'] * 1e3:.4g} mm beyond any the firmware can "
                  "resume at from its pose before the stall (a jump, no placement)")
     if first.get("unjudged"):
-        said += f", {first['unjudged']} not judged (no neighbour names a frame it may name)"
+        said += (f", {first['unjudged']} not judged (no neighbour names a frame it may name, "
+                 "or only one side's does)")
     return said
 
 
