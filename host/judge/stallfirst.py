@@ -37,6 +37,7 @@ from odocan.host.judge.samples import (
     SILENCE_CYCLES,
     Encoders,
     FloatArray,
+    IntArray,
     PoseHalves,
     Poses,
 )
@@ -217,8 +218,7 @@ def heard_all(enc: Encoders, before: Pair, after: Pair) -> bool:
     if before.enc < 0 or after.enc <= before.enc or enc.cycle_s is None:
         return False
     span = slice(before.enc, after.enc + 1)
-    return bool(np.all(np.diff(enc.seq[span]) == 1)
-                and np.all(np.diff(enc.timestamp_s[span]) < 1.5 * enc.cycle_s))
+    return _one_by_one(enc.seq[span], enc.timestamp_s[span], enc.cycle_s)
 
 
 def heard_through(enc: Encoders, t0_s: float, t1_s: float) -> bool:
@@ -230,9 +230,12 @@ def heard_through(enc: Encoders, t0_s: float, t1_s: float) -> bool:
     if enc.cycle_s is None:
         return False
     lo, hi = np.searchsorted(enc.timestamp_s, [t0_s, t1_s], side="right")
-    times = np.r_[t0_s, enc.timestamp_s[lo:hi], t1_s]
-    return bool(np.all(np.diff(enc.seq[lo:hi]) == 1)
-                and np.all(np.diff(times) < 1.5 * enc.cycle_s))
+    return _one_by_one(enc.seq[lo:hi], np.r_[t0_s, enc.timestamp_s[lo:hi], t1_s], enc.cycle_s)
+
+
+def _one_by_one(seq: IntArray, times_s: FloatArray, cycle_s: float) -> bool:
+    """No sequence number skipped in ``seq``, no step of ``times_s`` a cycle and a half long."""
+    return bool(np.all(np.diff(seq) == 1) and np.all(np.diff(times_s) < 1.5 * cycle_s))
 
 
 def _best(pose: Pair, neighbours: tuple[Pair | None, Pair | None], enc: Encoders,
