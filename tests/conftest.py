@@ -5,6 +5,12 @@ plan in a temporary ``ODOCAN_CACHE_DIR`` (never the user's ``~/.cache/odocan``).
 the levels and handlers of odocan's and the libraries' loggers for the life of a CLI process; in a
 test session that would leak into later tests' stderr.
 
+The session runs with Ctrl-C as a terminal gives it: a shell that starts pytest as a background
+job without job control (``cmd &`` in a script, ``nohup``) starts it with SIGINT ignored, which
+every process it starts inherits across ``exec``; the interpreter then installs no SIGINT handler,
+and a SIGINT before odocan installs its own was ignored: ``test_early_sigint``'s 0-50 ms cases
+ran their hour-long drive to the end, exit 0 (a full run launched that way, five false failures).
+
 Under ``CI`` (set by the CI runner) hypothesis draws are derandomized: a CI verdict must not
 depend on the luck of a draw; local runs keep exploring (what they find becomes an ``@example``).
 """
@@ -13,6 +19,7 @@ from __future__ import annotations
 
 import logging
 import os
+import signal
 from collections.abc import Iterator
 
 import pytest
@@ -24,6 +31,17 @@ from odocan.host.protocol.dbcplan import CACHE_ENV
 settings.register_profile("ci", derandomize=True)
 if os.environ.get("CI"):
     settings.load_profile("ci")
+
+
+@pytest.fixture(autouse=True, scope="session")
+def _ctrl_c_as_a_terminal_gives_it() -> Iterator[None]:
+    """SIGINT handled (so reset to its default in the processes the tests start), as when a
+    terminal starts pytest; restored at the end."""
+    inherited = signal.getsignal(signal.SIGINT)
+    if inherited == signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, inherited)
 
 
 @pytest.fixture(autouse=True, scope="session")
