@@ -208,16 +208,8 @@ class LiveFirst:
     def _judged(self, pose: Pair, forward: tuple[float, float] | None,
                 backward: tuple[float, float] | None) -> None:
         self._mark(pose.t_s)
-        verdict = self.verdict
-        best = decided(forward, backward)  # beyond on one side alone: not judged
-        if best is None:
-            verdict.unjudged += 1
-            return
-        verdict.judged += 1
-        if best[0] > verdict.worst_position_m or best[1] > verdict.worst_heading_rad:
-            verdict.worst_at_s = pose.t_s
-        verdict.worst_position_m = max(verdict.worst_position_m, best[0])
-        verdict.worst_heading_rad = max(verdict.worst_heading_rad, best[1])
+        # beyond on one side alone: not judged (``decided``)
+        self.verdict.judge(pose.t_s, decided(forward, backward))
 
     def wrong(self) -> list[str]:
         """Why the monitor says POSE WRONG for this rule (empty: it does not)."""

@@ -80,6 +80,18 @@ class FirstVerdict:
         return (self.worst_position_m <= 0.0 and self.worst_heading_rad <= 0.0
                 and self.worst_resume_m <= 0.0)
 
+    def judge(self, t_s: float, excess: tuple[float, float] | None) -> None:
+        """Count the pose sent at ``t_s``: not judged (``excess`` None), or judged with its
+        (position m, heading rad) ``excess`` beyond the tolerance, the worst kept."""
+        if excess is None:
+            self.unjudged += 1
+            return
+        self.judged += 1
+        if excess[0] > self.worst_position_m or excess[1] > self.worst_heading_rad:
+            self.worst_at_s = t_s
+        self.worst_position_m = max(self.worst_position_m, excess[0])
+        self.worst_heading_rad = max(self.worst_heading_rad, excess[1])
+
     def resumed(self, t_s: float, excess_m: float | None) -> None:
         """``stallresume.resume_excess`` of the sample after a silence sent at ``t_s``."""
         if excess_m is None:
@@ -238,14 +250,7 @@ def _judge_one(verdict: FirstVerdict, pose: Pair, neighbours: tuple[Pair | None,
         verdict.resumed(after.t_s, resume_excess(
             (before.x_m, before.y_m, before.heading_rad), (after.x_m, after.y_m),
             (enc.left[span], enc.right[span]), robot, tolerance[0]))
-    if excess is None:
-        verdict.unjudged += 1
-        return
-    verdict.judged += 1
-    if excess[0] > verdict.worst_position_m or excess[1] > verdict.worst_heading_rad:
-        verdict.worst_at_s = pose.t_s
-    verdict.worst_position_m = max(verdict.worst_position_m, excess[0])
-    verdict.worst_heading_rad = max(verdict.worst_heading_rad, excess[1])
+    verdict.judge(pose.t_s, excess)
 
 
 def _near(pose: Pair, before: Pair | None, after: Pair | None, cycle_s: float
