@@ -15,6 +15,7 @@ from __future__ import annotations
 import random
 from pathlib import Path
 
+import can
 import numpy as np
 import pytest
 
@@ -22,10 +23,13 @@ from odocan.firmware import encoders as fw_encoders
 from odocan.firmware.e2e import E2EStatus
 from odocan.host.cli.app import main
 from odocan.host.io.logs import read_log
+from odocan.host.judge.analysis import HEADING_LSB_RAD, POSITION_LSB_M
+from odocan.host.judge.monitor import BusMonitor
 from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.protocol.decode import frame_keys
 from odocan.host.protocol.e2e import check_frames, e2e_messages
 from odocan.host.protocol.e2e_evidence import heard_in_order
+from odocan.sim.robot import load
 
 TAKEN = (E2EStatus.OK, E2EStatus.OKSOMELOST)
 
@@ -63,6 +67,24 @@ def test_the_host_takes_the_encoder_frames_the_firmware_took(
     wrong = [(round(float(frames.timestamp_s[i]), 4), int(frames.data[i, 1]) & 15)
              for i, took in zip(at.tolist(), firmware, strict=True) if bool(accepted[i]) != took]
     assert wrong == []
+
+
+def test_the_live_judge_passes_it_too(tmp_path: Path,
+                                      capsys: pytest.CaptureFixture[str]) -> None:
+    """The monitor model (live): its pose vs its reference within one LSB each (it was 124 mm
+    and 183 mrad off the correct firmware; the whole and streamed judges:
+    ``tests/test_combo_faults.py``)."""
+    log = tmp_path / "drive.log"
+    main(["run", "--robot", "kobuki", "--duration", "4", "--seed", "703", "--faults",
+          "delay=0.5:150", "--firmware", "python", "--log", str(log)])
+    capsys.readouterr()
+    monitor = BusMonitor(load("kobuki"))
+    with can.LogReader(log) as reader:
+        for msg in reader:
+            monitor.feed(msg, now_s=msg.timestamp)
+    ref = monitor.tracker.vs_reference
+    assert ref.max_dpos_m <= POSITION_LSB_M
+    assert ref.max_dheading_rad <= HEADING_LSB_RAD
 
 
 def test_heard_in_order_against_the_sends() -> None:
