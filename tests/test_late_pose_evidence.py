@@ -51,7 +51,10 @@ def _firmware_verdicts(log: Path, seed: int, faults: str) -> list[bool]:
     return verdicts
 
 
-@pytest.mark.parametrize(("seed", "faults"), [(703, "delay=0.5:150")])
+# 703: the drive above; 1 to 6: the sweep (their FAILs left are the placements',
+# tests/test_combo_faults.py)
+@pytest.mark.parametrize(("seed", "faults"), [(703, "delay=0.5:150"), *(
+    (seed, "delay=0.5:150") for seed in range(1, 7)), (6, "delay=0.5:100")])
 def test_the_host_takes_the_encoder_frames_the_firmware_took(
         seed: int, faults: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     log = tmp_path / "drive.log"
