@@ -28,7 +28,7 @@ from odocan.host.judge.monitor import BusMonitor
 from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.protocol.decode import frame_keys
 from odocan.host.protocol.e2e import check_frames, e2e_messages
-from odocan.host.protocol.e2e_evidence import heard_in_order
+from odocan.host.protocol.e2e_evidence import heard_in_order, sent_times
 from odocan.sim.robot import load
 
 TAKEN = (E2EStatus.OK, E2EStatus.OKSOMELOST)
@@ -98,15 +98,19 @@ def test_heard_in_order_against_the_sends() -> None:
     period = 0.02
     sends = [(k * period + rng.choice((0.0, 0.0, 0.015, 0.15)), k) for k in range(400)]
     heard = sorted(sends)  # bus order: by the time each frame came (no two alike)
-    top, expected = -1, []
-    for _, k in heard:
+    top, expected, expected_s = -1, [], []
+    for t, k in heard:
         expected.append(k > top)
-        top = max(top, k)
+        if k > top:
+            top, top_late = k, t - k * period
+        # a late one: sent k * period, taken as sent as late as the latest-sent heard before
+        expected_s.append(t if k == top else k * period + top_late)
     stamps = np.array([t for t, _ in heard])
     counters = np.array([k % 16 for _, k in heard], dtype=np.int64)
     got = heard_in_order(stamps, counters, period)
     assert got == expected
     assert 50 < expected.count(False) < 250  # the late ones: the test sees some of each
+    assert sent_times(stamps, counters, period)[1] == pytest.approx(expected_s, abs=1e-9)
 
 
 def test_a_repeat_is_not_in_order() -> None:
