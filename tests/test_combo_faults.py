@@ -40,7 +40,11 @@ JUDGE_WRONG = ("issue #11: the judge's model of the frames the firmware took und
                "reference is off the correct firmware by ")
 # measured after the stall/hold/gap-fill fixes (offline analyze, seed 703; main alike in heading)
 OFF: dict[str | tuple[int, str], str] = {
-    "delay=0.5:100,busoff=1:1": "32 mm, 102 mrad, distance 673 mm",
+    "delay=0.5:100,busoff=1:1": "32 mm, 102 mrad, distance 673 mm (seed 703: the firmware "
+    "checked the encoder frames heard at 1.04, 1.06, 1.09 s only at its tick of 2.02 s, after the "
+    "bus-off: its window 15 took COUNTER 14 then was 0, so it refused 11 at 2.03 s, 13 at 2.05 s "
+    "(WRONGSEQUENCE) and 14 at 2.06 s (REPEATED); the host's window, opened by bus time from "
+    "1.04 s, took all three)",
     "delay=0.3:55,dup=0.1,busoff=1.2:0.8,reboot=2.5": "52 mm, 31 mrad, distance 542 mm",
     "delay=0.3:55,busoff=1:1": "40 mm, 74 mrad",
     "delay=0.3:55,dup=0.1,busoff=1:1": "45 mm, 78 mrad, distance 570 mm",
