@@ -23,6 +23,15 @@ Where they differ, the firmware's poses do:
 * **skipped**: a frame on the bus before that previous send (so in the firmware's mailbox
   before this pose's tick) and after the frame this pose names was refused.
 
+Both read the previous send's place on the bus as the time it was sent: a pose frame held back
+on the bus (a ``delay`` fault) is no bound. One heard after a frame of its message sent later
+(``heard_in_order``) is known late: the encoder frames heard before the time it was sent bound
+instead (``sent_times``; issue #11, rule 5: on kobuki, seed 703,
+``delay=0.5:150``, two ODOM_POSE_X sent at 0.361 and 0.421 s, both heard 150 ms late, made the
+on-time WHEEL_ENCODERS COUNTER 7 at 0.55 s "taken", named by the second, which named the 7 at
+0.39 s; the firmware had refused it, its window 0 after the late 8, and the reference, which
+integrated it, was 209 mm / 183 mrad off a correct firmware).
+
 Neither: the strict reading stands (its verdict is exact on a capture whose stamps are the
 bus's, e.g. the lockstep rig's logs, where a firmware locked out by a late frame refuses the
 frames on time after it).
@@ -46,7 +55,7 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
-from odocan.host.protocol.busfacts import ENC_COUNTER_MASK
+from odocan.host.protocol.busfacts import ENC_COUNTER_MASK, POSE_PERIOD_S
 from odocan.host.protocol.e2e_cycles import new_cycles
 from odocan.host.protocol.e2e_periods import (
     COUNTER_MODULO,
@@ -137,14 +146,16 @@ def pose_evidence(frames: FrameArrays, enc_pos: npt.NDArray[np.intp],
         counter = (frames.data[at, 1] & ENC_COUNTER_MASK).astype(np.int64)
         named = (frames.data[at, 1] >> 4).astype(np.int64)
         before = np.searchsorted(enc_pos[good], at)  # good encoder frames before each pose
+        since = _sent_places(frames.timestamp_s[at], counter, before,
+                             frames.timestamp_s[enc_pos[good]])
         found: int | None = None  # the place in ``good`` of the frame the last send named
         for k in range(1, len(at)):
             later = 0 < (counter[k] - counter[k - 1]) & ENC_COUNTER_MASK < COUNTER_MODULO // 2
-            if not later or before[k] - before[k - 1] > NEAR_FRAMES:
+            if not later or before[k] - since[k - 1] > NEAR_FRAMES:
                 found = None  # a send again or a long silence: no proof until the next pair
                 continue
             if named[k] != named[k - 1]:  # moved on: its only frame of that COUNTER since
-                found = _only_named(enc_counter, good, int(before[k - 1]) - RACE_FRAMES,
+                found = _only_named(enc_counter, good, since[k - 1] - RACE_FRAMES,
                                     int(before[k]), int(named[k]))
             elif found is not None and _only_named(enc_counter, good, found, int(before[k]),
                                                    int(named[k])) != found:
@@ -152,8 +163,60 @@ def pose_evidence(frames: FrameArrays, enc_pos: npt.NDArray[np.intp],
             if found is None:
                 continue
             taken.add(int(good[found]))
-            skipped.update(good[found + 1 : int(before[k - 1])].tolist())
+            skipped.update(good[found + 1 : since[k - 1]].tolist())
     return Evidence(frozenset(taken), frozenset(skipped - taken))
+
+
+def _sent_places(timestamp_s: npt.NDArray[np.float64], counter: IntArray,
+                 before: IntArray, enc_s: npt.NDArray[np.float64]) -> list[int]:
+    """Per pose frame (bus times ``timestamp_s``, COUNTERs ``counter``, ``before`` the good
+    encoder frames before each on the bus, ``enc_s`` their bus times): the good encoder frames
+    before it was sent. Its place on the bus when heard in order (``heard_in_order``), else
+    those heard before the time it was sent, ``sent_times``' (a pose frame held back on the
+    bus: its place is no bound)."""
+    in_order, sent_s = sent_times(timestamp_s, counter, POSE_PERIOD_S)
+    places: list[int] = before.tolist()
+    for k, ordered in enumerate(in_order):
+        if not ordered:
+            places[k] = min(places[k], int(np.searchsorted(enc_s, sent_s[k], side="right")))
+    return places
+
+
+def heard_in_order(timestamp_s: npt.NDArray[np.float64], counter: IntArray,
+                   period_s: float) -> list[bool]:
+    """``sent_times``' first list."""
+    return sent_times(timestamp_s, counter, period_s)[0]
+
+
+def sent_times(timestamp_s: npt.NDArray[np.float64], counter: IntArray,
+               period_s: float) -> tuple[list[bool], list[float]]:
+    """Whether each frame of one periodic sender (bus order; ``counter``: its E2E COUNTERs,
+    ``period_s`` its send period) was sent after every frame of it heard before it: False for
+    a frame held back on the bus behind a later send (``pose_evidence``). The sends between it
+    and the latest-sent frame heard so far: the integer congruent to their COUNTER step mod 16
+    nearest their stamps' gap in periods (exact while a frame comes less than 8 periods late,
+    as ``e2e_periods.receive_periods``, and while a recorder that bunched the stamps shortened
+    no gap by 8 periods: a frame taken late for that only proves nothing). A frame late behind
+    sends that were all late too, or lost, is not told: it counts as in order, as before.
+    The second list: when each was sent, its bus time if in order, else that of the latest
+    sent before it heard, less the sends between (that one taken as heard when sent)."""
+    ordered: list[bool] = []
+    sent: list[float] = []
+    top_counter, top_s = -1, 0.0  # the latest-sent frame heard so far (-1: none yet)
+    for t_s, c in zip(timestamp_s.tolist(), counter.tolist(), strict=True):
+        if top_counter >= 0:
+            step = (c - top_counter) & ENC_COUNTER_MASK
+            x = (t_s - top_s) / period_s
+            sends = step + COUNTER_MODULO * math.floor((x - step + COUNTER_MODULO // 2)
+                                                       / COUNTER_MODULO)
+            if not sends > 0:  # sent before (or a repeat of) a frame already heard: late
+                ordered.append(False)
+                sent.append(min(t_s, top_s + sends * period_s))
+                continue
+        ordered.append(True)
+        sent.append(t_s)
+        top_counter, top_s = c, t_s
+    return ordered, sent
 
 
 def _only_named(enc_counter: IntArray, good: npt.NDArray[np.intp], lo: int, hi: int,
