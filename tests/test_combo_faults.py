@@ -50,7 +50,13 @@ OFF: dict[str | tuple[int, str], str] = {
     "delay=0.3:55,dup=0.1,busoff=1:1": "45 mm, 78 mrad, distance 570 mm",
     # a stall under a delaying bus (the lead's sweep after the merges; main 483b364a alike)
     "delay=0.5:100,stall=2:1": "40.2 mm, 67.1 mrad (seed 703)",
-    "stall=1.5:0.5,delay=0.3:55": "0.05 mm, 3.75 mrad (seed 2)",
+    "stall=1.5:0.5,delay=0.3:55": (
+        "0.05 mm, 3.75 mrad (seed 2): the firmware's mailbox, full in the 0.5 s stall, dropped "
+        "the on-time encoder frames up to 2.0 s (after the stall it took a backlog COUNTER 0, "
+        "then the late 3 at 2.005 s and 5 at 2.025 s); the host took the on-time 7 and 8 "
+        "(CTRL_UPTIME 3) at 1.99-2.0 s, so the late 5 (CTRL_UPTIME 2) after them reads as a "
+        "controller restart: the reference re-primes there (the firmware reports no "
+        "COUNTER_RESET), 10 counts of heading short"),
     # delay=0.5:150 on seeds 2-6, delay=0.5:100 on seed 6 (found after the late-pose fix; main
     # alike): the host's E2E takes exactly the encoder frames the firmware took (checked frame by
     # frame against its receiver's statuses), so the rest is the reference's placements
