@@ -136,8 +136,8 @@ class _Pairs:
     """The poses as sent (``Pair``), made on demand by their ODOM_POSE_X's index: each X with the
     ODOM_POSE_Y nearest it in time, within an encoder cycle (``cycle_s``), that names the same
     ENC_COUNTER (an X without one is no pose: None). Few poses come after a silence, so the
-    rule makes only theirs and their neighbours' (making all of them was 6 of the 7.6 s an
-    hour's ``analyze`` took under cProfile, on a drive without a stall)."""
+    rule makes only theirs and the kept neighbours' it walks to (making all of them was 3.6 of
+    the 5.4 s of CPU an hour's ``analyze`` took, on a drive without a stall)."""
 
     def __init__(self, halves: PoseHalves, quiet_s: FloatArray, queued: npt.NDArray[np.bool_],
                  cycle_s: float) -> None:
