@@ -86,28 +86,22 @@ from odocan.host.judge.gapfill import (
 )
 from odocan.host.judge.holetaken import LONG_GAP_FRAMES, through_gaps
 from odocan.host.judge.nearthreshold import ResetLog, Resets
-from odocan.host.judge.pagechain import (
-    boot_breaks,
-    boot_ok,
-    chained_breaks,
-    chained_ok,
-    long_pairs,
-    quiet,
-)
-from odocan.host.judge.samples import QUEUED_GAP_CYCLES, Encoders, FloatArray, IntArray
-from odocan.host.protocol import busfacts
+from odocan.host.judge.pagechain import boot_breaks, boot_ok, long_pairs, quiet
+from odocan.host.judge.pagekeeper import LOST_PAGE as LOST_PAGE
+from odocan.host.judge.pagekeeper import TOTALS_PAGE as TOTALS_PAGE
+from odocan.host.judge.pagekeeper import Page as Page
+from odocan.host.judge.pagekeeper import PageKeeper as PageKeeper
+from odocan.host.judge.pagekeeper import StatusRows, statuses
+from odocan.host.judge.pagekeeper import Totals as Totals
+from odocan.host.judge.samples import Encoders, FloatArray, IntArray
 from odocan.host.protocol.busfacts import ENC_COUNTER_MASK
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.protocol.e2e import crc8h2f_p02, e2e_messages
 
-LOST_PAGE = busfacts.ENC_E2E_PAGE  # ODOM_STATUS page with ENC_E2E_OK and ENC_E2E_LOST
-TOTALS_PAGE = busfacts.TOTALS_PAGE  # ODOM_STATUS page with REJECTED_FRAMES and OVERFLOWED_FRAMES
 PAIR_PAGES = 8  # pages paired up to this many apart (4 s of pages: a window per pair)
 DARK_CYCLES = 3  # a log without any frame this many encoder cycles (the firmware sends a pose
 # every 2): the recorder lost frames
 Span = tuple[int, int]  # encoder frames (first, last), both included
-Status = tuple[int, int, float, bool, int, float]  # a status frame: page, COUNTER, time, CRC
-# good, encoder frames before it, the last one's time
 
 
 @dataclass(frozen=True)
@@ -249,77 +243,6 @@ def with_boot(pages: LostPages, totals: TotalsPages, first_s: float, boot_s: flo
                         np.r_[zero, totals.overflowed], np.r_[breaks, totals.breaks]))
 
 
-Page = tuple[int, float, int, int, int, float, int, int]  # lo, lo_s, hi, ENC_E2E_OK, LOST,
-# sent_s, OK unwrapped and its chain (``pagechain.chained_ok``)
-Totals = tuple[float, int, int, int]  # sent_s, REJECTED_FRAMES, OVERFLOWED_FRAMES, breaks
-
-
-@dataclass
-class PageKeeper:
-    """The pages made with their tick's summary (module docstring), kept from status frames
-    fed one at a time in bus order: the core of the whole-log, streamed and live evidence."""
-
-    cycle_s: float | None = None  # WHEEL_ENCODERS' cycle time
-    pages: list[Page] = field(default_factory=list)  # ENC_E2E pages kept, in bus order
-    totals: list[Totals] = field(default_factory=list)  # FRAME_TOTALS pages kept
-    _prev: Status | None = None  # the last status frame
-    _summary_s: float = -math.inf  # the last summary whose CRC holds: its time
-    _queued: bool = False  # and whether it came within QUEUED_GAP_CYCLES of the one before
-    _pending: list[tuple[int, tuple[int | float, ...]]] = field(default_factory=list)
-    # pages made with the last summary, kept when the next one is not close (or at the end)
-
-    def status(self, frame: Status, value: tuple[int, int] | None) -> None:
-        """One ODOM_STATUS frame (``Status``) and its page's two counts (None: not decoded)."""
-        prev, self._prev = self._prev, frame
-        if frame[0] == 0 and frame[3]:
-            self._summary(frame[2])
-        if prev is None or value is None or not self._made_in_tick(prev, frame):
-            return
-        a, b = value
-        if frame[0] == LOST_PAGE and prev[4] > 0:  # a frame before its summary: S_p known
-            self._pending.append((LOST_PAGE, (prev[4] - 1, prev[5], frame[4], a, b, frame[2])))
-        elif frame[0] == TOTALS_PAGE:
-            self._pending.append((TOTALS_PAGE, (frame[2], a, b)))
-
-    def new_life(self) -> PageKeeper:
-        """A keeper for a new firmware life whose first frame (a summary) was the last fed."""
-        keeper = PageKeeper(self.cycle_s, _prev=self._prev, _summary_s=self._summary_s)
-        return keeper
-
-    def _summary(self, sent_s: float) -> None:
-        """A summary whose CRC holds, sent at ``sent_s``: the pages pending on the one before
-        it are kept unless this one came within ``QUEUED_GAP_CYCLES`` of it (both let out in a
-        burst: ``queued_frames``); its own pages wait for the next."""
-        assert self.cycle_s is not None
-        close = sent_s - self._summary_s < QUEUED_GAP_CYCLES * self.cycle_s
-        self.keep_pending(not close)
-        self._queued = close
-        self._summary_s = sent_s
-
-    def keep_pending(self, keep: bool) -> None:
-        """The pages pending on the last summary kept (``keep``) or dropped."""
-        for kind, row in self._pending if keep else []:
-            if kind == LOST_PAGE:
-                last = self.pages[-1] if self.pages else None
-                ok_u, chain = chained_ok(None if last is None else (last[6], last[7], last[5]),
-                                         int(row[3]), float(row[5]))
-                self.pages.append((*row, ok_u, chain))  # type: ignore[arg-type]
-            else:
-                t = self.totals[-1] if self.totals else None
-                breaks = chained_breaks(None if t is None else t, float(row[0]), int(row[1]),
-                                        int(row[2]))
-                self.totals.append((*row, breaks))  # type: ignore[arg-type]
-        self._pending = []
-
-    def _made_in_tick(self, summary: Status, page: Status) -> bool:
-        """Whether ``page`` came right after its tick's ``summary`` (module docstring; the
-        summary on time so far: not within ``QUEUED_GAP_CYCLES`` of the summary before)."""
-        assert self.cycle_s is not None
-        return (summary[0] == 0 and summary[3] and not self._queued and page[3]
-                and page[0] != 0 and page[1] == (summary[1] + 1) & ENC_COUNTER_MASK
-                and page[2] - summary[2] < 0.5 * self.cycle_s)
-
-
 def seen_of(pages: list[Page], totals: list[Totals], gaps: list[tuple[int, int]],
             boot: tuple[float, float] | None = None) -> Seen:
     """``seen_by_pages`` of pages, totals and gaps (frame after, frames missing) kept as rows;
@@ -451,18 +374,18 @@ class PageEvidence:
         before = np.searchsorted(enc.index, rows + self._offset)  # enc.index: in the log
         last_s = np.where(before > 0, enc.timestamp_s[np.maximum(before - 1, 0)]
                           if len(enc.seq) else 0.0, self._last_enc_s)
-        status = [(int(p), int(c), float(t), bool(ok), self._enc_count + int(n), float(ls))
-                  for p, c, t, ok, n, ls in zip(
-                      head["PAGE"].tolist(), head["COUNTER"].tolist(),
-                      chunk.timestamp_s[rows].tolist(), crc.tolist(), before.tolist(),
-                      last_s.tolist(), strict=True)]
-        values = {int(r): (int(a), int(b)) for r, a, b in zip(
-            lost["index"], lost["ENC_E2E_OK"], lost["ENC_E2E_LOST"], strict=True)}
-        values.update({int(r): (int(a), int(b)) for r, a, b in zip(
-            totals["index"], totals["REJECTED_FRAMES"], totals["OVERFLOWED_FRAMES"],
-            strict=True)})
-        for row, frame in zip(rows.tolist(), status, strict=True):
-            self.keeper.status(frame, values.get(row))
+        counts = np.zeros((2, len(rows)), dtype=np.int64)
+        counted = np.zeros(len(rows), dtype=bool)
+        for page, names in ((lost, ("ENC_E2E_OK", "ENC_E2E_LOST")),
+                            (totals, ("REJECTED_FRAMES", "OVERFLOWED_FRAMES"))):
+            at = np.searchsorted(rows, np.asarray(page["index"], dtype=np.int64))  # status rows
+            counted[at] = True
+            for k, name in enumerate(names):
+                counts[k, at] = np.asarray(page[name]).astype(np.int64)
+        statuses(self.keeper, StatusRows(
+            np.asarray(head["PAGE"], dtype=np.int64), np.asarray(head["COUNTER"], dtype=np.int64),
+            chunk.timestamp_s[rows], crc, self._enc_count + before, last_s, counts[0], counts[1],
+            counted))
 
 
 def crc_holds(frames: FrameArrays, decoder: BulkDecoder, rows: IntArray,
