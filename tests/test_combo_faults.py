@@ -11,17 +11,21 @@ COUNTER 8, 9, 10 at 0.55 to 0.57 s and refused the on-time COUNTER 7 at 0.55 s, 
 in its one-period window, and the host took both: two ODOM_POSE_X frames heard 150 ms late were
 read as sent when heard, and the pose evidence took the 7 for the one the second named
 (``e2e_evidence.heard_in_order``, ``tests/test_late_pose_evidence.py``).
-Fixed too: the drives with a bus-off, where the log itself was wrong: frames held back by
-``delay`` whose release fell in the bus-off went on the bus at the recovery (2.0028 s) but kept
-their due time as stamp, so the log showed the encoder frames heard at 1.04 to 1.09 s that the
-firmware took only at its tick of 2.01 s (``tests/test_busoff_release.py``); with the stamps
-the bus gave them the host's E2E takes the frames the firmware took on all four (32 to 52 mm
-off before). Until the judges are fixed the other verdicts are pinned as strict xfails: a fixed
-judge turns them into XPASS, which fails the suite until the marks are removed. A pose 10 mm off
-from 2.0 s FAILs on every drive (three PASSed before: ``test_a_pose_10_mm_off_fails``) but the
-pinned ones: on the three with ``busoff=1:1`` 2.0 s is the end of the bus-off's silence, a gap
-of the log's encoder frames whose placement may absorb what the firmware could have taken in it
-(those FAILed only while the judge FAILed the untampered drive too).
+Fixed too: the drives with a bus-off, where the log itself was wrong: frames held back by ``delay``
+whose release fell in the bus-off went on the bus at the recovery (2.0028 s) but kept their due
+time as stamp, so the log showed the encoder frames heard at 1.04 to 1.09 s that the firmware took
+only at its tick of 2.01 s (``tests/test_busoff_release.py``); with the stamps the bus gave them
+the host's E2E takes the bus-off's frames as the firmware did and all four PASS (32 to 52 mm off
+before). Its verdicts still differ from the firmware's on 6 encoder frames, the delay's alone: 0.55
+to 0.60 s on ``delay=0.5:100`` (as without the bus-off) and COUNTER 7 at 3.91 s on
+``delay=0.3:55,busoff=1:1``, refused for an ODOM_POSE_Y held back 55 ms behind another held one,
+read as in order (``e2e_evidence.sent_times``) naming COUNTER 4. Until the judges are fixed the
+other verdicts are pinned as strict xfails: a fixed judge turns them into XPASS, which fails the
+suite until the marks are removed. A pose 10 mm off from 2.0 s FAILs on every drive (three PASSed
+before: ``test_a_pose_10_mm_off_fails``) but the pinned ones: on the three with ``busoff=1:1`` 2.0
+s is the end of the bus-off's silence, a gap of the log's encoder frames whose placement may absorb
+what the firmware could have taken in it (those FAILed only while the judge FAILed the untampered
+drive too).
 """
 
 from __future__ import annotations
