@@ -91,6 +91,9 @@ class BusOffEpisode:
         counters: the controller's error counters (changed in place).
         recovery_s: the time of 128 x 11 recessive bits at the bus's bitrate (s).
         on_bus_off: called with (time s, TEC) when the climb reaches bus-off.
+
+    ``recovered_at_s`` is the instant the controller left bus-off (T + DUR + the 128 x 11 bits),
+    however late ``advance_to`` learns it: frames it held meanwhile reach the bus then.
     """
 
     def __init__(
@@ -106,6 +109,7 @@ class BusOffEpisode:
         self._on_bus_off = on_bus_off
         self._started = False
         self._recover_at_s = math.inf
+        self.recovered_at_s = -math.inf  # when the controller left bus-off (-inf: not yet)
 
     def advance_to(self, now_s: float) -> None:
         """Bus-off transitions up to ``now_s`` (s): the climb at T, the recovery after it."""
@@ -118,6 +122,7 @@ class BusOffEpisode:
             self._recover_at_s = episode.at_s + episode.duration_s + self._recovery_s
         if self._counters.bus_off and now_s >= self._recover_at_s:
             self._counters.recover()
+            self.recovered_at_s = self._recover_at_s
             LOG.info("busoff recovered t=%.6f: 128 x 11 recessive bits, TEC = REC = 0", now_s)
 
     def _climb(self, at_s: float) -> None:

@@ -11,8 +11,9 @@ error counters and bus-off episodes ``sim.busoff``. A frame suffers at most one 
 dup, delay, flip (one uniform draw per frame split into intervals of those widths), and a burst
 once started takes the next frames whatever their draw. Babble and bus-off are independent of the
 frame faults. While the bus is off, ``send`` raises ``can.CanOperationError`` (the frame is
-refused, counted ``refused``) and held-back frames wait for the recovery; the babbling node is
-another node and goes on babbling. ``state`` is python-can's ``BusState``: ``ACTIVE`` (error
+refused, counted ``refused``) and held-back frames wait for the recovery: they reach the bus,
+stamped, at its instant (not at their due time, long past). The babbling node is another node
+and goes on babbling. ``state`` is python-can's ``BusState``: ``ACTIVE`` (error
 active, TEC and REC < 128; ``error_warning`` from 96), ``PASSIVE`` (error passive), ``ERROR``
 (bus-off).
 
@@ -252,7 +253,13 @@ class FaultInjectingBus(BusABC):
 
     def _release_one(self, timeout: float | None) -> None:
         release_s, _, msg = heapq.heappop(self._held)
-        msg.timestamp = release_s
+        # A frame due while the controller was bus-off waited in its transmit buffer: it reaches
+        # the bus, and every receiver's and the recorder's stamp, when the controller recovers.
+        # Stamped with its due time it sat in the log up to DUR s before it was heard: seed 703,
+        # delay=0.5:100,busoff=1:1, the encoder frames due at 1.04-1.09 s, which the firmware
+        # took at its tick of 2.01 s, read 1.04-1.09 s, and the judges took them in a window
+        # the firmware never had (a right firmware FAILed 32 mm, 102 mrad off).
+        msg.timestamp = max(release_s, self._busoff.recovered_at_s)
         try:
             self._transmit(msg, timeout)
         except can.CanError as exc:
