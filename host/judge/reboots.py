@@ -70,12 +70,11 @@ from odocan.host.judge.bootticks import (
     fell_in_run,
     poses_before,
     status_before,
-    status_rows,
 )
 from odocan.host.judge.breaks import merged_breaks
 from odocan.host.judge.gapseen import crc_holds
+from odocan.host.judge.heldsummaries import summaries_held_back
 from odocan.host.judge.liveconfig import config_text
-from odocan.host.judge.livelatestatus import held_back
 from odocan.host.judge.navrestart import second_evidence
 from odocan.host.judge.primed import counted_start
 from odocan.host.judge.samples import ENC_E2E_PAGE, AnalysisError, contract_cycle_s
@@ -293,22 +292,6 @@ def _watch_summaries(
             conflict = (int(positions[changed]), float(times_s[changed]))
         k += 1
     return boots, conflict
-
-
-def summaries_held_back(frames: FrameArrays, decoder: BulkDecoder,
-                        summaries: tuple[npt.NDArray[np.int64], npt.NDArray[np.int64],
-                                         npt.NDArray[np.object_]]) -> npt.NDArray[np.bool_]:
-    """Which ``summaries`` (positions, UPTIMEs, STATE names; their CRC holding) the bus held
-    back behind later ODOM_STATUS frames and say no reboot (``livelatestatus``)."""
-    positions, uptimes_s, states = summaries
-    where, _, counters = status_rows(frames, decoder)
-    said: list[tuple[int, str] | None] = [None] * len(where)
-    for at, uptime_s, state in zip(np.searchsorted(where, positions).tolist(),
-                                   uptimes_s.tolist(), states.tolist(), strict=True):
-        said[at] = (int(uptime_s), str(state))
-    over = np.array(held_back(counters.tolist(), said), dtype=bool)
-    return over[np.searchsorted(where, positions)] if len(where) else np.zeros(len(positions),
-                                                                               bool)
 
 
 def before_two_sources(frames: FrameArrays, decoder: BulkDecoder,
