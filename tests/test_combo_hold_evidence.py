@@ -8,8 +8,8 @@ from itertools import pairwise
 
 import numpy as np
 
-from odocan.host.judge.samples import SILENCE_CYCLES
-from odocan.host.judge.stalls import frozen_breaks, quiet_between
+from odocan.host.judge.samples import SILENCE_CYCLES, PoseHalves
+from odocan.host.judge.stalls import frozen_breaks, named_again, quiet_between
 
 CYCLE_S = 0.01
 
@@ -38,3 +38,36 @@ def test_a_jump_without_evidence_is_no_hold() -> None:
     assert frozen_breaks(enc, seq).tolist() == [11]  # no evidence asked: the old rule
     assert frozen_breaks(enc, seq, evidence=np.array([True])).tolist() == [11]
     assert frozen_breaks(enc, seq, evidence=np.array([False])).tolist() == []
+
+
+def _plain_again(named: list[int], heard_s: list[float], enc_t_s: list[float]) -> list[bool]:
+    """Per encoder frame: named twice or more, once after the next encoder frame came."""
+    return [sum(n == k for n in named) >= 2 and any(
+        n == k and k + 1 < len(enc_t_s) and t >= enc_t_s[k + 1]
+        for n, t in zip(named, heard_s, strict=True)) for k in range(len(enc_t_s))]
+
+
+def test_a_frame_named_again_only_before_the_next_came_is_no_hold() -> None:
+    """Under ``delay`` the firmware's E2E window refuses the on-time encoder frames for up to 16
+    periods and it names its last frame meanwhile; named again before the next frame it takes
+    came, it held nothing (kobuki, seed 2, ``delay=0.5:100``: read as a hold at 1.57 s, the
+    frames after it earned 11.7 mm, which absorbed a pose 10 mm off: ``test_combo_faults``)."""
+    rng = np.random.default_rng(5)
+    for _ in range(300):
+        frames = int(rng.integers(1, 8))
+        enc_t_s = np.cumsum(rng.choice([0.01, 0.01, 0.05], size=frames))
+        count = int(rng.integers(0, 10))
+        heard_s = np.sort(rng.uniform(0, 0.1 + frames * 0.02, size=count))
+        latest = np.searchsorted(enc_t_s, heard_s, side="right") - 1  # heard since
+        named = np.where(latest >= 0, np.maximum(latest - rng.integers(0, 2, count), 0), -1)
+        rows = {"timestamp_s": heard_s}
+        none = np.full(0, -1, dtype=np.int64)
+        halves = PoseHalves(rows, {"timestamp_s": np.zeros(0)}, named.astype(np.int64), none)
+        got = named_again(halves, frames, enc_t_s).tolist()
+        assert got == _plain_again(named.tolist(), heard_s.tolist(), enc_t_s.tolist())
+    # the old rule without the bus times: named twice
+    halves = PoseHalves({"timestamp_s": np.array([0.011, 0.031])}, {"timestamp_s": np.zeros(0)},
+                        np.array([0, 0]), np.zeros(0, dtype=np.int64))
+    assert named_again(halves, 2).tolist() == [True, False]
+    assert named_again(halves, 2, np.array([0.0, 0.05])).tolist() == [False, False]
+    assert named_again(halves, 2, np.array([0.0, 0.03])).tolist() == [True, False]

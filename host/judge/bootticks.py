@@ -474,6 +474,12 @@ def pose_rows(frames: FrameArrays, decoder: BulkDecoder
     return _rows(frames, decoder, POSE_MESSAGE)
 
 
+def status_rows(frames: FrameArrays, decoder: BulkDecoder
+                ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.float64], npt.NDArray[np.int64]]:
+    """``pose_rows`` of ODOM_STATUS (any page)."""
+    return _rows(frames, decoder, STATUS_MESSAGE)
+
+
 def pose_heard(data: bytes, data_ids: tuple[int, ...] | None) -> int | None:
     """The E2E COUNTER of an ODOM_POSE_X frame heard live whose CRC holds, whatever its
     sequence (``data_ids``: the message's E2E DataIDs; None: no E2E); None otherwise."""

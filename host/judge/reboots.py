@@ -73,6 +73,7 @@ from odocan.host.judge.bootticks import (
 )
 from odocan.host.judge.breaks import merged_breaks
 from odocan.host.judge.gapseen import crc_holds
+from odocan.host.judge.heldsummaries import summaries_held_back
 from odocan.host.judge.liveconfig import config_text
 from odocan.host.judge.navrestart import second_evidence
 from odocan.host.judge.primed import counted_start
@@ -259,6 +260,7 @@ def _watch_summaries(
     falls = second_evidence(frames, decoder, TWIST_COUNTERS)[0]  # DISTANCE fell, NAV restarted
     booted = boot_ticks(uptimes_s, counters, times_s, poses, statuses, None, falls)
     ahead = ahead_ticks(frames, decoder, positions, uptimes_s, counters, times_s, statuses)
+    late = summaries_held_back(frames, decoder, (positions, uptimes_s, states))
     watch = SourceWatch()
     boots = []
     changed, conflict = 0, None  # the summary of the last new offset; where two sources began
@@ -280,7 +282,8 @@ def _watch_summaries(
         watch.status_before = (None if status_counter < 0
                                else (float(statuses[0][k]), status_counter))
         kind = watch.observe(float(times_s[k]), int(uptimes_s[k]), name, int(counters[k]),
-                             bool(ahead[k]), fell=fell_in_run(falls, float(times_s[k])))
+                             bool(ahead[k]), fell=fell_in_run(falls, float(times_s[k])),
+                             late=bool(late[k]))
         if kind == "reboot":
             boots.append((int(positions[k]), int(uptimes_s[k]), name, int(before)))
         if watch.changed_at_s == float(times_s[k]):

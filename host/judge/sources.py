@@ -44,6 +44,7 @@ from odocan.host.judge.distfall import (
 from odocan.host.judge.latefall import continues_twice, tied_late
 from odocan.host.judge.liveadopted import LATE_REBOOT
 from odocan.host.judge.livegapseen import heard_status
+from odocan.host.judge.livelatestatus import StatusOrder
 from odocan.host.judge.livestreams import LiveStreams, hear_pose_frame, pose_told_first
 from odocan.host.judge.navrestart import NAV_MESSAGE, restarted_within
 from odocan.host.judge.powerup import (
@@ -121,6 +122,8 @@ class SourceWatch:
     nav_ids: tuple[int, ...] | None = None  # NAV_STATUS's E2E DataIDs (``navrestart``)
     navs: deque[tuple[float, bytes]] = field(  # the latest NAV_STATUS heard (bus time, bytes)
         default_factory=lambda: deque(maxlen=RECENT_TWISTS))  # read as ``twists`` are
+    order: StatusOrder = field(default_factory=StatusOrder)  # ODOM_STATUS frames held back,
+    # live (``hear_status``; ``livelatestatus``)
 
     def on_page(self, page: str, signals: dict[str, Any], tracker: PoseTracker) -> bool:
         """An accepted ODOM_STATUS ``page`` (``"summary"``, ``"e2e_wheel_encoders"``, ...):
@@ -168,16 +171,19 @@ class SourceWatch:
         return False
 
     def observe(self, t_s: float, uptime_s: int, state: str, counter: int | None = None,
-                ahead: bool = False, seq: int | None = None, fell: bool | None = None
-                ) -> str | None:
+                ahead: bool = False, seq: int | None = None, fell: bool | None = None,
+                late: bool | None = None) -> str | None:
         """One ODOM_STATUS summary (``counter``: its E2E COUNTER, None: not told; with the
         watch's ``pose``, the run of the ODOM_POSE_X frames heard before the summary, it tells
         a power-up tick: ``bootticks.boot_tick``; ``ahead``: the first pose after it told one,
         ``bootticks.boot_ahead``, a log's; ``seq``: the encoder frame latest heard, live;
         ``fell``: a twist of that run fell, ``bootticks.fell_in_run``, a log's; None: read from
-        ``twists``, live); returns ``"reboot"``, ``"two sources"``, ``"uptime jump"`` or None.
-        A summary the first pose after it may tell is kept in ``ahead`` (live: ``hear_pose``,
-        ``told_ahead``)."""
+        ``twists``, live; ``late``: the bus held it back behind later ODOM_STATUS frames and it
+        says no reboot against the summary sent before it, ``livelatestatus``, a log's; None:
+        ``order``'s, live); returns ``"reboot"``, ``"two sources"``, ``"uptime jump"`` or
+        None. Such a summary is none of them: it says the UPTIME and state its firmware had
+        when it sent it, and is passed over unless it is a power-up tick. A summary the first
+        pose after it may tell is kept in ``ahead`` (live: ``hear_pose``, ``told_ahead``)."""
         offset = uptime_s - t_s
         kind = None
         booted = counter is not None and boot_tick(uptime_s, counter, t_s, self.pose,
@@ -186,6 +192,8 @@ class SourceWatch:
             fell = self._fell_in_run(t_s) if fell is None else fell
             booted = boot_tick(uptime_s, counter, t_s, self.pose, self.summary_s,
                                self.status_before, fell)
+        if not booted and (self.order.passed_over(uptime_s, state) if late is None else late):
+            return None  # held back, it tells no reboot (``livelatestatus``)
         broke = (None if booted or counter is None else
                  ahead_candidate(uptime_s, counter, t_s, self.summary_s, self.status_before))
         booted, ahead = booted or (ahead and broke is not None), ahead and not booted
@@ -288,6 +296,7 @@ class SourceWatch:
         ``counter``, whatever its sequence, before it is observed: the one before a summary
         tells whether it breaks the sequence (``bootticks.status_breaks``)."""
         self.status_before, self.status_last = self.status_last, (t_s, counter)
+        self.order.hear(counter)
         if self.ahead_posed is not None or self.ahead_late is not None:
             self.ahead_heard.append(t_s)
 

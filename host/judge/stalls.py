@@ -70,7 +70,7 @@ def after_stalls(
     queued_by_sample = np.zeros(len(sent_s), dtype=bool)
     queued_by_sample[order] = queued
     evidence = None if halves is None else hold_evidence(
-        named_again(halves, len(enc.seq))[kept.enc], sent_s[keep],
+        named_again(halves, len(enc.seq), enc.timestamp_s)[kept.enc], sent_s[keep],
         sent if pose_sent_s is None else pose_sent_s, enc.cycle_s)
     frozen = _frozen(kept, enc, queued_by_sample[keep], evidence)
     restarts = [onboard.enc[order[after - 1]] + 1, frozen]
@@ -261,12 +261,28 @@ def frozen_breaks(sample_enc: IntArray, sample_seq: IntArray,
     return frozen
 
 
-def named_again(halves: PoseHalves, frames: int) -> npt.NDArray[np.bool_]:
+def named_again(halves: PoseHalves, frames: int, enc_t_s: FloatArray | None = None
+                ) -> npt.NDArray[np.bool_]:
     """Per encoder frame (of ``frames``), whether two accepted pose frames of one kind or more
-    named it (``halves``: ``samples.pose_halves``): a hold's evidence (``frozen_breaks``)."""
+    named it (``halves``: ``samples.pose_halves``): a hold's evidence (``frozen_breaks``).
+    With ``enc_t_s`` (the accepted encoder frames' bus times) the second must come after the
+    next accepted frame did: a firmware that names a frame again before the next one it takes
+    came held nothing (issue #11: under ``delay`` its E2E window refuses the on-time frames for
+    up to 16 periods, and it names its last frame meanwhile, as the host's E2E check says it
+    must; read as a hold, the frames after it earned a stall's allowance, 11.7 mm, which
+    absorbed a pose 10 mm off: kobuki, seed 2, ``delay=0.5:100``)."""
     again = np.zeros(frames, dtype=bool)
-    for named in (halves.ex, halves.ey):
-        counts = np.bincount(named[named >= 0], minlength=frames)
+    for named, rows in ((halves.ex, halves.px), (halves.ey, halves.py)):
+        ok = named >= 0
+        if enc_t_s is not None and frames:
+            nxt = np.minimum(named + 1, frames - 1)
+            came = (named + 1 < frames) & (rows["timestamp_s"] >= enc_t_s[nxt])
+            firsts = np.bincount(named[ok & ~came], minlength=frames)[:frames]
+            # named again after the next frame came: a naming after it beyond the first naming
+            late = np.bincount(named[ok & came], minlength=frames)[:frames]
+            again |= (late >= 1) & (firsts + late >= 2)
+            continue
+        counts = np.bincount(named[ok], minlength=frames)
         again |= counts[:frames] >= 2
     return again
 

@@ -272,13 +272,14 @@ class StreamPoses:
             newest = known["seq"][np.maximum(latest[:cut], 0)]  # samples.lapped_out
             g = np.where((g >= 0) & (latest[:cut] >= 0) & (newest - seq >= LAP), -1, g)
         self.unmatched += int(np.count_nonzero(g < 0))
-        self._keep_first(name, halves, g, seq)
+        self._keep_first(name, halves, g, seq, known)
         if cut == len(halves.index):
             return float(top - 8) if not final else np.inf
         return float(min(known["seq"][np.maximum(latest[cut:], 0)].min(), top) - 8)
 
     def _keep_first(
-        self, name: str, halves: _Halves, g: npt.NDArray[np.int64], seq: npt.NDArray[np.int64]
+        self, name: str, halves: _Halves, g: npt.NDArray[np.int64], seq: npt.NDArray[np.int64],
+        known: dict[str, np.ndarray],
     ) -> None:
         """The first frame of ``halves`` naming each encoder frame not given out yet; and in
         ``resent`` the frame when a later one naming it differs from it, -1 when one naming
@@ -287,10 +288,14 @@ class StreamPoses:
         hits = np.flatnonzero(g >= 0)
         columns = {k: v[hits].tolist() for k, v in halves.values.items()}  # plain Python values
         last = self._last_pose.get(name, (-1, {}))
+        at = np.minimum(np.searchsorted(known["g"], g[hits] + 1), max(len(known["g"]) - 1, 0))
+        came = ((known["g"][at] == g[hits] + 1) & (known["t"][at] <= halves.timestamp_s[hits])
+                if len(known["g"]) else np.zeros(len(hits), dtype=bool)).tolist()
         for i, (gi, si, t) in enumerate(zip(g[hits].tolist(), seq[hits].tolist(),
                                             halves.timestamp_s[hits].tolist(), strict=True)):
             row = {k: v[i] for k, v in columns.items()}
-            if gi in firsts or last[0] == gi:  # stalls.named_again
+            if (gi in firsts or last[0] == gi) and came[i]:  # stalls.named_again: after the
+                # next frame came
                 self.named_again.add(gi)
             if si >= self._given_below and gi not in firsts:
                 firsts[gi] = (si, row, t)

@@ -46,6 +46,7 @@ from odocan.host.judge.bootticks import (
     pose_rows,
     poses_before,
     status_before,
+    status_rows,
 )
 from odocan.host.judge.distfall import Falls, joined, no_falls
 from odocan.host.judge.gapseen import crc_holds
@@ -345,6 +346,7 @@ class StreamLives:
             self._summaries = False
             return []
         if len(page["index"]) == 0:  # the chunk's latest pose and status frame still count
+            self._held_back(chunk, page["index"], [])  # every status frame heard in order
             self._ahead_posed(pose_rows(chunk, self.decoder), self._pose, -1, None)
             self._pose = poses_before(chunk, self.decoder, page["index"], self._pose)[1]
             self._status = status_before(chunk, self.decoder, page["index"], self._status)[1]
@@ -354,6 +356,10 @@ class StreamLives:
             return []
         index = page["index"]
         good = crc_holds(chunk, self.decoder, index)
+        choices = dict(message.get_signal_by_name("STATE").choices or {})
+        names = [str(choices.get(int(state), int(state))) for state in page["STATE"].tolist()]
+        late = self._held_back(chunk, index, list(zip(page["UPTIME"].tolist(), names,
+                                                      strict=True)))[good]
         carried, rows = self._pose, pose_rows(chunk, self.decoder)
         (pose_t, pose_counter, pose_new), self._pose = poses_before(
             chunk, self.decoder, index[good], self._pose)
@@ -361,14 +367,14 @@ class StreamLives:
         events: list[tuple[int, _Boot | tuple[int, int]]] = []
         (status_t, status_counter), self._status = status_before(
             chunk, self.decoder, index[good], self._status)
-        choices = dict(message.get_signal_by_name("STATE").choices or {})
         following = [*index[good].tolist()[1:], None]
-        for position, t_s, uptime_s, state, counter, after, pose, status in zip(
+        for position, t_s, uptime_s, state, counter, after, pose, status, held in zip(
             index[good].tolist(), page["timestamp_s"][good].tolist(),
             page["UPTIME"][good].tolist(), page["STATE"][good].tolist(),
             page["COUNTER"][good].tolist(), following,
             zip(pose_t.tolist(), pose_counter.tolist(), pose_new.tolist(), strict=True),
-            zip(status_t.tolist(), status_counter.tolist(), strict=True), strict=True,
+            zip(status_t.tolist(), status_counter.tolist(), strict=True), late.tolist(),
+            strict=True,
         ):
             name = str(choices.get(int(state), int(state)))
             events += self._posed_told(float(t_s), int(uptime_s), int(counter))
@@ -377,7 +383,7 @@ class StreamLives:
                                 else None)
             self._watch.status_before = (status[0], int(status[1])) if status[1] >= 0 else None
             kind = self._watch.observe(float(t_s), int(uptime_s), name, int(counter),
-                                       fell=fell_in_run(self._falls[0], float(t_s)))
+                                       fell=fell_in_run(self._falls[0], float(t_s)), late=held)
             at = int(position) + self._offset
             if self._watch.changed_at_s == float(t_s):
                 self._changed = (at, float(t_s))
@@ -390,6 +396,22 @@ class StreamLives:
                                self._watch.ahead[4], False)
                 self._ahead_posed(rows, carried, int(position), after)
         return events
+
+    def _held_back(self, chunk: FrameArrays, positions: npt.NDArray[np.int64],
+                   said: list[tuple[int, str]]) -> npt.NDArray[np.bool_]:
+        """Which summaries at chunk ``positions`` (``said``: their UPTIME and STATE) the bus held
+        back behind later ODOM_STATUS frames and say no reboot (``livelatestatus``), every
+        status frame of the chunk whose CRC holds heard on the watch's order."""
+        where, _, counters = status_rows(chunk, self.decoder)
+        at = np.searchsorted(where, positions)
+        found = at < len(where)
+        found[found] = where[at[found]] == positions[found]
+        summaries: list[tuple[int, str] | None] = [None] * len(where)
+        for k, summary in zip(at[found].tolist(), np.array(said, dtype=object)[found].tolist()
+                              if said else [], strict=True):
+            summaries[k] = (int(summary[0]), str(summary[1]))
+        over = np.array(self._watch.order.hear_all(counters.tolist(), summaries), dtype=bool)
+        return found & over[np.minimum(at, max(len(where) - 1, 0))] if len(where) else found
 
     def _boot(self, at: int, uptime_s: int, t_s: float, name: str, before: int) -> _Boot:
         """The reboot of the summary at log position ``at`` (bus time ``t_s``, UPTIME, STATE
