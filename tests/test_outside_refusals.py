@@ -83,6 +83,8 @@ def test_a_log_whose_times_go_back_is_warned_with_a_count(
     assert len(told) == 1, told
     assert f"{path}: 1 frame of {len(frames)} earlier than the frame before (first: frame 501, "\
         in told[0]
+    back_ms = float(told[0].split(" ms back from ")[0].rsplit(" ", 1)[-1])  # how far, said
+    assert 989 <= back_ms <= 1000, told[0]  # its second back, less the spacing (<= 11 ms)
     chunked: list[str] = []
     assert sum(len(c) for c in iter_log(path, chunk_frames=7, warn=chunked.append)) == len(frames)
     assert chunked == told

@@ -166,9 +166,10 @@ class TimeOrder:
             return
         number, t_s, before_s = self.first
         warn(f"{path}: {self.back} frame{'s' if self.back > 1 else ''} of {self.frames} "
-             f"earlier than the frame before (first: frame {number}, {t_s:.6f} s after "
-             f"{before_s:.6f} s; by {STAMPING_S * 1e3:g} ms or less, a recorder's stamping, "
-             "not counted): times kept as recorded; the log's duration may be wrong")
+             f"earlier than the frame before (first: frame {number}, {t_s:.6f} s, "
+             f"{(before_s - t_s) * 1e3:.4g} ms back from {before_s:.6f} s; frames back by "
+             f"{STAMPING_S * 1e3:g} ms or less, a recorder's stamping, are not counted): times "
+             "kept as recorded; the log's duration may be wrong")
 
 
 def _read_candump_file(path: Path) -> tuple[FrameArrays, int, int]:
