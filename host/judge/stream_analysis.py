@@ -448,7 +448,7 @@ def _judged(
         "reference_breaks": placements.as_dict(),
         "events": [
             {"kind": "counter_restart", "t_s": final.times_s[e], "encoder_frame": int(e),
-             "detail": restart_detail(e in info.by_uptime)}
+             "detail": restart_detail(e in info.by_uptime, ambiguous=e in info.ambiguous)}
             for e in info.reprimed
         ] + [
             {"kind": "stall_reprime", "t_s": final.times_s[e0 + rep.r],
