@@ -59,3 +59,22 @@ def test_a_reboot_with_a_boot_time_under_a_delay_passes_and_a_tamper_fails(
     assert raise_raw(log, tampered, "ODOM_POSE_X", (2, 4), TAMPER_LSB, BOOTED_S) > 50
     for stream in ("always", "never"):
         assert _cli("analyze", str(tampered), "--robot", robot, "--stream", stream) == 1, stream
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "the live judge (BusMonitor) is not fixed: kobuki seed 1 (16 s) the correct firmware "
+    "5.89 mm, 11.5 mrad off its reference; seed 2 (12 s) 15.23 mm, 204 mrad (the same on main). "
+    "Cause (watched): at the boot summary (10.301 s) it starts the new life on the latest "
+    "encoder frame its own E2E sequence, run on across the reboot, accepted (tracking.power_up): "
+    "COUNTER 2 at 10.275 s, the next it took COUNTER 8 at 10.32 s; the new firmware, its E2E "
+    "fresh, primed on COUNTER 6 at 10.30 s, one of the frames that sequence refused"))
+def test_the_live_judge_follows_a_reboot_with_a_boot_time_under_a_delay(tmp_path: Path) -> None:
+    from odocan.host.judge.analysis import HEADING_LSB_RAD, POSITION_LSB_M
+    from tests.test_live_reboot import monitor_of
+
+    log = tmp_path / "drive.log"
+    assert _cli("run", "--robot", "kobuki", "--scenario", "random", "--seed", "1",
+                "--duration", "16", "--faults", FAULTS, "--log", str(log)) == 0
+    right = monitor_of(log, "kobuki", "exact").tracker.vs_reference
+    assert right.max_dpos_m <= POSITION_LSB_M, right.max_dpos_m
+    assert right.max_dheading_rad <= HEADING_LSB_RAD, right.max_dheading_rad
