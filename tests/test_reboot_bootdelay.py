@@ -78,3 +78,19 @@ def test_the_live_judge_follows_a_reboot_with_a_boot_time_under_a_delay(tmp_path
     right = monitor_of(log, "kobuki", "exact").tracker.vs_reference
     assert right.max_dpos_m <= POSITION_LSB_M, right.max_dpos_m
     assert right.max_dheading_rad <= HEADING_LSB_RAD, right.max_dheading_rad
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "not fixed: a longer boot, its first count page read (not silentboot's): kobuki seed 1 "
+    "(14 s) delay=0.1:15,reboot=10:0.5 FAILs the correct firmware 48.10 mm, 83.87 mrad (the "
+    "same on main; reboot=10:0.5 without the delay PASSes). The Python firmware, watched, "
+    "primed on COUNTER 10 at 10.50 s; the E2E check run over the whole log refused every "
+    "encoder frame from 10.36 s to 10.50 s (out of sequence after the delay's reorders) and "
+    "took COUNTER 11 at 10.51 s first, so no frame the host took is the one it primed on "
+    "(the life's start not traced further). The fix would likely be the E2E check fresh at "
+    "the frame the firmware primed on, as silentboot now does"))
+def test_a_longer_boot_under_a_delay_passes(tmp_path: Path) -> None:
+    log = tmp_path / "drive.log"
+    assert _cli("run", "--robot", "kobuki", "--scenario", "random", "--seed", "1",
+                "--duration", "14", "--faults", "delay=0.1:15,reboot=10:0.5",
+                "--log", str(log)) == 0
