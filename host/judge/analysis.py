@@ -346,7 +346,7 @@ def _analyze_life(
     unproven: list[dict[str, Any]] = []  # its first count pages lost: said (stallpowerup)
     if silent:  # rebooted unheard: (0, 0, 0) on each frame it may have primed on (silentboot)
         power_up, unproven = False, ([] if start_pose else primed_in_silence(
-            enc, onboard, float(np.min(sent_s)), robot, integrator))
+            frames, decoder, enc, onboard, float(np.min(sent_s)), (robot, integrator)))
     elif boot:  # (a stalled MCU's first page misses the frames its FIFO overran: primed_first)
         power_up = saw_only_the_log(frames, accepted, decoder) or primed_first(
             float(np.min(sent_s, initial=np.inf)), enc, alive_s, pose_sent_s)

@@ -31,6 +31,8 @@ if TYPE_CHECKING:
 
 Pose = tuple[float, float, float]
 F = TypeVar("F", bound=Callable[..., Any])
+Rerun = Callable[[Pose, "int | None"], "Analysis"]  # a life judged from a start (and a cut)
+COUNTED = ("frames", "e2e", "unknown_frames")  # a report's counts of the frames on the bus
 PRIMED_KIND = "power_up_primed_on"  # the report's event: the frame it was judged from
 FRAMES_KEY = "start_poses"  # the unproven event's candidates (frame, start pose at frame 0)
 WHY_KEY = "why"  # the event's reason for its candidates (``{frames}``: theirs), if not a stall
@@ -59,24 +61,28 @@ def candidates(enc: Encoders, lo: int, robot: RobotProfile, integrator: str) -> 
     return [[p, list(start_pose_primed_on(enc, p, robot, integrator))] for p in range(lo + 1)]
 
 
-def judged_from_each(first: Analysis, rerun: Callable[[Pose], Analysis]) -> Analysis:
+def judged_from_each(first: Analysis, rerun: Rerun) -> Analysis:
     """``first`` (fitted, its start unproven) judged again from each candidate start of its
-    unproven event (``rerun``: the life from that exact start): the first that passes (the
-    later ones not judged: a streamed life is read again per candidate), else the one with the
-    least error beyond its allowance, its events saying which frame; ``first`` when it has no
-    candidates."""
+    unproven event (``rerun``: the life from that exact start; from the candidate's position in
+    the life's frames on when it has one, ``silentboot``, its frame and E2E counts then
+    ``first``'s: the bus carried the frames before it all the same): the first that passes
+    (the later ones not judged: a streamed life is read again per candidate), else the one with
+    the least error beyond its allowance, its events saying which frame; ``first`` when it has
+    no candidates."""
     event = next((e for e in first.report["events"] if FRAMES_KEY in e), None)
     if event is None:
         return first
     tries: list[tuple[int, Analysis]] = []
-    for p, pose in event[FRAMES_KEY]:  # up to the first that passes: it is the one taken
-        tries.append((p, rerun((pose[0], pose[1], pose[2]))))
+    for p, pose, *cut in event[FRAMES_KEY]:  # up to the first that passes: the one taken
+        tries.append((p, rerun((pose[0], pose[1], pose[2]), int(cut[0]) if cut else None)))
+        if cut:  # the frames the bus carried before the cut: counted as the whole life's
+            tries[-1][1].report.update({k: first.report[k] for k in COUNTED if k in first.report})
         if tries[-1][1].passed:
             break
     passed = [t for t in tries if t[1].passed]
     p, best = passed[0] if passed else min(tries, key=lambda t: t[1].report[
         "onboard_vs_reference"]["max_position_error_beyond_allowance_m"])
-    frames = [int(f) for f, _ in event[FRAMES_KEY]]
+    frames = [int(f) for f, *_ in event[FRAMES_KEY]]
     verdict = (f"it passes from frame {p}" if passed else f"it fails from frame {p}"
                if len(tries) == 1 else f"it fails from every one (the least error from frame {p})")
     best.report["reference_start"] = "power-up"
@@ -91,9 +97,13 @@ def judged_from_each(first: Analysis, rerun: Callable[[Pose], Analysis]) -> Anal
 
 def each_prime(analyze_life: F) -> F:
     """``analyze_life`` (``analysis._analyze_life``) with its unproven start judged from each
-    frame it may have primed on (``judged_from_each``: again with ``start_pose``)."""
+    frame it may have primed on (``judged_from_each``: again with ``start_pose``, its frames
+    from the candidate's position on when it has one)."""
     @functools.wraps(analyze_life)
     def judged(*args: Any, **kwargs: Any) -> Analysis:
-        return judged_from_each(analyze_life(*args, **kwargs), lambda pose: analyze_life(
-            *args, **{**kwargs, "start_pose": pose}))
+        def rerun(pose: Pose, cut: int | None) -> Analysis:
+            frames = args[0] if cut is None else args[0].select(slice(cut, None))
+            return cast("Analysis", analyze_life(frames, *args[1:], **{**kwargs,
+                                                                   "start_pose": pose}))
+        return judged_from_each(analyze_life(*args, **kwargs), rerun)
     return cast(F, judged)

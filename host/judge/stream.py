@@ -390,6 +390,7 @@ class StreamReference:
     refused: int = 0
     reprimed: list[int] = field(default_factory=list)  # encoder frames a counter restart primed
     by_uptime: list[int] = field(default_factory=list)  # of them, CTRL_UPTIME went back
+    ambiguous: list[int] = field(default_factory=list)  # of those, an ambiguous step's
     _window: dict[str, np.ndarray] = field(default_factory=dict)  # left, right, seq, g, t, uptime
     _sums: tuple[int, int, float, float, float, float] = (0, 0, 0.0, 0.0, 0.0, 0.0)
     _count: int = 0  # encoder frames fed
@@ -418,6 +419,7 @@ class StreamReference:
         self.refused += steps.refused - max(0, carried - 1)  # carried refusals counted before
         self.reprimed += [int(win["g"][k]) for k in steps.reprimed]  # decided in this window
         self.by_uptime += [int(win["g"][k]) for k in steps.by_uptime]
+        self.ambiguous += [int(win["g"][k]) for k in steps.ambiguous]  # (``ambiguity``)
         skip = max(carried, 1) - 1  # step k leads into window frame k + 1
         out = self._integrate(*self._held(win["g"][skip + 1:], steps.d_left[skip:],
                                           steps.d_right[skip:]))

@@ -79,7 +79,7 @@ from odocan.host.judge.stream_lives import LifeSpan, StreamLives
 from odocan.host.judge.stream_losses import SpanDrops
 from odocan.host.judge.stream_place import PlacedChunk, reference_errors, segment_offsets
 from odocan.host.judge.stream_place import start_pose as place_start
-from odocan.host.judge.stream_primed import judged_from_candidates
+from odocan.host.judge.stream_primed import cut_frames, judged_from_candidates
 from odocan.host.judge.stream_refusal import UNSETTLED
 from odocan.host.judge.stream_refusal import NotStreamable as NotStreamable
 from odocan.host.judge.stream_reprime import stream_reprimes
@@ -304,7 +304,7 @@ def _life(
     (``start_pose``: a set-pose's, exact at the life's first encoder frame)."""
     first = first_pass(frames, db, robot)
     first.refuse()
-    facts = first.facts
+    facts, given = first.facts, integrator
     integrator, source = facts.integrator(integrator)
     first.check()
     power_up = not silent and (facts.saw_only_the_log() if boot
@@ -315,12 +315,20 @@ def _life(
         seed=seed, wall_seconds=wall_seconds)
     if silent and start_pose is None:  # rebooted unheard: (0, 0, 0) on each frame (silentboot)
         event = first.prefix.silent_event(first.first_sent_s, first.head, (robot, integrator))
+        counts = first.e2e.counts  # the frames before a cut counted all the same (primedon)
+        whole = {"frames": facts.frame_counts, "unknown_frames": counts[UNKNOWN],
+                 "e2e": {name: c for name, c in counts.items() if name != UNKNOWN}}
         if event:
-            return judged_from_candidates(event, lambda pose: judge(start_pose=pose))
+            return judged_from_candidates(event, lambda pose, cut: judge(start_pose=pose) if (
+                cut is None) else _life(
+                    cut_frames(frames, cut), robot, given, tolerance=tolerance, db=db,
+                    boot=boot, max_wheel_speed_mm_s=max_wheel_speed_mm_s, rebase=rebase,
+                    scenario=scenario, seed=seed, wall_seconds=wall_seconds, start_pose=pose,
+                    silent=True), (whole, first.t_first_s))
     if not (boot or rebase or power_up or start_pose is not None) and facts.primed_late():
         event = first.prefix.event(first.first_sent_s, (robot, integrator))  # stream_primed
         if event:  # judged from each frame it may have primed on, as the whole log's judge
-            return judged_from_candidates(event, lambda pose: judge(start_pose=pose))
+            return judged_from_candidates(event, lambda pose, _: judge(start_pose=pose))
     return judge(start_pose=start_pose)
 
 
@@ -440,7 +448,7 @@ def _judged(
         "reference_breaks": placements.as_dict(),
         "events": [
             {"kind": "counter_restart", "t_s": final.times_s[e], "encoder_frame": int(e),
-             "detail": restart_detail(e in info.by_uptime)}
+             "detail": restart_detail(e in info.by_uptime, ambiguous=e in info.ambiguous)}
             for e in info.reprimed
         ] + [
             {"kind": "stall_reprime", "t_s": final.times_s[e0 + rep.r],

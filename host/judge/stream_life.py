@@ -111,6 +111,7 @@ class LifeInfo:
     refused: int = 0
     reprimed: list[int] = field(default_factory=list)
     by_uptime: list[int] = field(default_factory=list)  # of them, CTRL_UPTIME went back
+    ambiguous: list[int] = field(default_factory=list)  # of those, an ambiguous step's
     segments: int = 0  # the last encoder frame's segment (reference_path's ``restarts``)
     openings: list[tuple[int, bool]] = field(default_factory=list)  # ``_Rows.openings``
     gap_steps: dict[int, GapStep] = field(default_factory=dict)  # ``_Rows.gap_steps``
@@ -203,6 +204,7 @@ def life_chunks(
     info.gap_steps = rows.gap_steps
     info.reprimed = [e0 + k for k in reference.reprimed]
     info.by_uptime = [e0 + k for k in reference.by_uptime]
+    info.ambiguous = [e0 + k for k in reference.ambiguous]
     info.least = least_of(reference.geometry, reference.bits, reference.max_wheel_speed_mm_s)
 
 

@@ -18,7 +18,7 @@ minutes after its power-up) is still refused (``NotStreamable``, ``TOO_LONG``)."
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterable, Iterator
 from typing import Any
 
 import numpy as np
@@ -91,24 +91,41 @@ class PowerUpPrefix:
         frames = concat_frames([c for c, _ in self.chunks])
         accepted = np.concatenate([a for _, a in self.chunks])
         enc = encoder_frames(frames, accepted, self.decoder)
-        return primed_in_silence(enc, head, t_s, *judged)
+        return primed_in_silence(frames, self.decoder, enc, head, t_s, judged)
 
 
 Pose = tuple[float, float, float]
+Frames = Callable[[], Iterable[FrameArrays]]  # ``stream_first.Frames`` (it imports this one)
+
+
+def cut_frames(frames: Frames, skip: int) -> Frames:
+    """A life's frames (``stream_first.Frames``) from position ``skip`` on."""
+    def chunks() -> Iterator[FrameArrays]:
+        left = skip
+        for chunk in frames():
+            if left >= len(chunk):
+                left -= len(chunk)
+                continue
+            yield chunk.select(slice(left, None)) if left else chunk
+            left = 0
+    return chunks
 
 
 def judged_from_candidates(event: list[dict[str, Any]],
-                           rerun: Callable[[Pose], tuple[dict[str, Any], float]]
+                           rerun: Callable[[Pose, int | None], tuple[dict[str, Any], float]],
+                           whole: tuple[dict[str, Any], float] | None = None
                            ) -> tuple[dict[str, Any], float]:
     """The life judged from each candidate of ``event`` (``rerun``: the streamed life's report
-    and first frame's time from that exact start), as ``primedon.judged_from_each`` judges
-    the whole log's."""
+    and first frame's time from that exact start, from the candidate's position on when it has
+    one), as ``primedon.judged_from_each`` judges the whole log's (``whole``: the whole
+    life's frame and E2E counts, ``primedon.COUNTED``, and first frame's time, for a cut)."""
     t_first: list[float] = []
 
-    def analysis(pose: Pose) -> Analysis:
-        report, t_first_s = rerun(pose)
-        t_first[:] = [t_first_s]
+    def analysis(pose: Pose, cut: int | None) -> Analysis:
+        report, t_first_s = rerun(pose, cut)
+        t_first[:] = [t_first_s if cut is None or whole is None else whole[1]]
         return Analysis(report=report, passed=bool(report["passed"]))
 
-    best = judged_from_each(Analysis(report={"events": event}), analysis)
+    counted = {} if whole is None else whole[0]
+    best = judged_from_each(Analysis(report={"events": event, **counted}), analysis)
     return best.report, t_first[0]

@@ -1,0 +1,96 @@
+"""A reboot with a boot time under a mild bus delay (issue #11, rule 5: "a FAIL must never blame
+a correct firmware").
+
+``--faults delay=0.1:15,reboot=10:0.3``: the firmware restarts at 10 s and is silent for its
+0.3 s boot; the bus delays 10 % of the frames by up to 15 ms, so an encoder frame sent in the
+boot can reach the bus after a later one. The E2E check run over the whole new life from its
+first encoder frame (before the boot) refused that reordered frame and then the next ones until
+it resynchronised; the new firmware, booted after the reorder with a fresh E2E receiver, primed
+on one of those refused frames (kobuki seed 1: COUNTER 6 at 10.30 s; the Python firmware
+watched in process integrates every step it took within 2e-10 m of float64). The host's
+candidates (``host.judge.silentboot``) were only the frames its own check took, and the correct
+firmware FAILed from every one: kobuki seed 1 (16 s) 3.10 mm, 6.72 mrad; seed 2 (12 s)
+0.92 mm, 34.17 mrad; pmir seed 1 (12 s) 3.21 mm, 3.19 mrad; whole and streamed alike. Now each
+encoder frame on the bus is a candidate, the life judged again from its position with the E2E
+check fresh there: PASS, and the same log with ODOM_POSE_X raised by 10 mm from the boot on
+(``tests.log_edit.raise_raw``, E2E CRC recomputed) FAILs.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from tests.log_edit import raise_raw
+
+TAMPER_LSB = 100  # 10 mm in ODOM_POSE_X's 0.1 mm LSBs
+FAULTS = "delay=0.1:15,reboot=10:0.3"
+BOOTED_S = 10.3  # the reboot at 10 s, its boot 0.3 s
+DRIVES = [("kobuki", 1, 16), ("kobuki", 2, 12), ("pmir", 1, 12)]  # (robot, seed, duration s)
+
+
+def _cli(*args: str) -> int:
+    done = subprocess.run([sys.executable, "-m", "odocan", *args], capture_output=True,
+                          text=True, timeout=600, check=False)
+    assert "Traceback" not in done.stderr, done.stderr
+    return done.returncode
+
+
+@pytest.mark.parametrize(("robot", "seed", "duration"), DRIVES)
+def test_a_reboot_with_a_boot_time_under_a_delay_passes_and_a_tamper_fails(
+        robot: str, seed: int, duration: int, tmp_path: Path) -> None:
+    log, tampered = tmp_path / "drive.log", tmp_path / "t.log"
+    assert _cli("run", "--robot", robot, "--scenario", "random", "--seed", str(seed),
+                "--duration", str(duration), "--faults", FAULTS, "--log", str(log)) == 0
+    events = []
+    for stream in ("always", "never"):
+        report = tmp_path / f"{stream}.json"
+        assert _cli("analyze", str(log), "--robot", robot, "--stream", stream,
+                    "--report", str(report)) == 0, stream
+        events.append(json.loads(report.read_text())["events"])
+    assert events[0] == events[1]
+    primed = [e for e in events[0] if e["kind"] == "power_up_primed_on"]
+    assert len(primed) == 1, primed
+    assert "it passes from frame" in primed[0]["detail"], primed
+    assert raise_raw(log, tampered, "ODOM_POSE_X", (2, 4), TAMPER_LSB, BOOTED_S) > 50
+    for stream in ("always", "never"):
+        assert _cli("analyze", str(tampered), "--robot", robot, "--stream", stream) == 1, stream
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "the live judge (BusMonitor) is not fixed: kobuki seed 1 (16 s) the correct firmware "
+    "5.89 mm, 11.5 mrad off its reference; seed 2 (12 s) 15.23 mm, 204 mrad (the same on main). "
+    "Cause (watched): at the boot summary (10.301 s) it starts the new life on the latest "
+    "encoder frame its own E2E sequence, run on across the reboot, accepted (tracking.power_up): "
+    "COUNTER 2 at 10.275 s, the next it took COUNTER 8 at 10.32 s; the new firmware, its E2E "
+    "fresh, primed on COUNTER 6 at 10.30 s, one of the frames that sequence refused"))
+def test_the_live_judge_follows_a_reboot_with_a_boot_time_under_a_delay(tmp_path: Path) -> None:
+    from odocan.host.judge.analysis import HEADING_LSB_RAD, POSITION_LSB_M
+    from tests.test_live_reboot import monitor_of
+
+    log = tmp_path / "drive.log"
+    assert _cli("run", "--robot", "kobuki", "--scenario", "random", "--seed", "1",
+                "--duration", "16", "--faults", FAULTS, "--log", str(log)) == 0
+    right = monitor_of(log, "kobuki", "exact").tracker.vs_reference
+    assert right.max_dpos_m <= POSITION_LSB_M, right.max_dpos_m
+    assert right.max_dheading_rad <= HEADING_LSB_RAD, right.max_dheading_rad
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "not fixed: a longer boot, its first count page read (not silentboot's): kobuki seed 1 "
+    "(14 s) delay=0.1:15,reboot=10:0.5 FAILs the correct firmware 48.10 mm, 83.87 mrad (the "
+    "same on main; reboot=10:0.5 without the delay PASSes). The Python firmware, watched, "
+    "primed on COUNTER 10 at 10.50 s; the E2E check run over the whole log refused every "
+    "encoder frame from 10.36 s to 10.50 s (out of sequence after the delay's reorders) and "
+    "took COUNTER 11 at 10.51 s first, so no frame the host took is the one it primed on "
+    "(the life's start not traced further). The fix would likely be the E2E check fresh at "
+    "the frame the firmware primed on, as silentboot now does"))
+def test_a_longer_boot_under_a_delay_passes(tmp_path: Path) -> None:
+    log = tmp_path / "drive.log"
+    assert _cli("run", "--robot", "kobuki", "--scenario", "random", "--seed", "1",
+                "--duration", "14", "--faults", "delay=0.1:15,reboot=10:0.5",
+                "--log", str(log)) == 0
