@@ -10,11 +10,12 @@ turns that bring its HEADING nearest the reference's heading; a Y half's HEADING
 that brings TURNS * 2 pi + HEADING nearest the reference's heading (0 .. 65535: the error is
 how far the reference lies outside the turn TURNS names) and its X the reference's.
 
-A lone half is judged only where the reference at its frame is the one the samples are judged
-against: its encoder frame in a segment (``reference_path``: between gaps, stall breaks, counter
-restarts and re-primes) that holds a kept sample, after the reference's start, the half not
-sent after a silence of the firmware (a stall's first pose: ``stallfirst``'s), not aliased by a
-resend (``resendalias``). Any other lone half is counted as sent and not judged
+A lone half is judged where the reference at its frame is told: after the reference's start,
+its position within the samples' loss and twin allowances plus, in a segment of the reference
+without a sample (``reference_path``: opened by a gap of the log or a stall), the allowances of
+the openings since the last placement on samples (``budgets``); the half not sent after a
+silence of the firmware (a stall's first pose: ``stallfirst``'s), not aliased by a resend
+(``resendalias``). Any other lone half is counted as sent and not judged
 (``judgedfloor``: the summary's judged line), never dropped unsaid. The streamed analysis reads a
 log with lone halves whole (``stream_first``: ``NotStreamable``)."""
 
@@ -81,18 +82,37 @@ def lone_frames(halves: PoseHalves, paired: IntArray) -> tuple[IntArray, IntArra
     return ix, iy
 
 
-def segments(enc: Encoders, ref: Reference, breaks: IntArray) -> IntArray:
-    """Per encoder frame, the number of the reference's segment it lies in (a new one at each
-    gap of the sequence, stall break, counter restart and re-prime)."""
-    starts = np.zeros(len(enc.seq), dtype=bool)
-    starts[1:] = np.diff(enc.seq) > 1
-    cuts = [*breaks.tolist(), *ref.counter_restarts, *ref.unseen_restarts,
-            *(ref.start + k for k in ref.stall_reprimes)]
-    for b in cuts:
-        if 0 <= b < len(starts):
-            starts[b] = True
-    seg: IntArray = np.cumsum(starts).astype(np.int64)
-    return seg
+def budgets(enc: Encoders, ref: Reference, breaks: IntArray, kept: Poses,
+            named: IntArray) -> FloatArray:
+    """Per encoder frame ``named``: how far (m) the firmware's position may lie from ``ref``
+    there beyond the samples' tolerance; NaN where it cannot be told. ``ref``'s segments
+    (``reference_path.build_reference``: opened by each gap of the log and stall break after
+    its start) are placed on their samples; one without a sample keeps the previous one's
+    placement, the firmware's position off it by at most the allowances of the openings since
+    the last segment with a sample (``breaks.placed_offsets``: ``segment_allowance_m``). A
+    segment holding a new start (an unseen restart, a stall's re-prime) is not told."""
+    e0 = ref.start
+    starts = np.zeros(len(enc.seq) - e0, dtype=bool)
+    starts[1:] = np.diff(enc.seq[e0:]) > 1
+    inside = breaks[(breaks > e0) & (breaks < len(enc.seq))] - e0
+    starts[inside] = True
+    segment = np.cumsum(starts)
+    allowance = np.asarray(ref.placements.segment_allowance_m, dtype=np.float64)
+    if len(allowance) != int(segment[-1]) + 1:  # placed otherwise: told by nothing here
+        return np.full(len(named), np.nan)
+    seg = segment[named - e0]
+    sampled = np.zeros(len(allowance), dtype=bool)
+    sampled[segment[kept.enc[kept.enc >= e0] - e0]] = True
+    restarted = [*ref.unseen_restarts, *(e0 + k for k in ref.stall_reprimes)]
+    untold = np.zeros(len(allowance), dtype=bool)
+    untold[segment[[r - e0 for r in restarted if e0 <= r < len(enc.seq)]]] = True
+    summed = np.concatenate(([0.0], np.cumsum(np.where(sampled, 0.0, allowance))))
+    last = np.maximum.accumulate(np.where(sampled, np.arange(len(allowance)), -1))
+    # the allowances of the sample-less segments after the last sampled one up to each
+    budget = summed[seg + 1] - summed[np.maximum(last[seg], 0) + 1]
+    out: FloatArray = np.where((last[seg] < 0) | untold[seg] | ~np.isfinite(budget), np.nan,
+                               np.where(sampled[seg], 0.0, budget))
+    return out
 
 
 def judge_lone(
@@ -108,8 +128,6 @@ def judge_lone(
     ix, iy = lone_frames(halves, paired)
     if not len(ix) and not len(iy):
         return verdict
-    seg = segments(enc, ref, breaks)
-    judged_segments = np.unique(seg[kept.enc]) if len(kept.enc) else np.zeros(0, np.int64)
     sent = np.sort(np.concatenate((np.asarray(halves.px["timestamp_s"], dtype=np.float64),
                                    np.asarray(halves.py["timestamp_s"], dtype=np.float64),
                                    np.zeros(0) if pose_sent_s is None else pose_sent_s)))
@@ -118,7 +136,6 @@ def judge_lone(
     def judgeable(named: IntArray, t_s: FloatArray, alias: npt.NDArray[np.bool_] | None,
                   rows: IntArray) -> npt.NDArray[np.bool_]:
         ok = (named >= ref.start) & (named < end)
-        ok &= np.isin(seg[np.clip(named, 0, len(seg) - 1)], judged_segments)
         if alias is not None:
             ok &= ~alias[rows]
         if enc.cycle_s is not None:  # sent after a silence: a stall's first pose (stallfirst)
@@ -130,6 +147,12 @@ def judge_lone(
     ex, tx = halves.ex[ix], np.asarray(halves.px["timestamp_s"][ix], dtype=np.float64)
     ey, ty = halves.ey[iy], np.asarray(halves.py["timestamp_s"][iy], dtype=np.float64)
     okx, oky = judgeable(ex, tx, halves.ax, ix), judgeable(ey, ty, halves.ay, iy)
+    bx = np.full(len(ex), np.nan)
+    by = np.full(len(ey), np.nan)
+    bx[okx] = budgets(enc, ref, breaks, kept, ex[okx])
+    by[oky] = budgets(enc, ref, breaks, kept, ey[oky])
+    okx &= ~np.isnan(bx)
+    oky &= ~np.isnan(by)
     verdict.unjudged = int(np.count_nonzero(~okx) + np.count_nonzero(~oky))
     ix, ex, tx, iy, ey, ty = ix[okx], ex[okx], tx[okx], iy[oky], ey[oky], ty[oky]
     poses = _completed(halves, ix, ex, iy, ey, ref)
@@ -137,7 +160,8 @@ def judge_lone(
         return verdict
     pos, head = pose_errors(poses, ref.at(poses.enc))
     robot, integrator, losses, placed = allowed
-    beyond = pos - loss_allowance(enc, robot, integrator, losses, poses.enc, kept.enc, placed)
+    beyond = pos - np.concatenate((bx[okx], by[oky]))
+    beyond -= loss_allowance(enc, robot, integrator, losses, poses.enc, kept.enc, placed)
     beyond -= twin_allowance_of(enc, robot, integrator, ref, poses.enc, record=False)
     verdict.judged = len(poses.enc)
     verdict.position_m = float(np.max(beyond))
