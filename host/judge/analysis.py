@@ -397,7 +397,7 @@ def _analyze_life(
     vs_ref["max_position_error_beyond_allowance_m"] = float(
         np.max(pos_err - allowance - twin_allowed))
     (lone := judge_lone(halves, onboard, enc, ref_all, stalls, pose_sent_s, (
-        robot, integrator, losses, placed))).fold(vs_ref)  # a half without its partner: its own
+        robot, integrator, losses, placed), left_out.lone_rows)).fold(vs_ref)  # lonehalves
     passed = bool(
         vs_ref["max_position_error_beyond_allowance_m"] <= tolerance.position_m
         and vs_ref["max_heading_error_rad"] <= tolerance.heading_rad

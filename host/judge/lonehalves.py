@@ -119,13 +119,17 @@ def judge_lone(
     halves: PoseHalves, kept: Poses, enc: Encoders, ref: Reference,
     breaks: IntArray, pose_sent_s: FloatArray | None,
     allowed: tuple[RobotProfile, str, list[tuple[int, int, int]], Placements],
+    first_rows: set[int] | None = None,
 ) -> LoneVerdict:
     """Judge every lone half (module docstring) against ``ref`` (``kept``: the samples
     judged, ``breaks``: the stalls' encoder frames); ``allowed``: robot, integrator, the firmware's
-    loss spans and the placements, for the samples' loss and twin allowances at its frames."""
+    loss spans and the placements, for the samples' loss and twin allowances at its frames;
+    ``first_rows``: the ODOM_POSE_X halves ``stallfirst`` judged (a stall's first pose): its."""
     verdict = LoneVerdict()
     paired = np.intersect1d(halves.ex[halves.ex >= 0], halves.ey[halves.ey >= 0])
     ix, iy = lone_frames(halves, paired)
+    if first_rows:
+        ix = ix[~np.isin(ix, sorted(first_rows))]
     if not len(ix) and not len(iy):
         return verdict
     sent = np.sort(np.concatenate((np.asarray(halves.px["timestamp_s"], dtype=np.float64),
