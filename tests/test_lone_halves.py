@@ -20,6 +20,7 @@ from typing import Any
 import can
 import cantools
 import pytest
+from cantools.database.can import Database
 
 from odocan.sim import contract
 from tests.log_edit import drop_frames, raise_raw_once
@@ -51,6 +52,7 @@ def lone_halves(path: Path) -> tuple[list[float], list[float]]:
     """The times (s after the first frame) of the ODOM_POSE_X frames without an ODOM_POSE_Y of
     the same ENC_COUNTER within 5 ms, and of the Y frames without such an X."""
     db = cantools.database.load_file(str(contract.DBC_PATH))
+    assert isinstance(db, Database)
     ids = {db.get_message_by_name(n).frame_id: n for n in ("ODOM_POSE_X", "ODOM_POSE_Y")}
     frames: dict[str, list[tuple[float, int]]] = {"ODOM_POSE_X": [], "ODOM_POSE_Y": []}
     first = None
