@@ -147,8 +147,6 @@ class BreakSummary:
     free: int = 0  # placements after a gap without a bound (none configured: not checked)
     twins: int = 0  # encoder frames with a twin after the reference's start (host.judge.twins)
     twin_allowance_m: float = 0.0  # their detours summed: the largest twin allowance (m)
-    # per segment (0: the start), the allowance its opening adds (host.judge.lonehalves)
-    segment_allowance_m: tuple[float, ...] = ()
 
     def add_stall(self, asked_m: float, limit_m: float) -> None:
         self.stalls += 1
@@ -272,6 +270,4 @@ def placed_offsets(
     for k, (first, by_gap) in enumerate(openings, start=1):
         gap[k] = by_gap
         allowance[k] = allowance_of(first) + (gap_allowance_of(first) if by_gap else 0.0)
-    x, y, summary = bound_offsets(raw_x_m, raw_y_m, gap, allowance, slack_m)
-    summary.segment_allowance_m = tuple(allowance.tolist())
-    return x, y, summary
+    return bound_offsets(raw_x_m, raw_y_m, gap, allowance, slack_m)

@@ -88,7 +88,7 @@ def budgets(enc: Encoders, ref: Reference, breaks: IntArray, kept: Poses,
     stall break after its start, placed on the kept samples it holds), NaN where it cannot be
     told: a segment without a sample, or holding a new start (an unseen restart, a stall's
     re-prime). A segment without a sample keeps the previous placement and the firmware may lie
-    off it by the allowances of the openings since (``segment_allowance_m``), but under a
+    off it by the allowances of the openings since (``breaks.placed_offsets``), but under a
     reordering bus its frames may not be the firmware's: kobuki seed 1, delay=0.5:150, a lone X
     there 1.68 mm and 11.1 mrad off a correct firmware; so it is not judged (counted)."""
     e0 = ref.start
