@@ -127,6 +127,7 @@ from odocan.host.judge.gapseen import Seen, seen_in_log
 from odocan.host.judge.holepages import page_numbered
 from odocan.host.judge.judgedfloor import floored
 from odocan.host.judge.keptmark import mark_kept
+from odocan.host.judge.lonehalves import judge_lone
 from odocan.host.judge.losses import (
     firmware_losses,
     firmware_ok_spans,
@@ -395,6 +396,8 @@ def _analyze_life(
                          seen, alive_s)
     vs_ref["max_position_error_beyond_allowance_m"] = float(
         np.max(pos_err - allowance - twin_allowed))
+    (lone := judge_lone(halves, onboard, enc, ref_all, stalls, pose_sent_s, (
+        robot, integrator, losses, placed), left_out.lone_rows)).fold(vs_ref)  # lonehalves
     passed = bool(
         vs_ref["max_position_error_beyond_allowance_m"] <= tolerance.position_m
         and vs_ref["max_heading_error_rad"] <= tolerance.heading_rad
@@ -415,13 +418,13 @@ def _analyze_life(
         "frames": frame_counts(frames, decoder),
         "samples": {
             "onboard": len(onboard.enc),
-            "truth": len(truth.enc),
-            "truth_compared": len(truth_series["truth_x_m"]),
+            "truth": len(truth.enc), "truth_compared": len(truth_series["truth_x_m"]),
             "unmatched_poses": unmatched,
             "encoder_frames": len(enc.index),
             "reference_restarts": ref_all.restarts,
             "unseen_restarts": len(ref_all.unseen_restarts),  # new starts: unseenrestart
             "implausible_encoder_frames": ref_all.implausible_frames, **left_out.counts(),
+            **lone.counts(),
         },
         "reference_breaks": ref_all.placements.as_dict(),
         "events": [

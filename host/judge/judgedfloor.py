@@ -40,13 +40,17 @@ class _Verdict(Protocol):
 
 def judged_share(report: dict[str, Any]) -> tuple[int, float] | None:
     """(poses judged, poses sent) of a report (``samples``: ``onboard`` judged,
-    ``unmatched_poses`` the halves left out, X and Y each); None without samples."""
+    ``unmatched_poses`` the halves left out, X and Y each; ``lone_halves_judged`` /
+    ``_unjudged``: halves whose partner was lost, ``host.judge.lonehalves``); None without
+    samples."""
     samples = report.get("samples") or {}
     if "onboard" not in samples:
         return None
-    judged = int(samples["onboard"]) + int(samples.get("stall_first_judged") or 0)
-    return judged, judged + int(samples.get("unmatched_poses") or 0) / 2 + int(
-        samples.get("stall_first_unjudged") or 0) - int(samples.get("stall_first_unmatched") or 0)
+    judged = int(samples["onboard"]) + int(samples.get("stall_first_judged") or 0) + int(
+        samples.get("lone_halves_judged") or 0)  # a half without its partner: one pose sent
+    left = int(samples.get("stall_first_unjudged") or 0) - int(
+        samples.get("stall_first_unmatched") or 0) + int(samples.get("lone_halves_unjudged") or 0)
+    return judged, judged + int(samples.get("unmatched_poses") or 0) / 2 + left
 
 
 def mark_floor(report: dict[str, Any]) -> dict[str, Any]:

@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING
 
+from odocan.host.judge.livelone import judge_lone_live
 from odocan.host.judge.liveresent import judge_resend
 from odocan.host.judge.livewindow import HALF_WINDOW, QUEUED_GAP_S, Columns, Half
 
@@ -89,5 +90,19 @@ class HalfPairs:
         self._ys.pop(seq, None)
         if seq in self.sampled:
             return
+        self._lone_before(seq)
         self.sampled.add(seq)
         self._tracker.on_pair(seq, x, y, queued)
+
+    def _lone_before(self, seq: int) -> None:
+        """The halves waiting for a partner naming frames before ``seq``, which is sampled
+        now: their partners were lost; each judged alone (``livelone``), in frame order."""
+        lone: list[tuple[int, str, Half]] = []
+        for s in [k for k in self._xs if k < seq and k not in self.sampled]:
+            lone.append((s, "x", self._xs.pop(s)))
+        for s in [k for k in self._ys if k < seq]:
+            lone.append((s, "y", self._ys.pop(s)[0]))
+        if len(lone) > 1:
+            lone.sort(key=lambda item: (item[0], item[1]))
+        for s, name, half in lone:
+            judge_lone_live(name, s, half, self._tracker)

@@ -330,7 +330,8 @@ _FIRST_WINDOW = 64  # summaries tried at once after one that was not quiet (doub
 
 _SUMMED_SAMPLES = ("onboard", "truth", "truth_compared", "unmatched_poses", "encoder_frames",
                    "reference_restarts", "implausible_encoder_frames", "stall_first_judged",
-                   "stall_first_unjudged", "stall_first_unmatched")
+                   "stall_first_unjudged", "stall_first_unmatched", "lone_halves_judged",
+                   "lone_halves_unjudged")
 _TIME_SERIES = ("t_s", "truth_t_s", "gap_start_t_s", "gap_end_t_s", "restart_t_s")
 
 

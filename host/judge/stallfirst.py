@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import numpy.typing as npt
@@ -75,6 +75,7 @@ class FirstVerdict:
     resumes: int = 0  # first samples after the silence judged by ``stallresume``
     worst_resume_m: float = -math.inf  # beyond every pose the firmware can resume at
     resume_at_s: float | None = None  # bus time of that sample (ODOM_POSE_X)
+    lone_rows: set[int] = field(default_factory=set)  # X halves judged alone (lonehalves)
 
     def passed(self) -> bool:
         return (self.worst_position_m <= 0.0 and self.worst_heading_rad <= 0.0
@@ -130,6 +131,7 @@ class Pair:
     heading_rad: float
     quiet_s: float = 0.0  # since the ODOM_POSE_X before it (any: paired or not)
     queued: bool = False  # its X in a burst (``senderseq.queued_frames``)
+    lone: bool = False  # its ODOM_POSE_Y lost: X and HEADING alone (y_m NaN, no TURNS)
 
 
 class _Pairs:
@@ -152,6 +154,14 @@ class _Pairs:
         if k not in self._made:
             self._made[k] = self._make(k)
         return self._made[k]
+
+    def lone_at(self, k: int) -> Pair:
+        """ODOM_POSE_X ``k`` alone (its Y lost: ``host.judge.lonehalves``)."""
+        px = self._halves.px
+        return Pair(float(px["timestamp_s"][k]), int(px["ENC_COUNTER"][k]),
+                    int(self._halves.ex[k]), float(px["X"][k]) * POSITION_LSB_M, math.nan,
+                    float(px["HEADING"][k]) * HEADING_LSB_RAD, float(self._quiet_s[k]),
+                    bool(self._queued[k]), lone=True)
 
     def _make(self, k: int) -> Pair | None:
         px, py, ty = self._halves.px, self._halves.py, self._ty
@@ -208,6 +218,8 @@ def judge_left_out(
     is_kept = _kept_test(kept)
     for k in silent.tolist():
         pose = pairs.at(k)
+        if pose is None and k > first:  # its ODOM_POSE_Y lost: judged on what it carries
+            pose = pairs.lone_at(k)
         if k <= first or pose is None or is_kept(pose):
             continue
         if not heard_through(enc, pose.t_s - pose.quiet_s, pose.t_s):
@@ -218,6 +230,8 @@ def judge_left_out(
         if before is not None and after is not None and not heard_all(enc, before, after):
             continue  # a gap of the log (frames the logger missed): no stall of this rule's
         _judge_one(verdict, pose, (before, after), enc, (geometry, integrator, bits), tolerance)
+        if pose.lone:  # counted here, not by lonehalves
+            verdict.lone_rows.add(k)
     return verdict
 
 
@@ -367,6 +381,9 @@ def carried_excess(pose: Pair, near: Pair, counts: tuple[np.ndarray, np.ndarray]
     # its rounding box and its heading's half LSB over the carried way (kobuki, a 1 s stall:
     # a correct firmware FAILed 0.00097 mm beyond without them)
     rounding_m = math.sqrt(2) * 0.5 * POSITION_LSB_M + 0.5 * HEADING_LSB_RAD * math.hypot(dx, dy)
+    if pose.lone:  # X and HEADING alone: Y and TURNS not sent
+        return (abs(pose.x_m - x) - tolerance[0] - allowed - rounding_m, abs(math.remainder(
+            pose.heading_rad - heading, 2 * math.pi)) - tolerance[1] - 0.5 * HEADING_LSB_RAD)
     return (math.hypot(pose.x_m - x, pose.y_m - y) - tolerance[0] - allowed - rounding_m,
             abs(pose.heading_rad - heading) - tolerance[1] - 0.5 * HEADING_LSB_RAD)
 

@@ -188,6 +188,7 @@ class StreamPoses:
 
     decoder: BulkDecoder
     unmatched: int = 0  # pose frames naming no accepted encoder frame of the log
+    lone: int = 0  # halves given out without their partner (host.judge.lonehalves: judged whole)
     _offset: int = 0
     _enc_count: int = 0
     _recent: dict[str, np.ndarray] = field(default_factory=dict)  # g, index, counter, seq, t
@@ -350,6 +351,7 @@ class StreamPoses:
         done = sorted(g for g in xs.keys() | ys.keys()
                       if (xs[g][0] if g in xs else ys[g][0]) < floor)
         both = [g for g in done if g in xs and g in ys]
+        self.lone += len(done) - len(both)
         sx = [xs[g][1] for g in both]
         sy = [ys[g][1] for g in both]
         sent = np.array([ys[g][2] for g in both], dtype=np.float64)

@@ -192,6 +192,8 @@ class FirstPass:
             raise NotStreamable("the firmware stalled before its first pose")
         if self.resent_kept:  # judged whole (host.judge.resent), as the sample is out already
             raise NotStreamable("a resent pose differs from the first naming its encoder frame")
+        if self.poses.lone:  # judged on what it carries, by the whole log's judge (lonehalves)
+            raise NotStreamable("a pose half whose partner was lost (a lone half)")
 
     @property
     def breaks(self) -> np.ndarray:

@@ -126,13 +126,15 @@ def twin_allowance(spans: list[tuple[int, float]], at: IntArray) -> FloatArray:
 
 
 def twin_allowance_of(enc: Encoders, robot: RobotProfile, integrator: str, ref: Reference,
-                      at: IntArray) -> FloatArray:
+                      at: IntArray, *, record: bool = True) -> FloatArray:
     """``twin_allowance`` at encoder frames ``at`` for the twins after ``ref``'s start (the
     whole-log judge's), their count and largest sum noted in ``ref.placements`` (the report's
-    ``reference_breaks``)."""
+    ``reference_breaks``; ``record`` False: not noted, the lone halves' frames)."""
     spans = twin_spans(enc, Geometry.of(robot), min(robot.counter_bits, WIRE_COUNTER_BITS),
                        integrator, ref.start)
     allowance = twin_allowance(spans, at)
+    if not record:
+        return allowance
     ref.placements.twins = len(spans)
     ref.placements.twin_allowance_m = float(np.max(allowance, initial=0.0))
     return allowance
