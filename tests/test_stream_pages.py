@@ -121,7 +121,9 @@ def test_the_streamed_report_is_the_whole_logs(capture: tuple[Path, str],
     starved and jittered captures at 97 to 1 000 frames a chunk) refused themselves so
     (``UNSETTLED``), and the log was read whole. The starved captures' streams are refused, now
     as at 4 096 before, for another rule: their bursts' pairing (``samples._queued``, a median
-    over the life), which this change leaves as it was."""
+    over the life), which this change leaves as it was; and a capture whose bus lost one half
+    of a pose is refused for its lone half (``lonehalves``: the stream does not judge lone
+    halves yet), so kobuki ``delay=0.1:15`` seed 7 no longer checks the stream's pages here."""
     path, robot = capture
     whole = analyze(read_log(path), load(robot)).report
     refusal = ""
@@ -129,7 +131,8 @@ def test_the_streamed_report_is_the_whole_logs(capture: tuple[Path, str],
         streamed = analyze_file(path, load(robot), chunk_frames=chunk_frames)
     except NotStreamable as refused:
         refusal, streamed = str(refused), whole
-    assert refusal in ("", "frames let out in a burst after a busy bus (queued pairing)")
+    assert refusal in ("", "frames let out in a burst after a busy bus (queued pairing)",
+                       "a pose half whose partner was lost (a lone half)")
     assert json.dumps(streamed) == json.dumps(whole)
 
 
