@@ -18,8 +18,8 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from odocan.host.judge.livepose import FramePose, difference
-from odocan.host.judge.liveresent import may_alias_live
+from odocan.host.judge.livepose import FramePose
+from odocan.host.judge.liveresent import may_alias_live, record_error
 from odocan.host.judge.livewindow import CYCLE_S, Half
 from odocan.host.judge.samples import HEADING_LSB_RAD, SILENCE_CYCLES
 from odocan.sim.pose import TURN_RAD
@@ -51,9 +51,5 @@ def judge_lone_live(name: str, seq: int, half: Half, tracker: PoseTracker) -> bo
         within = min(max(ref.heading_rad - half.extra * TURN_RAD, 0.0),
                      TURN_RAD - HEADING_LSB_RAD)
         pose = FramePose(seq, ref.x_m, half.value, half.extra * TURN_RAD + within)
-    error = difference(pose, ref)
-    stats = tracker.vs_reference
-    stats.max_dpos_m = max(stats.max_dpos_m, error["dpos_m"])
-    stats.max_dheading_rad = max(stats.max_dheading_rad, abs(error["dheading_rad"]))
-    tracker.losses.record(seq, error, tracker.fast_path, half.t_s)
+    record_error(tracker, seq, pose, ref, half.t_s)
     return True

@@ -36,12 +36,19 @@ def judge_resend(name: str, seq: int, half: Half, tracker: PoseTracker) -> bool:
         resent = FramePose(seq, pose.x_m, half.value, half.extra * TURN_RAD + heading_rad)
     if resent == pose:
         return True
-    error = difference(resent, ref)
+    record_error(tracker, seq, resent, ref, half.t_s)
+    return True
+
+
+def record_error(tracker: PoseTracker, seq: int, pose: FramePose, ref: FramePose,
+                 t_s: float) -> None:
+    """``pose``'s error from ``ref`` into the tracker's largest errors and its loss allowance's
+    record (a half judged outside a sample: a resend, a lone half)."""
+    error = difference(pose, ref)
     stats = tracker.vs_reference
     stats.max_dpos_m = max(stats.max_dpos_m, error["dpos_m"])
     stats.max_dheading_rad = max(stats.max_dheading_rad, abs(error["dheading_rad"]))
-    tracker.losses.record(seq, error, tracker.fast_path, half.t_s)
-    return True
+    tracker.losses.record(seq, error, tracker.fast_path, t_s)
 
 
 def may_alias_live(seq: int, t_s: float, tracker: PoseTracker) -> bool:
