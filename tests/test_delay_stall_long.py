@@ -82,8 +82,11 @@ def test_the_lone_y_after_the_stall_is_not_judged_on_the_reprime_the_samples_cho
     (lone,) = [m for m in msgs if m.arbitration_id == y_id and abs(m.timestamp - LONE_Y_S) < 1e-6]
     latest = [m for m in msgs if m.arbitration_id == enc_id and m.timestamp < LONE_Y_S][-1]
     # named right: the latest encoder frame's COUNTER, sent a millisecond before it
-    assert db.decode_message(y_id, lone.data)["ENC_COUNTER"] == db.decode_message(
-        enc_id, latest.data)["COUNTER"]
+    named, counter = (db.decode_message(i, bytes(m.data)) for i, m in ((y_id, lone),
+                                                                        (enc_id, latest)))
+    assert isinstance(named, dict)
+    assert isinstance(counter, dict)
+    assert named["ENC_COUNTER"] == counter["COUNTER"]
     assert LONE_Y_S - latest.timestamp < 0.002
     verdicts: list[lonehalves.LoneVerdict] = []
 
