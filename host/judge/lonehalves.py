@@ -11,12 +11,13 @@ that brings TURNS * 2 pi + HEADING nearest the reference's heading (0 .. 65535: 
 how far the reference lies outside the turn TURNS names) and its X the reference's.
 
 A lone half is judged where the reference at its frame is told: after the reference's start,
-in a segment of the reference holding a kept sample (``budgets``), its position within the
-samples' loss and twin allowances; the half not sent after a silence of the firmware (a
-stall's first pose: ``stallfirst``'s), not aliased by a resend (``resendalias``). Any other
-lone half is counted as sent and not judged (``judgedfloor``: the summary's judged line), never
-dropped unsaid. The streamed analysis reads a log with lone halves whole (``stream_first``:
-``NotStreamable``)."""
+in a segment of the reference holding a kept sample (``budgets``), not from a re-primed stall
+to the first sample after it (the re-prime's frame is the samples' choice: ``reprime_window``),
+its position within the samples' loss and twin allowances; the half not sent after a silence
+of the firmware (a stall's first pose: ``stallfirst``'s), not aliased by a resend
+(``resendalias``). Any other lone half is counted as sent and not judged (``judgedfloor``: the
+summary's judged line), never dropped unsaid. The streamed analysis reads a log with lone
+halves whole (``stream_first``: ``NotStreamable``)."""
 
 from __future__ import annotations
 
@@ -87,10 +88,12 @@ def budgets(enc: Encoders, ref: Reference, breaks: IntArray, kept: Poses,
     against (a segment of ``reference_path.build_reference``, opened by a gap of the log or a
     stall break after its start, placed on the kept samples it holds), NaN where it cannot be
     told: a segment without a sample, or holding a new start (an unseen restart, a stall's
-    re-prime). A segment without a sample keeps the previous placement and the firmware may lie
-    off it by the allowances of the openings since (``breaks.placed_offsets``), but under a
-    reordering bus its frames may not be the firmware's: kobuki seed 1, delay=0.5:150, a lone X
-    there 1.68 mm and 11.1 mrad off a correct firmware; so it is not judged (counted)."""
+    re-prime), or from a re-primed stall's break to the first sample after it
+    (``reprime_window``). A segment without a sample keeps the previous placement and the
+    firmware may lie off it by the allowances of the openings since (``breaks.placed_offsets``),
+    but under a reordering bus its frames may not be the firmware's: kobuki seed 1,
+    delay=0.5:150, a lone X there 1.68 mm and 11.1 mrad off a correct firmware; so it is not
+    judged (counted)."""
     e0 = ref.start
     starts = np.zeros(len(enc.seq) - e0, dtype=bool)
     starts[1:] = np.diff(enc.seq[e0:]) > 1
@@ -103,6 +106,25 @@ def budgets(enc: Encoders, ref: Reference, breaks: IntArray, kept: Poses,
     restarted = [*ref.unseen_restarts, *(e0 + k for k in ref.stall_reprimes)]
     sampled[segment[[r - e0 for r in restarted if e0 <= r < len(enc.seq)]]] = False
     out: FloatArray = np.where(sampled[segment[named - e0]], 0.0, np.nan)
+    out[reprime_window(ref, kept, named)] = np.nan
+    return out
+
+
+def reprime_window(ref: Reference, kept: Poses, named: IntArray) -> npt.NDArray[np.bool_]:
+    """Per encoder frame ``named``: whether it lies after a stall the reference re-primed
+    after (``stallreprime``: its break ``b``) and before the first kept sample after it. The
+    frames the firmware took last before the stall (``f``) and re-primed on (``r``) are
+    chosen by the samples after, which cannot tell (f, r) from (f + 1, r + 1) where the robot
+    turns evenly: the reference between ``b`` and that sample may be a few steps off the
+    firmware's (issue #11: kobuki circle seed 7163, delay=0.1:150, stall=8:2, the firmware
+    re-primed on seq 1001, the samples chose 1003, and its lone Y naming 1002, named right,
+    lay 3.47 mm off the reference held there: a correct firmware FAILed)."""
+    out = np.zeros(len(named), dtype=bool)
+    for b in ref.stall_reprimes:
+        lo = ref.start + b
+        after = kept.enc[kept.enc >= lo]
+        hi = int(after.min()) if len(after) else np.iinfo(np.int64).max
+        out |= (named >= lo) & (named < hi)
     return out
 
 
