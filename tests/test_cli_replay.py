@@ -75,6 +75,7 @@ def test_replay_reproduces_the_run(
         "max_resent_position_diff_m": 0.0, "max_position_drift_between_gaps_m": 0.0,
         "logged": 300, "log_starts_mid_drive": False, "holes": [], "heading_offsets_bam16": [],
         "not_compared": {"unnamed": 0, "unpaired": 0},  # every pose of the log compared
+        "lone_halves": {"x": 0, "y": 0, "not_compared": 0},  # a lossless bus: none
     }
     assert (section["passed"], section["faults"], section["unjudged"]) == (True, [], None)
     # Bit-identical pose and twist frames, at the same times; the log's truth frames kept.

@@ -28,6 +28,7 @@ from tests.test_live_reboot import bridge_of, monitor_of
 
 LSB_M = 1e-4  # X, Y: 0.1 mm (dbc/odocan.dbc)
 VALUE_BYTES = (2, 4)  # X of ODOM_POSE_X, Y of ODOM_POSE_Y: bytes 2..5, signed little-endian
+HEADING_BYTES = (6, 2)  # HEADING of ODOM_POSE_X: bytes 6..7 (u16, raised below its wrap)
 LONE_X_S, LONE_Y_S = 0.801, 1.301  # a lone X and a lone Y of the drop=0.1 log (checked below)
 
 
@@ -191,14 +192,37 @@ def test_a_wrong_lone_first_pose_after_a_stall_on_a_lossy_bus_fails(tmp_path: Pa
     assert code == 1
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "replay compares the logged poses with the replayed firmware's only at frames both halves"
-    " name (replay_compare.onboard_by_tick): the lone X raised 10 m at 0.801 s is one of the 35"
-    " 'unpaired' X not compared (316 of 357 compared, all identical) and replay PASSes (exit 0)."
-    " Completing a lone half with the replay's other half is only sound where the log's and the"
-    " replay's frames agree (no hole, not mid-drive, no offset between gaps): not done yet"))
-def test_replay_flags_a_wrong_lone_half_of_the_log(dropped: Path, tmp_path: Path) -> None:
+@pytest.mark.parametrize(("message", "at_s", "span", "lsb"), [
+    ("ODOM_POSE_X", LONE_X_S, VALUE_BYTES, -100_000),  # X 10 m
+    ("ODOM_POSE_Y", LONE_Y_S, VALUE_BYTES, 100),  # Y 10 mm
+    ("ODOM_POSE_X", LONE_X_S, HEADING_BYTES, 200),  # HEADING 19.2 mrad
+])
+def test_replay_flags_a_wrong_lone_half_of_the_log(dropped: Path, tmp_path: Path, message: str,
+                                                   at_s: float, span: tuple[int, int],
+                                                   lsb: int) -> None:
+    """Replay compared the logged poses with the replayed firmware's only at frames both halves
+    name: the lone X raised 10 m at 0.801 s was one of 35 'unpaired' X not compared (316 of 357
+    compared, all identical) and replay PASSed. Each lone half is compared on what it carries
+    now (``replay_lone``): FAIL, exit 1."""
     edited = tmp_path / "edited.log"
-    raise_raw_once(dropped, edited, "ODOM_POSE_X", VALUE_BYTES, -100_000, LONE_X_S - 0.0005)
+    raise_raw_once(dropped, edited, message, span, lsb, at_s - 0.0005)
     done = _odocan("replay", "--robot", "kobuki", str(edited), "--log", str(tmp_path / "r.log"))
     assert done.returncode == 1, done.stdout[-400:]
+    assert "FAIL: the replayed firmware departs from the log's" in done.stdout
+
+
+def test_replay_compares_the_lone_halves_of_a_correct_log(dropped: Path, tmp_path: Path) -> None:
+    """The control: the untouched log replays PASS, its lone halves compared (those the
+    replayed firmware sent a pose for: all but a few naming no encoder frame) and said."""
+    lone_x, lone_y = lone_halves(dropped)
+    report = tmp_path / "r.json"
+    done = _odocan("replay", "--robot", "kobuki", str(dropped), "--report", str(report))
+    assert done.returncode == 0, done.stdout[-400:]
+    vs = json.loads(report.read_text())["replay"]["onboard_vs_log"]
+    lone = vs["lone_halves"]
+    assert lone["x"] + lone["y"] >= 0.9 * (len(lone_x) + len(lone_y))
+    assert lone["x"] <= len(lone_x)
+    assert lone["y"] <= len(lone_y)
+    assert f"{lone['x'] + lone['y']} lone pose halves" in done.stdout
+    assert vs["max_position_diff_m"] <= LSB_M
+    assert vs["max_heading_diff_rad"] == 0.0

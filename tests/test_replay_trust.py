@@ -22,10 +22,12 @@ from typing import Any
 import can
 import pytest
 
-from tests.log_edit import raise_raw
+from tests.log_edit import raise_raw, raise_raw_once
 
 ENCODERS, POSE_X = 0x100, 0x200
 TEN_METRES_LSB = 100_000  # ODOM_POSE_X X: 0.1 mm per LSB
+TEN_MM_LSB = 100
+LSB_M = 1e-4
 
 
 def _cli(*args: str) -> subprocess.CompletedProcess[str]:
@@ -137,16 +139,25 @@ def test_a_raised_pose_after_a_reboot_fails(tmp_path: Path) -> None:
     assert lines == ["FAIL: the replayed firmware departs from the log's"], out  # once, no PASS
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "issue #11, found by an outside trial (Dec 5): pmir figure8 seed 7286, 20 s, burst=0.01:12 "
-    "(run PASSes): replay exits 1, 'life 0: between gaps of the log its position moves off the "
-    "log's by up to 1.92 mm', heading 12.66 mrad, and blames 'the firmware build differs from "
-    "the one that recorded it' (it is this build); not looked into"))
 def test_a_burst_drive_replays_pass(tmp_path: Path) -> None:
+    """Found by an outside trial (Dec 5): pmir figure8 seed 7286, 20 s, burst=0.01:12 (run
+    PASSes). A burst on the firmware's handle lost its first cycle's frames, the boot summary
+    with them; the first summary heard (0.2 s, UPTIME 0, E2E COUNTER 4: its firmware's third
+    cycle) was taken for the power-up, the replayed firmware reset there, and the replay
+    FAILed the correct firmware by 37.7 mm, 1.92 mm between gaps, 12.66 mrad (131 BAM16, the
+    heading of its first 0.2 s), blaming 'the firmware build'. A summary not of the first
+    cycle names no power-up (``powerup.holds_first_cycle``, analyze's rule too). The log with
+    one pose raised 10 mm, and with every pose from 10.5 s on, FAILs."""
     log = tmp_path / "b.log"
     _run(log, "pmir", 7286, 20, "burst=0.01:12", scenario="figure8")
     code, out, _ = _replay(log, tmp_path / "r.json")
     assert code == 0, out
+    for name, edit in (("once", raise_raw_once), ("from", raise_raw)):
+        edited = tmp_path / f"{name}.log"
+        assert edit(log, edited, "ODOM_POSE_X", (2, 4), TEN_MM_LSB, 10.5)
+        code, out, section = _replay(edited, tmp_path / f"{name}.json")
+        assert code == 1, out
+        assert section["onboard_vs_log"]["max_position_diff_m"] > TEN_MM_LSB * LSB_M / 2
 
 
 @pytest.mark.xfail(strict=True, reason=(

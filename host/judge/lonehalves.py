@@ -8,7 +8,8 @@ encoder frame it names, so only its own signals are judged, one LSB each as a fu
 an X half's Y is the reference's (its position error is X's alone) and its TURNS the whole
 turns that bring its HEADING nearest the reference's heading; a Y half's HEADING is the BAM16
 that brings TURNS * 2 pi + HEADING nearest the reference's heading (0 .. 65535: the error is
-how far the reference lies outside the turn TURNS names) and its X the reference's.
+how far the reference lies outside the turn TURNS names) and its X the reference's
+(``posehalves``: the replay reads a lone half nearest the replayed firmware's pose alike).
 
 A lone half is judged where the reference at its frame is told: after the reference's start,
 in a segment of the reference holding a kept sample (``budgets``), not from a re-primed stall
@@ -21,7 +22,6 @@ halves whole (``stream_first``: ``NotStreamable``)."""
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -30,6 +30,7 @@ import numpy.typing as npt
 
 from odocan.host.judge.compare import pose_errors
 from odocan.host.judge.losses import Placements, loss_allowance
+from odocan.host.judge.posehalves import BAM, x_half_heading_bam, y_half_heading_bam
 from odocan.host.judge.reference_path import Reference
 from odocan.host.judge.samples import (
     HEADING_LSB_RAD,
@@ -43,9 +44,6 @@ from odocan.host.judge.samples import (
 )
 from odocan.host.judge.twins import twin_allowance_of
 from odocan.sim.robot import RobotProfile
-
-TURN = 2 * math.pi
-BAM = 65536
 
 
 @dataclass
@@ -193,17 +191,13 @@ def _completed(halves: PoseHalves, ix: IntArray, ex: IntArray, iy: IntArray, ey:
     each completed by the reference at its frame (module docstring), X ones first."""
     rx, ry = ref.at(ex), ref.at(ey)
     heading_x = halves.px["HEADING"][ix].astype(np.int64)
-    turns_x = np.round((rx.heading_rad - heading_x * HEADING_LSB_RAD) / TURN)
-    turns_y = halves.py["TURNS"][iy].astype(np.int64).astype(np.float64)
-    # TURNS wraps as an i16: the whole turns nearest the reference's
-    turns_y += BAM * np.round((ry.heading_rad / TURN - turns_y) / BAM)
-    heading_y = np.clip(np.round((ry.heading_rad - turns_y * TURN) / HEADING_LSB_RAD), 0,
-                        BAM - 1).astype(np.int64)
+    bam_x = x_half_heading_bam(heading_x, rx.heading_rad / HEADING_LSB_RAD)
+    bam_y = y_half_heading_bam(halves.py["TURNS"][iy].astype(np.int64),
+                               ry.heading_rad / HEADING_LSB_RAD)
     return Poses(
         enc=np.concatenate((ex, ey)).astype(np.int64),
         x_m=np.concatenate((halves.px["X"][ix] * POSITION_LSB_M, ry.x_m)),
         y_m=np.concatenate((rx.y_m, halves.py["Y"][iy] * POSITION_LSB_M)),
-        heading_rad=np.concatenate((turns_x * TURN + heading_x * HEADING_LSB_RAD,
-                                    turns_y * TURN + heading_y * HEADING_LSB_RAD)),
-        heading_raw=np.concatenate((heading_x, heading_y)),
+        heading_rad=np.concatenate((bam_x, bam_y)) * HEADING_LSB_RAD,
+        heading_raw=np.concatenate((heading_x, bam_y.astype(np.int64) % BAM)),
     )

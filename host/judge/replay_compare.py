@@ -5,7 +5,8 @@ At each encoder frame both firmwares' poses name, the largest difference between
 naming it in the log and in the replay: positions up to the log's first gap of the encoder
 sequence, after it their offset's drift between two gaps (when the log says its firmware took
 its frames on time, ``replayable``), headings everywhere, and the log's resent positions against
-its first at the same frame (one firmware's poses at one frame agree).
+its first at the same frame (one firmware's poses at one frame agree). A half of the log whose
+partner the bus lost is compared on what it carries, the same way (``replay_lone``).
 """
 
 from __future__ import annotations
@@ -20,7 +21,16 @@ import numpy.typing as npt
 from odocan.firmware.errors import ErrorFlag
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.analysis import HEADING_LSB_RAD, POSITION_LSB_M, Tolerance
+from odocan.host.judge.posehalves import BAM, HALVES
 from odocan.host.judge.powerup import starts_at_power_up
+from odocan.host.judge.replay_lone import (
+    Anchoring,
+    LoneFigures,
+    LoneHalves,
+    turned,
+    unpaired,
+    versus_replay,
+)
 from odocan.host.judge.replay_track import EncoderTrack, crc_holds
 from odocan.host.judge.samples import Poses
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
@@ -31,21 +41,22 @@ IntArray = npt.NDArray[np.int64]
 HOLE_CYCLES = 3  # no frame at all for longer than 3 encoder cycles: a hole of the log
 SAID_HOLES = 3  # holes named one by one in the summary
 
-def onboard_by_tick(frames: FrameArrays, accepted: npt.NDArray[np.bool_]) -> dict[int, list[
-        tuple[int, int, int]]]:
-    """The on-board poses of ``frames`` by the tick of the encoder frame they name:
-    (X raw, Y raw, heading in BAM16 units unwrapped = TURNS * 65536 + HEADING); the first X
-    with the first Y, then each other X and Y sent naming it (a resend: every pose frame is
-    compared, each half with the first of the other kind, as ``host.judge.resent``)."""
+Halves = dict[int, list[tuple[int, int]]]
+
+
+def halves_by_tick(frames: FrameArrays, accepted: npt.NDArray[np.bool_]) -> tuple[Halves, Halves]:
+    """The pose halves of ``frames`` (``posehalves.HALVES``) by the tick of the encoder frame
+    they name: X and HEADING raw of each ODOM_POSE_X, Y and TURNS raw of each ODOM_POSE_Y; per
+    tick the first sent naming it, then each other one sent naming it (a resend)."""
     decoder = BulkDecoder(contract.database())
     track = EncoderTrack.of(frames, accepted, decoder)
     halves = []
-    for name, value, extra in (("ODOM_POSE_X", "X", "HEADING"), ("ODOM_POSE_Y", "Y", "TURNS")):
+    for name, value, extra in HALVES:
         d = decoder.decode(frames, name)
         keep = crc_holds(frames, decoder, name, d["index"])  # every pose sent (``crc_holds``)
         ticks = track.named(d["index"][keep], d["ENC_COUNTER"][keep].astype(np.int64),
                             d["timestamp_s"][keep])
-        half: dict[int, list[tuple[int, int]]] = {}
+        half: Halves = {}
         previous = -1  # a resend names its predecessor's frame (one naming an earlier one
         for tick, v, e in zip(ticks.tolist(), d[value][keep].tolist(), d[extra][keep].tolist(),
                               strict=True):  # after a gap of the log's frames is no resend)
@@ -54,10 +65,24 @@ def onboard_by_tick(frames: FrameArrays, accepted: npt.NDArray[np.bool_]) -> dic
                 sent.append((int(v), int(e)))
             previous = tick
         halves.append(half)
-    px, py = halves
-    return {t: [(x, py[t][0][0], py[t][0][1] * 65536 + h) for x, h in px[t]]
-            + [(px[t][0][0], y, turns * 65536 + px[t][0][1]) for y, turns in py[t][1:]]
+    return halves[0], halves[1]
+
+
+def paired(px: Halves, py: Halves) -> dict[int, list[tuple[int, int, int]]]:
+    """The poses at the ticks both halves name: (X raw, Y raw, heading in BAM16 units unwrapped
+    = TURNS * 65536 + HEADING); the first X with the first Y, then each other X and Y sent
+    naming it (a resend: every pose frame is compared, each half with the first of the other
+    kind, as ``host.judge.resent``)."""
+    return {t: [(x, py[t][0][0], py[t][0][1] * BAM + h) for x, h in px[t]]
+            + [(px[t][0][0], y, turns * BAM + px[t][0][1]) for y, turns in py[t][1:]]
             for t in px.keys() & py.keys()}
+
+
+def onboard_by_tick(frames: FrameArrays, accepted: npt.NDArray[np.bool_]) -> dict[int, list[
+        tuple[int, int, int]]]:
+    """The on-board poses of ``frames`` by the tick of the encoder frame they name (``paired``
+    of ``halves_by_tick``): a half whose partner was lost is not in it (``replay_lone``)."""
+    return paired(*halves_by_tick(frames, accepted))
 
 
 def x_pose_ticks(frames: FrameArrays, track: EncoderTrack, decoder: BulkDecoder) -> IntArray:
@@ -91,7 +116,8 @@ def versus_log(
     ``replay_lives`` cut at it), so never mid-drive: its positions are compared as they are,
     whatever the cut's first poses look like (re-anchoring there would absorb an offset)."""
     _, accepted = check_frames(replayed)
-    old, new = onboard_by_tick(log, log_accepted), onboard_by_tick(replayed, accepted)
+    px, py = halves_by_tick(log, log_accepted)
+    old, new, lone = paired(px, py), onboard_by_tick(replayed, accepted), LoneHalves.of(px, py)
     common = np.array(sorted(old.keys() & new.keys()), dtype=np.int64)
     decoder = BulkDecoder(contract.database())
     track = EncoderTrack.of(log, log_accepted, decoder)
@@ -99,17 +125,15 @@ def versus_log(
     holes = recorder_holes(log)
     named = x_pose_ticks(log, track, decoder)
     facts: dict[str, Any] = {"logged": len(named), "log_starts_mid_drive": mid, "holes": holes,
-                             "max_resent_position_diff_m": resent_position_diff_m(old),
-                             "not_compared": {
-                                 "unnamed": int(np.count_nonzero(named < 0)),
-                                 "unpaired": int(np.count_nonzero(
-                                     (named >= 0) & ~np.isin(named, common)))}}
+                             "max_resent_position_diff_m": max(
+                                 resent_position_diff_m(old), lone.resent_lsb * POSITION_LSB_M)}
     if len(common) == 0:
         return {"samples": 0, "identical": 0, "identical_before_gap": 0,
                 "max_position_diff_m": None, "max_position_diff_raw_m": None,
                 "max_heading_diff_rad": None, "before_first_gap": 0,
                 "max_position_diff_before_gap_m": None, "heading_offsets_bam16": [],
-                "max_position_drift_between_gaps_m": None, **facts}
+                "max_position_drift_between_gaps_m": None, **facts,
+                **_lone_facts(named, common, LoneFigures(not_compared=len(lone.tick)))}
     after = np.searchsorted(track.index, [int(h["before"]) for h in holes], "right")
     hole_ends = track.tick[after[after < len(track.tick)]]  # a hole ending the log: none
     turn, anchored, offsets = anchors(common, old, new, hole_ends, mid)
@@ -121,9 +145,14 @@ def versus_log(
     log_xy, replay_xy = (np.array([poses[t][0][:2] for t in common.tolist()], dtype=np.int64)
                          for poses in (old, new))
     gap_ends = np.r_[common[0], ticks[gaps + 1]] if mid else ticks[gaps + 1]
-    drift = drift_between_gaps_m(common, log_xy, replay_xy, gap_ends, turn, anchored) \
-        if replayable(log, log_accepted) else None
-    before_gap = float(position[:before].max()) if before else None
+    drifts = replayable(log, log_accepted)
+    alone = versus_replay(lone, new, Anchoring(
+        common, hole_ends, turn, anchored, gap_ends,
+        log_xy - turned(replay_xy, turn) if drifts else None, replay_xy,
+        None if mid else first_gap))
+    drift = _larger(drift_between_gaps_m(common, log_xy, replay_xy, gap_ends, turn, anchored),
+                    alone.drift_m) if drifts else None
+    before_gap = _larger(float(position[:before].max()) if before else None, alone.before_gap_m)
     judged = [v for v in (before_gap, drift) if v is not None]
     return {
         "samples": len(common),
@@ -131,14 +160,27 @@ def versus_log(
         "identical_before_gap": int(np.count_nonzero(differs[:before] == 0)),
         # the figure the verdict compares (``departures``), not the raw one across a hole
         "max_position_diff_m": max(judged) if judged else None,
-        "max_position_diff_raw_m": None if mid else float(position.max()),
-        "max_heading_diff_rad": float(heading.max()),
+        "max_position_diff_raw_m": None if mid else _larger(float(position.max()), alone.raw_m),
+        "max_heading_diff_rad": _larger(float(heading.max()), alone.heading_rad),
         "before_first_gap": before,
         "max_position_diff_before_gap_m": before_gap,
         "heading_offsets_bam16": offsets,
         "max_position_drift_between_gaps_m": drift,
-        **facts,
+        **facts, **_lone_facts(named, common, alone),
     }
+
+
+def _larger(a: float | None, b: float | None) -> float | None:
+    """The larger of two figures, either None when not measured."""
+    return b if a is None else a if b is None else max(a, b)
+
+
+def _lone_facts(named: IntArray, common: IntArray, alone: LoneFigures) -> dict[str, Any]:
+    """The report's ``lone_halves`` (compared with the replay, and not) and ``not_compared``
+    (the log's ODOM_POSE_X frames compared neither in a pair nor alone)."""
+    return {"lone_halves": {"x": alone.x, "y": alone.y, "not_compared": alone.not_compared},
+            "not_compared": {"unnamed": int(np.count_nonzero(named < 0)),
+                             "unpaired": unpaired(named, common.tolist(), alone)}}
 
 
 Poses3 = dict[int, list[tuple[int, int, int]]]
@@ -243,11 +285,8 @@ def drift_between_gaps_m(
     times the replay's travel since the segment's first tick."""
     if len(common) == 0:
         return 0.0
-    angle = (np.zeros(len(common)) if turn is None else turn * HEADING_LSB_RAD)[:, None]
     loose = np.zeros(len(common), dtype=np.bool_) if anchored is None else anchored
-    x, y = replay_xy[:, :1].astype(np.float64), replay_xy[:, 1:].astype(np.float64)
-    offset = log_xy - np.c_[np.cos(angle) * x - np.sin(angle) * y,
-                            np.sin(angle) * x + np.cos(angle) * y]
+    offset = log_xy - turned(replay_xy, np.zeros(len(common)) if turn is None else turn)
     segment = np.searchsorted(gap_ends, common, side="right")
     first = np.r_[True, segment[1:] != segment[:-1]]  # a segment's first common tick
     start = np.flatnonzero(first)[np.cumsum(first) - 1]
@@ -318,7 +357,7 @@ def compared(vs_log: dict[str, Any]) -> str:
     heading = f"{vs_log['max_heading_diff_rad'] * 1e3:.4f} mrad"
     if before == samples and not vs_log.get("log_starts_mid_drive"):
         return (f"{vs_log['identical']} identical, max difference "
-                f"{vs_log['max_position_diff_m'] * 1e3:.4f} mm, {heading}")
+                f"{vs_log['max_position_diff_m'] * 1e3:.4f} mm, {heading}{_lone_said(vs_log)}")
     parts = []
     if before:
         parts.append(f"{before} up to the log's first gap as they are "
@@ -333,7 +372,17 @@ def compared(vs_log: dict[str, Any]) -> str:
                  "frames on time)")
     anchored = bool(vs_log.get("heading_offsets_bam16"))
     parts.append(f"heading {heading}" + (" less its offset where re-anchored" if anchored else ""))
-    return "; ".join(parts)
+    return "; ".join(parts) + _lone_said(vs_log)
+
+
+def _lone_said(vs_log: dict[str, Any]) -> str:
+    """The lone halves compared (``replay_lone``), in the words of ``compared``: none, nothing."""
+    lone = vs_log.get("lone_halves") or {}
+    x, y = int(lone.get("x", 0)), int(lone.get("y", 0))
+    if not x and not y:
+        return ""
+    return (f"; {x + y} lone pose halves ({x} ODOM_POSE_X, {y} ODOM_POSE_Y: their partner lost) "
+            "compared on what they carry, as the pairs")
 
 
 def not_comparable(vs_log: dict[str, Any]) -> list[str]:
@@ -347,6 +396,11 @@ def not_comparable(vs_log: dict[str, Any]) -> list[str]:
                      f"ODOM_POSE_X frames not compared: {left['unnamed']} name an encoder frame "
                      "the log's E2E-accepted sequence cannot place (late, refused or lost), "
                      f"{left['unpaired']} one the replayed firmware sent no pose for")
+    alone = int((vs_log.get("lone_halves") or {}).get("not_compared", 0))
+    if alone:
+        lines.append(f"{alone} lone pose halves (their partner lost) not compared: the replayed "
+                     "firmware sent no pose for the frame they name, or no pose both halves "
+                     "name anchors their stretch of the log")
     drift = vs_log.get("max_position_drift_between_gaps_m") is not None
     if vs_log.get("log_starts_mid_drive"):
         offset = (vs_log.get("heading_offsets_bam16") or [0])[0] * HEADING_LSB_RAD

@@ -38,6 +38,7 @@ from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.analysis import Tolerance
 from odocan.host.judge.bootnamed import named_start, pose_enc_rows, powerup_poses
 from odocan.host.judge.gapseen import crc_holds
+from odocan.host.judge.powerup import holds_first_cycle
 from odocan.host.judge.reboots import (
     encoder_count_pages,
     page_counted_start,
@@ -142,9 +143,12 @@ def first_power_up(frames: FrameArrays, decoder: BulkDecoder,
     choices = dict(message.get_signal_by_name("STATE").choices or {})
     state = str(choices.get(int(page["STATE"][row]), ""))
     position = int(good[0])
-    start = summary_start(position, 0, state, track.index)
     counted = page_counted_start(position, len(frames), (track.index, track.counter),
                                  encoder_count_pages(frames, decoder))
+    if "COUNTER" in page and not holds_first_cycle(int(page["COUNTER"][row])):
+        # not the boot summary (lost): the firmware powered up a cycle or more before it
+        return None if counted is None or counted <= int(track.index[0]) else (counted, position)
+    start = summary_start(position, 0, state, track.index)
     said = named_start(powerup_poses(frames, decoder),
                        (track.index.astype(np.int64), track.counter.astype(np.int64)), position,
                        float(frames.timestamp_s[position]), pose_enc_rows(frames, decoder))
