@@ -81,16 +81,20 @@ def test_the_live_judge_follows_a_reboot_with_a_boot_time_under_a_delay(tmp_path
     assert right.max_dheading_rad <= HEADING_LSB_RAD, right.max_dheading_rad
 
 
-def test_a_longer_boot_under_a_delay_passes_and_a_tamper_fails(tmp_path: Path) -> None:
+@pytest.mark.parametrize("seed", [1, 2])
+def test_a_longer_boot_under_a_delay_passes_and_a_tamper_fails(seed: int, tmp_path: Path) -> None:
     """A 0.5 s boot: the first count page names the frame the firmware primed on, counted back
     over the frames a fresh E2E check from there takes (``silentboot.fresh_counted_start``).
     Kobuki seed 1 (14 s) FAILed the correct firmware 48.10 mm, 83.87 mrad: the firmware primed
     on COUNTER 10 at 10.50 s; the whole log's check, out of sequence after the delay's reorders,
     refused every encoder frame from 10.36 s to 10.50 s, and the page counted back over the
     frames it took named COUNTER 10 at 10.355 s, a COUNTER lap early (a fresh check from there
-    names it too: the boot summary's frame, which the counts also name, is taken first)."""
+    names it too: the boot summary's frame, which the counts also name, is taken first).
+    Seed 2 FAILed it 59.3 mm: two frames reached the firmware in its first tick (a delay), it
+    primed on the first (COUNTER 8 at 10.495 s), refused the next (COUNTER 10 at 10.50 s, the
+    summary's frame) and every frame after till its first page (ENC_E2E_OK 1)."""
     log, tampered = tmp_path / "drive.log", tmp_path / "t.log"
-    assert _cli("run", "--robot", "kobuki", "--scenario", "random", "--seed", "1",
+    assert _cli("run", "--robot", "kobuki", "--scenario", "random", "--seed", str(seed),
                 "--duration", "14", "--faults", "delay=0.1:15,reboot=10:0.5",
                 "--log", str(log)) == 0
     for stream in ("always", "never"):

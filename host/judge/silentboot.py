@@ -40,7 +40,7 @@ from odocan.host.judge.gapseen import crc_holds
 from odocan.host.judge.primed import counted_start
 from odocan.host.judge.primedon import FRAMES_KEY, WHY_KEY
 from odocan.host.judge.reference import Geometry, integrate, wrap_delta
-from odocan.host.judge.samples import WIRE_COUNTER_BITS, Encoders, Poses
+from odocan.host.judge.samples import WIRE_COUNTER_BITS, Encoders, Poses, contract_cycle_s
 from odocan.host.protocol.busfacts import ENC_COUNTER_MASK as MASK
 from odocan.host.protocol.decode import BulkDecoder
 from odocan.host.protocol.e2e import check_frames
@@ -141,7 +141,12 @@ def fresh_counted_start(encoders: tuple[FrameArrays, npt.NDArray[np.int64]],
     back to it; else ``counted``. ``told``: (``counted``, ``primed.counted_start`` over the
     frames the whole log's check took; ``reboots.summary_start`` over every encoder frame, the
     first encoder frame at or after it taken; the life before's start); ``encoders``: the
-    WHEEL_ENCODERS frames, each with its position in the log.
+    WHEEL_ENCODERS frames, each with its position in the log. The frames of that frame's tick
+    are tried too, latest first (less than a cycle before it): a delay that let two frames
+    reach the firmware in one tick made it prime on the first it drained (kobuki ``--seed 2
+    --faults delay=0.1:15,reboot=10:0.5``: COUNTER 8 at 10.495 s, COUNTER 10 at 10.50 s
+    refused, and every frame after till its first page, ENC_E2E_OK 1; 59.3 mm off from the
+    frame the whole log's check named).
 
     A delay that reordered a frame of the boot made the whole log's check refuse the frames
     after it until it resynchronised, while the new firmware, booted after the reorder, took
@@ -158,10 +163,15 @@ def fresh_counted_start(encoders: tuple[FrameArrays, npt.NDArray[np.int64]],
     k, before = int(np.searchsorted(at, summary)), int(np.searchsorted(at, page))
     if counts[0] <= 0 or k >= before:
         return counted
-    fresh = taken_fresh(window.select(slice(k, before)), decoder)
-    counter = window.data[k:before, 1].astype(np.int64) & MASK
-    named = counted_start((at[k:before][fresh], counter[fresh]), page, *counts)
-    return int(at[k]) if fresh[0] and named == int(at[k]) else counted
+    tick_s = window.timestamp_s[k] - (contract_cycle_s(decoder, "WHEEL_ENCODERS") or 0.0)
+    counter = window.data[:before, 1].astype(np.int64) & MASK
+    while k >= 0 and window.timestamp_s[k] > tick_s:  # its first tick's frames, latest first
+        fresh = taken_fresh(window.select(slice(k, before)), decoder)
+        named = counted_start((at[k:before][fresh], counter[k:][fresh]), page, *counts)
+        if fresh[0] and named == int(at[k]):
+            return int(at[k])
+        k -= 1
+    return counted
 
 
 def firmware_frames(frames: FrameArrays, decoder: BulkDecoder) -> npt.NDArray[np.intp]:
