@@ -68,7 +68,12 @@ def test_a_reboot_with_a_boot_time_under_a_delay_passes_and_a_tamper_fails(
     "Cause (watched): at the boot summary (10.301 s) it starts the new life on the latest "
     "encoder frame its own E2E sequence, run on across the reboot, accepted (tracking.power_up): "
     "COUNTER 2 at 10.275 s, the next it took COUNTER 8 at 10.32 s; the new firmware, its E2E "
-    "fresh, primed on COUNTER 6 at 10.30 s, one of the frames that sequence refused"))
+    "fresh, primed on COUNTER 6 at 10.30 s, one of the frames that sequence refused; its "
+    "window (livewindow) holds only the frames that sequence took, so neither the page's count "
+    "(livewindow.primed_at) nor a fresh check can name it. A 0.5 s boot likewise: seed 1 (14 s) "
+    "32.65 mm, seed 2 (14 s) 44.52 mm, pmir seed 1 (14 s) 30.67 mm, which the whole-log and "
+    "streamed judges now PASS (silentboot.fresh_counted_start: the boot summary's tick's "
+    "frames, each E2E-checked fresh to the first count page)"))
 def test_the_live_judge_follows_a_reboot_with_a_boot_time_under_a_delay(tmp_path: Path) -> None:
     from odocan.host.judge.analysis import HEADING_LSB_RAD, POSITION_LSB_M
     from tests.test_live_reboot import monitor_of
