@@ -78,7 +78,7 @@ from odocan.host.judge.liveconfig import config_text
 from odocan.host.judge.navrestart import second_evidence
 from odocan.host.judge.primed import counted_start
 from odocan.host.judge.samples import ENC_E2E_PAGE, AnalysisError, contract_cycle_s
-from odocan.host.judge.silentboot import silent_start
+from odocan.host.judge.silentboot import fresh_counted_start, silent_start
 from odocan.host.judge.sources import SourceWatch, two_sources_text
 from odocan.host.judge.stallfirst import merged_first
 from odocan.host.judge.stalls import silent_between
@@ -121,7 +121,10 @@ def split_lives(frames: FrameArrays, decoder: BulkDecoder) -> list[Life]:
     for (position, uptime_s, state, _), limit in zip(boots, limits, strict=True):
         start = summary_start(position, uptime_s, state, encoders)
         counted = (None if stalled_first(frames, decoder, encoders, position, limit)
-                   else page_counted_start(position, limit, (encoders, counters), pages))
+                   else page_counted_start(position, limit, (encoders, counters), pages, (
+                       (frames.select(rows["index"]), rows["index"].astype(np.int64)),
+                       decoder, (starts[-1] if starts else 0,
+                                 summary_start(position, uptime_s, state, rows["index"])))))
         said = (named_start(poses, (encoders.astype(np.int64), counters), position,
                             float(frames.timestamp_s[position]), after) if uptime_s == 0 else None)
         named = None if said is None else said[0]
@@ -190,15 +193,23 @@ def summary_start(position: int, uptime_s: int, state: str, encoders: npt.NDArra
 def page_counted_start(
     position: int, limit: int, encoders: tuple[npt.NDArray[np.intp], npt.NDArray[np.int64]],
     pages: tuple[npt.NDArray[np.int64], ...],
+    fresh: tuple[tuple[FrameArrays, npt.NDArray[np.int64]], BulkDecoder, tuple[int, int]]
+    | None = None,
 ) -> int | None:
     """The encoder frame the firmware primed on, from its first page of WHEEL_ENCODERS E2E
     counts after the summary at ``position`` (and before ``limit``, the next boot):
-    ``counted_start``. None without such a page."""
+    ``counted_start``; with ``fresh`` (every WHEEL_ENCODERS frame and its position, the
+    decoder, the life before's start and ``summary_start`` over every WHEEL_ENCODERS frame),
+    its E2E check fresh at that frame as the new firmware's was
+    (``silentboot.fresh_counted_start``). None without such a page."""
     where, ok, lost = pages
     after = int(np.searchsorted(where, position))
     if after == len(where) or where[after] >= limit:
         return None
-    return counted_start(encoders, int(where[after]), int(ok[after]), int(lost[after]))
+    page, counts = int(where[after]), (int(ok[after]), int(lost[after]))
+    counted = counted_start(encoders, page, *counts)
+    return counted if fresh is None else fresh_counted_start(
+        fresh[0], fresh[1], page, counts, (counted, fresh[2][1], fresh[2][0]))
 
 
 def encoder_count_pages(

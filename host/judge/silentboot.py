@@ -37,9 +37,11 @@ import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.gapseen import crc_holds
+from odocan.host.judge.primed import counted_start
 from odocan.host.judge.primedon import FRAMES_KEY, WHY_KEY
 from odocan.host.judge.reference import Geometry, integrate, wrap_delta
-from odocan.host.judge.samples import WIRE_COUNTER_BITS, Encoders, Poses
+from odocan.host.judge.samples import WIRE_COUNTER_BITS, Encoders, Poses, contract_cycle_s
+from odocan.host.protocol.busfacts import ENC_COUNTER_MASK as MASK
 from odocan.host.protocol.decode import BulkDecoder
 from odocan.host.protocol.e2e import check_frames
 from odocan.sim.robot import RobotProfile
@@ -105,8 +107,7 @@ def primed_in_silence(frames: FrameArrays, decoder: BulkDecoder, enc: Encoders, 
     worst: list[tuple[float, int]] = []
     for k in places:
         at = int(rows["index"][k])
-        window = frames.select(np.arange(at, named + 1))
-        _, fresh = check_frames(window, decoder.db)
+        fresh = taken_fresh(frames.select(np.arange(at, named + 1)), decoder)
         taken = np.flatnonzero(fresh[rows["index"][places[k:]] - at])
         if not len(taken) or taken[0] != 0 or not fresh[-1]:
             continue  # the frame refused, or the named frame not taken, from there
@@ -123,6 +124,54 @@ def primed_in_silence(frames: FrameArrays, decoder: BulkDecoder, enc: Encoders, 
     order = [k for _, k in sorted(worst)[:MOST_TRIED]]
     return [{"kind": KIND, "t_s": t_s, WHY_KEY: WHY,
              FRAMES_KEY: [[k, [0.0, 0.0, 0.0], int(rows["index"][k])] for k in order]}]
+
+
+def taken_fresh(window: FrameArrays, decoder: BulkDecoder) -> npt.NDArray[np.bool_]:
+    """Which of ``window``'s frames a firmware whose E2E receiver starts fresh at its first
+    frame accepts (the check run over ``window`` alone: a new firmware's, booted there)."""
+    return check_frames(window, decoder.db)[1]
+
+
+def fresh_counted_start(encoders: tuple[FrameArrays, npt.NDArray[np.int64]],
+                        decoder: BulkDecoder, page: int, counts: tuple[int, int],
+                        told: tuple[int | None, int, int]) -> int | None:
+    """The encoder frame the firmware primed on from its first count page at ``page``
+    (``counts``: ENC_E2E_OK, ENC_E2E_LOST): the frame its boot summary's rule names when the
+    page, over the frames an E2E check fresh there takes (as the new firmware's was), counts
+    back to it; else ``counted``. ``told``: (``counted``, ``primed.counted_start`` over the
+    frames the whole log's check took; ``reboots.summary_start`` over every encoder frame, the
+    first encoder frame at or after it taken; the life before's start); ``encoders``: the
+    WHEEL_ENCODERS frames, each with its position in the log. The frames of that frame's tick
+    are tried too, latest first (less than a cycle before it): a delay that let two frames
+    reach the firmware in one tick made it prime on the first it drained (kobuki ``--seed 2
+    --faults delay=0.1:15,reboot=10:0.5``: COUNTER 8 at 10.495 s, COUNTER 10 at 10.50 s
+    refused, and every frame after till its first page, ENC_E2E_OK 1; 59.3 mm off from the
+    frame the whole log's check named).
+
+    A delay that reordered a frame of the boot made the whole log's check refuse the frames
+    after it until it resynchronised, while the new firmware, booted after the reorder, took
+    them and primed on one: counted back over the frames the check took, the page named a frame
+    a COUNTER lap early, before the boot (a fresh check from there names it too), and the
+    correct firmware FAILed 48.10 mm off (issue #11, kobuki ``--seed 1 --faults
+    delay=0.1:15,reboot=10:0.5``). The summary's frame only: a recorder's late stamps move it
+    by a few frames, which the counts then do not name, and a frame the counts name from a
+    later one is no proof (after reorders a page of few counts names frames near it by chance:
+    kobuki ``--seed 2 --faults delay=0.1:15,reboot=10:0.3``, ENC_E2E_OK 2 and ENC_E2E_LOST 4,
+    named one the correct firmware FAILed from by 22.5 mm; ``silentboot`` judges that life)."""
+    counted, summary, lo = told
+    window, at = encoders[0].select(encoders[1] > lo), encoders[1][encoders[1] > lo]
+    k, before = int(np.searchsorted(at, summary)), int(np.searchsorted(at, page))
+    if counts[0] <= 0 or k >= before:
+        return counted
+    tick_s = window.timestamp_s[k] - (contract_cycle_s(decoder, "WHEEL_ENCODERS") or 0.0)
+    counter = window.data[:before, 1].astype(np.int64) & MASK
+    while k >= 0 and window.timestamp_s[k] > tick_s:  # its first tick's frames, latest first
+        fresh = taken_fresh(window.select(slice(k, before)), decoder)
+        named = counted_start((at[k:before][fresh], counter[k:][fresh]), page, *counts)
+        if fresh[0] and named == int(at[k]):
+            return int(at[k])
+        k -= 1
+    return counted
 
 
 def firmware_frames(frames: FrameArrays, decoder: BulkDecoder) -> npt.NDArray[np.intp]:

@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from odocan.host.io.frames import concat_frames, empty_frames
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.bootnamed import (
     PowerUpPoses,
@@ -54,9 +55,9 @@ from odocan.host.judge.latefall import continues_twice, fell_late
 from odocan.host.judge.livestreams import pose_told_first
 from odocan.host.judge.navrestart import Carried, second_evidence
 from odocan.host.judge.primed import counted_start
-from odocan.host.judge.reboots import SUMMARY_PAGE, mark_two_sources
+from odocan.host.judge.reboots import SUMMARY_PAGE, mark_two_sources, summary_start
 from odocan.host.judge.samples import ENC_E2E_PAGE, AnalysisError, contract_cycle_s
-from odocan.host.judge.silentboot import quiet_start
+from odocan.host.judge.silentboot import fresh_counted_start, quiet_start
 from odocan.host.judge.sources import SourceWatch, two_sources_text
 from odocan.host.judge.stalls import silent_between, stalled_before
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
@@ -85,6 +86,7 @@ class _Boot:
     t_s: float
     before_s: int
     start: int  # from the summary (``reboots.summary_start``)
+    state: str = ""  # its STATE
     named: int | None = None  # named by its power-up pose (``bootnamed.named_start``)
     naming: tuple[int, int] | None = None  # ... and its ENC_COUNTER, until the first pose after
     # the summary tells whether it counts on from it (``bootnamed.first_after``)
@@ -112,6 +114,9 @@ class StreamLives:
         default_factory=lambda: np.zeros(0, dtype=np.int64))
     _enc_t: npt.NDArray[np.float64] = field(  # the bus time of each of ``_encoders``
         default_factory=lambda: np.zeros(0, dtype=np.float64))
+    _every: tuple[FrameArrays, npt.NDArray[np.int64]] = field(  # every encoder frame (not
+        default_factory=lambda: (empty_frames(), np.zeros(0, np.int64)))  # only accepted), its
+    # position (``silentboot.fresh_counted_start``)
     _alive: tuple[npt.NDArray[np.int64], npt.NDArray[np.float64]] = field(  # positions, bus
         default_factory=lambda: (np.zeros(0, np.int64), np.zeros(0)))  # times of the frames
     # that say the firmware ran (``reboots.stalled_first``: ODOM_STATUS whose CRC holds, poses)
@@ -147,6 +152,8 @@ class StreamLives:
             (self._encoders, rows["index"][keep].astype(np.int64) + self._offset))
         self._counters = np.concatenate((self._counters, rows["COUNTER"][keep].astype(np.int64)))
         self._enc_t = np.concatenate((self._enc_t, rows["timestamp_s"][keep].astype(np.float64)))
+        self._every = (concat_frames([self._every[0], chunk.select(rows["index"])]),
+                       np.concatenate((self._every[1], rows["index"] + self._offset)))
         self._powerups = carried_on(self._powerups,
                                     powerup_poses(chunk, self.decoder, self._offset))
         falls, twist = second_evidence(chunk, self.decoder, TWIST_COUNTERS, self._falls[1])
@@ -163,6 +170,8 @@ class StreamLives:
         self._encoders = self._encoders[-ENCODERS_KEPT:]
         self._counters = self._counters[-ENCODERS_KEPT:]
         self._enc_t = self._enc_t[-ENCODERS_KEPT:]
+        self._every = (self._every[0].select(slice(-ENCODERS_KEPT, None)),
+                       self._every[1][-ENCODERS_KEPT:])
         self._alive = (self._alive[0][-ENCODERS_KEPT:], self._alive[1][-ENCODERS_KEPT:])
         self._offset += len(chunk)
 
@@ -259,7 +268,10 @@ class StreamLives:
             return
         if page is not None:
             boot.paged, boot.page_at = True, page[0]
-            boot.counted = counted_start((self._encoders, self._counters), page[0], *page[1])
+            boot.counted = fresh_counted_start(self._every, self.decoder, page[0], page[1], (
+                counted_start((self._encoders, self._counters), page[0], *page[1]),
+                summary_start(boot.position, boot.uptime_s, boot.state, self._every[1]),
+                self._boots[-1][1] if self._boots else 0))
             if boot.pose is None or boot.pose[0] > page[0]:  # whether it stalled before
                 return  # its first pose: told at that pose, unless a reboot comes first
         self._waiting = None
@@ -420,7 +432,7 @@ class StreamLives:
         start = int(earlier[-1]) if uptime_s == 0 and name != "INIT" and len(earlier) else at
         named = (named_start(self._powerups, (self._encoders, self._counters), at, t_s)
                  if uptime_s == 0 else None)
-        boot = _Boot(at, uptime_s, t_s, before, start, naming=named)
+        boot = _Boot(at, uptime_s, t_s, before, start, name, naming=named)
         self._tracking.append(boot)
         self._naming += [boot] if named is not None else []
         return boot
