@@ -103,7 +103,8 @@ class LiveSeen:
         counts); True when a FRAME_TOTALS page was kept: ``proven`` may prove more (a window
         is proven only once the first FRAME_TOTALS page after its last page is kept)."""
         keeper = self.keeper
-        keeper.status((page, counter, t_s, crc_ok, self._enc_count, self._last_enc_s), value)
+        keeper.status((page, counter, t_s, crc_ok, self._enc_count, self._last_enc_s, -1),
+                      value)  # encoder frames refused not counted: no proof by checked
         grew = len(keeper.totals) > self._kept[1]  # (a window ends in one)
         return self._kept_more() and grew
 
