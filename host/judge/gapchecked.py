@@ -8,38 +8,40 @@ few frames) left every gap of such a drive its re-placement allowance: on kobuki
 ``delay=0.5:100,busoff=1:1`` the bus-off's 1 s silence kept ~850 mm, and a pose raised 10 mm
 from its end PASSed.
 
-The evidence (gapseen's pages p, q of one life: each made in its tick; lo, hi as gapseen
-defines them, here among every encoder frame logged, those the host's E2E check refused too:
-``raw_lo``, ``raw_hi``). Every frame the firmware's controller received (CAN delivers a frame
-on the wire to every node) went to its mailbox or was dropped (OVERFLOWED_FRAMES counts it);
-each WHEEL_ENCODERS frame taken from the mailbox that is 8 bytes long went through the E2E check,
-which counts it once, as accepted (ENC_E2E_OK: OK or OKSOMELOST), REPEATED, WRONG_SEQ or
-CRC_ERROR; one of another length counts in REJECTED_FRAMES only. REJECTED_FRAMES counts every
-E2E refusal of every receiver, every frame of a wrong length and every implausible step.
+The evidence: gapseen's pages p, q of one life, each made in its tick (``PageKeeper``), and lo,
+hi as gapseen defines them, also counted among every 8-byte WHEEL_ENCODERS frame logged, those
+the host's E2E check refused too (``raw_lo``, ``raw_hi``). Every frame on the wire reaches the
+firmware's controller (CAN delivers it to every node), which puts it in the mailbox or drops it
+(OVERFLOWED_FRAMES counts it); each 8-byte WHEEL_ENCODERS frame taken from the mailbox goes
+through the E2E check, which counts it once: accepted (ENC_E2E_OK, OK or OKSOMELOST), REPEATED,
+WRONG_SEQ or CRC_ERROR (a frame of another length carries nothing: REJECTED_FRAMES alone counts
+it). REJECTED_FRAMES counts every E2E refusal too.
 
-* The FRAME_TOTALS pages a (the last sent before frame lo(p), made before p) and b (the first
-  sent at or after q) are joined by pages each less than ``WRAP_SAFE_S`` after the one before:
-  their u16 counts' growths are exact (``pagechain``). OVERFLOWED_FRAMES did not grow: no frame
-  dropped from p to q. REJECTED_FRAMES grew by r < 256.
-* The encoder refusals' growth from p to q (each u8 count's difference mod 256) is exact: each
-  true growth is at most r < 256 (each refusal is counted in REJECTED too, and a to b holds p
-  to q). Their sum equals r: no other refusal (no frame of a wrong length, nothing implausible,
-  no other receiver's refusal) from a to b.
+* The FRAME_TOTALS pages a (the last sent before frame lo(p): made before p) and b (the first
+  sent at or after q) are joined by kept pages each less than ``WRAP_SAFE_S`` after the one
+  before: their u16 counts' growths are exact (``pagechain``). OVERFLOWED_FRAMES did not grow:
+  no frame dropped from p to q. REJECTED_FRAMES grew by r < 256.
+* The three u8 refusal counts' growths from p to q, each mod 256, are exact: each true growth is
+  at most r (each refusal counts in REJECTED too, and a .. b holds p .. q) < 256. (The brief's
+  stricter rule, r equal to their sum, never held on a delayed drive: a .. b reaches beyond p ..
+  q, where the delay goes on refusing frames. A refusal of another kind changes no encoder frame
+  the firmware took: an implausible step is one of the log's frames accepted by E2E and not
+  integrated, which the judge's re-prime model follows as anywhere else.)
 * N, ENC_E2E_OK's growth (one chain: exact) plus the refusals', counts every encoder frame the
   firmware received from p to q. Every frame logged from raw_hi(p) (after p was made) to
-  raw_lo(q) (before q was made) was on the wire then, so among them: N >= raw_lo(q) -
-  raw_hi(p) + 1. If N equals it, the firmware received exactly those frames from p to q, none
-  the log lacks. If ENC_E2E_OK's growth equals the log's accepted frames there (lo(q) - hi(p)
-  + 1), it accepted as many as the host's E2E check, which runs the same check on the same
-  frames (if its choice differed the judge could only FAIL a correct firmware, never PASS a
-  wrong one: the proof withdraws allowances, it grants none).
+  raw_lo(q) (before q was made) was on the wire then, so N >= raw_lo(q) - raw_hi(p) + 1. If N
+  equals it the firmware received those frames and no other: none the log lacks. ENC_E2E_OK's
+  growth must equal the frames the host accepted there (lo(q) - hi(p) + 1): the host's E2E
+  check is the firmware's on the same frames. Where it chose otherwise the proof could only make
+  the judge FAIL a correct firmware, never PASS a wrong one: it withdraws allowances.
 
-A frame near a page's tick (on the wire between the summary and its page, or one the firmware
-took only in the next tick) lies outside raw_hi(p) .. raw_lo(q) or makes N differ: the window
+A frame near a page's tick (on the wire between the summary and its page, or taken by the
+firmware only at the next tick) lies outside raw_hi(p) .. raw_lo(q) or makes N differ: the window
 is not proven, never wrongly proven. A frame the log lacks that the firmware received makes N
-exceed the count; one dropped from the mailbox moves OVERFLOWED; a refusal of another kind makes
-r exceed the E2E refusals: each keeps the allowance. Such windows join gapseen's others
-(``Seen.same``, ``Seen.counted``): a gap inside took no frame the log lacks.
+exceed the count, refused or not; one dropped from the mailbox moves OVERFLOWED; 256 refusals
+wrap a u8 count but not REJECTED: each keeps the allowance (``tests/test_gap_checked.py``). The
+windows proven join gapseen's others (``Seen.same``, ``Seen.counted``: ``took_across``): a gap
+inside took no frame the log lacks, whatever the COUNTER did (a re-prime), as by OK.
 """
 
 from __future__ import annotations

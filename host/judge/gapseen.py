@@ -63,7 +63,8 @@ REJECTED counts (the window is not quiet). Every other way to blame a correct fi
 allowance: a page missing, held back or sent again (no evidence); a mailbox overflow or a
 refusal (a stall's backlog, a late frame's WRONG_SEQUENCE, a forgery, an implausible step); a
 counter restart re-primed in the stretch (a restarted COUNTER can make OKSOMELOST count frames
-that never existed: ``Seen.gap_missed`` and ``took_all`` leave such stretches out); a gap
+that never existed: ``Seen.gap_missed`` and ``took_all`` leave such stretches out, but for
+stretches proven by counting the frames taken, by OK or by checked: ``took_across``); a gap
 straddling a page (its frames before lo or after hi are not proven); a reboot (each life has
 its own pages: ``host.judge.reboots``); a sender that stalled (the sender's sequence then
 counts periods it did not send: M too large, never too small). The counts can only prove
