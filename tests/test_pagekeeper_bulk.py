@@ -26,39 +26,44 @@ from odocan.host.judge.pagekeeper import (
 
 CYCLE_S = 0.01  # WHEEL_ENCODERS' cycle
 
-Frame = tuple[Status, tuple[int, int] | None]
+Frame = tuple[Status, tuple[int, ...] | None]
 
 
 @st.composite
 def streams(draw: st.DrawFn) -> list[Frame]:
     """Status frames in bus order with their page's counts (None: not a counted page)."""
     frames: list[Frame] = []
-    t_s, counter, before, last_s = 0.0, 0, 0, -1.0
+    t_s, counter, before, last_s, raw = 0.0, 0, 0, -1.0, draw(st.sampled_from([-1, 0]))
     for _ in range(draw(st.integers(0, 60))):
         page = draw(st.sampled_from([0, 0, 0, LOST_PAGE, TOTALS_PAGE, 3, 6]))
         t_s += draw(st.sampled_from([0.0, 0.001, 0.004, 0.006, 0.03, 0.1, 0.1, 0.25]))
         counter = (counter + draw(st.sampled_from([1, 1, 1, 2, 0]))) & 0xF
         if draw(st.booleans()):
-            before += draw(st.integers(0, 12))
+            grew = draw(st.integers(0, 12))
+            before, raw = before + grew, raw if raw < 0 else raw + grew + draw(st.integers(0, 3))
             last_s = t_s - draw(st.sampled_from([0.0, 0.002, 0.009]))
         crc_ok = draw(st.integers(0, 9)) > 0
-        counts = (draw(st.integers(0, 70_000)), draw(st.integers(0, 300)))
+        counts: tuple[int, ...] = (draw(st.integers(0, 70_000)), draw(st.integers(0, 300)))
+        if page == LOST_PAGE and draw(st.booleans()):  # its refusals (gapchecked) decoded
+            counts += (draw(st.integers(0, 0xFFFFFF)),)
         counted = page in (LOST_PAGE, TOTALS_PAGE) and draw(st.integers(0, 9)) > 0
-        frames.append(((page, counter, t_s, crc_ok, before, last_s),
+        frames.append(((page, counter, t_s, crc_ok, before, last_s, raw),
                        counts if counted else None))
     return frames
 
 
 def _rows(frames: list[Frame]) -> StatusRows:
-    columns = list(zip(*(f for f, _ in frames), strict=True)) or [()] * 6
+    columns = list(zip(*(f for f, _ in frames), strict=True)) or [()] * 7
     counts = [v or (0, 0) for _, v in frames]
     return StatusRows(
         np.array(columns[0], dtype=np.int64), np.array(columns[1], dtype=np.int64),
         np.array(columns[2], dtype=np.float64), np.array(columns[3], dtype=bool),
         np.array(columns[4], dtype=np.int64), np.array(columns[5], dtype=np.float64),
-        np.array([a for a, _ in counts], dtype=np.int64),
-        np.array([b for _, b in counts], dtype=np.int64),
-        np.array([v is not None for _, v in frames], dtype=bool))
+        np.array([v[0] for v in counts], dtype=np.int64),
+        np.array([v[1] for v in counts], dtype=np.int64),
+        np.array([v is not None for _, v in frames], dtype=bool),
+        np.array(columns[6], dtype=np.int64),
+        np.array([v[2] if len(v) > 2 else -1 for v in counts], dtype=np.int64))
 
 
 def _state(keeper: PageKeeper) -> tuple[object, ...]:
@@ -92,8 +97,9 @@ def test_the_streams_keep_pages_of_both_kinds() -> None:
     frames: list[Frame] = []
     for tick in range(12):  # a summary, its page 2 ms after
         t_s, page = 0.1 * tick, (TOTALS_PAGE, LOST_PAGE)[tick % 2]
-        frames += [((0, 2 * tick & 0xF, t_s, True, 10 * tick, t_s), None),
-                   ((page, 2 * tick + 1 & 0xF, t_s + 0.002, True, 10 * tick, t_s), (tick, 1))]
+        frames += [((0, 2 * tick & 0xF, t_s, True, 10 * tick, t_s, 11 * tick), None),
+                   ((page, 2 * tick + 1 & 0xF, t_s + 0.002, True, 10 * tick, t_s, 11 * tick),
+                    (tick, 1, tick))]
     keeper = PageKeeper(CYCLE_S)
     statuses(keeper, _rows(frames))
     keeper.keep_pending(True)

@@ -43,7 +43,11 @@ them, W the sender's frames in (S_p, S_q], F those the firmware accepted, L thos
   gaps into frames lo(p) + 1 .. hi(q)), is at least those of W. If g >= M > 0: M <= g <= G <=
   |W - F| <= M, all equal: every missing frame between lo(p) and hi(q) is in W and was not
   accepted, and again on W the firmware accepted exactly L.
-* Windows proven either way whose pages overlap or meet join (their W's are contiguous): on
+* By checked (``host.judge.gapchecked``): refusals allowed, when the firmware's E2E counts
+  (accepted and refused) grew by exactly the log's encoder frames between the pages, nothing
+  dropped and nothing refused but by the encoder's E2E check: on W it received exactly the
+  log's frames (a delay's reordering refuses a frame every few: no window is quiet).
+* Windows proven any way whose pages overlap or meet join (their W's are contiguous): on
   the union the firmware accepted exactly the log's frames, surely for the log's frames from
   hi of the first page to lo of the last (``Seen.same``); the gaps into frames lo(p) + 1 ..
   hi(q) of a window proven by LOST were missed whole (``Seen.missed``).
@@ -59,7 +63,8 @@ REJECTED counts (the window is not quiet). Every other way to blame a correct fi
 allowance: a page missing, held back or sent again (no evidence); a mailbox overflow or a
 refusal (a stall's backlog, a late frame's WRONG_SEQUENCE, a forgery, an implausible step); a
 counter restart re-primed in the stretch (a restarted COUNTER can make OKSOMELOST count frames
-that never existed: ``Seen.gap_missed`` and ``took_all`` leave such stretches out); a gap
+that never existed: ``Seen.gap_missed`` and ``took_all`` leave such stretches out, but for
+stretches proven by counting the frames taken, by OK or by checked: ``took_across``); a gap
 straddling a page (its frames before lo or after hi are not proven); a reboot (each life has
 its own pages: ``host.judge.reboots``); a sender that stalled (the sender's sequence then
 counts periods it did not send: M too large, never too small). The counts can only prove
@@ -76,6 +81,7 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
+from odocan.host.judge.gapchecked import REFUSED, UNKNOWN, by_checked, packed_rows
 from odocan.host.judge.gapfill import (
     NO_ANCHORS,
     Anchors,
@@ -116,6 +122,9 @@ class LostPages:
     sent_s: FloatArray  # its bus time (s)
     ok_u: IntArray  # ENC_E2E_OK unwrapped along its chain (``pagechain.chained_ok``)
     chain: IntArray  # the chain's number
+    raw_lo: IntArray  # lo and hi among every encoder frame logged, refused ones too
+    raw_hi: IntArray
+    refused: IntArray  # the E2E refusal counts packed (``gapchecked.packed``; -1: unknown)
 
 
 @dataclass(frozen=True)
@@ -160,9 +169,10 @@ class Seen:
 
     def gap_missed(self, frame: int, reprimed: frozenset[int] = frozenset()) -> bool:
         """Whether the firmware missed every frame of the gap into encoder ``frame`` (no
-        counter restart re-primed in the span that proves it: ``reprimed``)."""
-        return any(lo < frame <= hi and _clear(lo, hi, reprimed)
-                   for lo, hi in self.missed + self.same)
+        counter restart re-primed in the span that proves it, ``reprimed``, unless its count
+        of the frames taken proves it: ``took_across``)."""
+        return self.took_across(frame) or any(lo < frame <= hi and _clear(lo, hi, reprimed)
+                                              for lo, hi in self.missed + self.same)
 
     def took_all(self, first: int, last: int, reprimed: frozenset[int] = frozenset()) -> bool:
         """Whether the firmware took exactly the log's frames ``first`` .. ``last``."""
@@ -200,6 +210,7 @@ def seen_by_pages(pages: LostPages, totals: TotalsPages, gap_frames: IntArray,
     sure = pages.lo[j] - pages.hi[i] + 1  # the log's frames surely among those counted
     exact = pages.chain[i] == pages.chain[j]  # OK's growth exact (``pagechain``)
     by_ok = calm & exact & (sure > 0) & (pages.ok_u[j] - pages.ok_u[i] <= sure)
+    by_ok |= by_checked(pages, totals, i, j)  # OK's growth counts the log's frames too
     missed = list(zip(lo[by_lost].tolist(), hi[by_lost].tolist(), strict=True))
     windows = list(zip(i[by_lost | by_ok].tolist(), j[by_lost | by_ok].tolist(), strict=True))
     counted = list(zip(i[by_ok].tolist(), j[by_ok].tolist(), strict=True))
@@ -238,7 +249,9 @@ def with_boot(pages: LostPages, totals: TotalsPages, first_s: float, boot_s: flo
          int(totals.breaks[0])), boot_s)]
     return (LostPages(np.r_[zero, pages.lo], np.r_[[first_s], pages.lo_s], np.r_[zero, pages.hi],
                       np.r_[zero, pages.ok], np.r_[zero, pages.lost], np.r_[now, pages.sent_s],
-                      np.r_[[ok_u], pages.ok_u], np.r_[[chain], pages.chain]),
+                      np.r_[[ok_u], pages.ok_u], np.r_[[chain], pages.chain],
+                      np.r_[zero, pages.raw_lo], np.r_[zero, pages.raw_hi],
+                      np.r_[[UNKNOWN], pages.refused]),
             TotalsPages(np.r_[now, totals.sent_s], np.r_[zero, totals.rejected],
                         np.r_[zero, totals.overflowed], np.r_[breaks, totals.breaks]))
 
@@ -250,9 +263,9 @@ def seen_of(pages: list[Page], totals: list[Totals], gaps: list[tuple[int, int]]
     if not pages:
         return NOTHING
     col = list(zip(*pages, strict=True))
-    ints = [np.array(col[k], dtype=np.int64) for k in (0, 2, 3, 4, 6, 7)]
+    ints = [np.array(col[k], dtype=np.int64) for k in (0, 2, 3, 4, 6, 7, 8, 9, 10)]
     lost = LostPages(ints[0], np.array(col[1], dtype=np.float64), ints[1], ints[2], ints[3],
-                     np.array(col[5], dtype=np.float64), ints[4], ints[5])
+                     np.array(col[5], dtype=np.float64), *ints[4:])
     tcol = list(zip(*totals, strict=True)) if totals else [(), (), (), ()]
     counts = TotalsPages(np.array(tcol[0], dtype=np.float64), np.array(tcol[1], dtype=np.int64),
                          np.array(tcol[2], dtype=np.int64), np.array(tcol[3], dtype=np.int64))
@@ -273,6 +286,7 @@ class PageEvidence:
     first_s: float | None = None  # the first encoder frame's time
     keeper: PageKeeper = field(default_factory=PageKeeper)
     _enc_count: int = 0  # encoder frames fed
+    _raw_count: int = 0  # encoder frames fed, those the host's E2E check refused too
     _offset: int = 0  # frames fed
     _last_seq: int | None = None
     _last_enc_s: float = -math.inf
@@ -297,9 +311,11 @@ class PageEvidence:
         self._anchors = recent_anchors(self._anchors, enc)
         self._add_gaps(enc)
         self._add_holes(chunk, enc)
+        raw = self._raw_rows(chunk)
         if self._usable:
-            self._add_status(chunk, enc)
+            self._add_status(chunk, enc, raw)
         self._enc_count += len(enc.seq)
+        self._raw_count += len(raw)
         self._offset += len(chunk)
         if len(enc.seq):
             self._last_enc_s = float(enc.timestamp_s[-1])
@@ -356,7 +372,14 @@ class PageEvidence:
                            for i in k[step[k] > LONG_GAP_FRAMES].tolist())
         self._last_seq = int(enc.seq[-1])
 
-    def _add_status(self, chunk: FrameArrays, enc: Encoders) -> None:
+    def _raw_rows(self, chunk: FrameArrays) -> IntArray:
+        """The chunk's WHEEL_ENCODERS frames (8 bytes), refused ones too (``gapchecked``)."""
+        try:
+            return np.asarray(self.decoder.select(chunk, "WHEEL_ENCODERS"), dtype=np.int64)
+        except (DecodeError, KeyError):
+            return np.zeros(0, dtype=np.int64)
+
+    def _add_status(self, chunk: FrameArrays, enc: Encoders, raw: IntArray) -> None:
         """The chunk's status frames, each to the ``PageKeeper`` with its page's counts."""
         try:
             lost = self.decoder.decode_page(chunk, "ODOM_STATUS", LOST_PAGE)
@@ -376,6 +399,11 @@ class PageEvidence:
                           if len(enc.seq) else 0.0, self._last_enc_s)
         counts = np.zeros((2, len(rows)), dtype=np.int64)
         counted = np.zeros(len(rows), dtype=bool)
+        refused = np.full(len(rows), UNKNOWN, dtype=np.int64)
+        if set(REFUSED) <= lost.keys():
+            at = np.searchsorted(rows, np.asarray(lost["index"], dtype=np.int64))
+            refused[at] = packed_rows(*(np.asarray(lost[name]).astype(np.int64)
+                                        for name in REFUSED))
         for page, names in ((lost, ("ENC_E2E_OK", "ENC_E2E_LOST")),
                             (totals, ("REJECTED_FRAMES", "OVERFLOWED_FRAMES"))):
             at = np.searchsorted(rows, np.asarray(page["index"], dtype=np.int64))  # status rows
@@ -385,7 +413,7 @@ class PageEvidence:
         statuses(self.keeper, StatusRows(
             np.asarray(head["PAGE"], dtype=np.int64), np.asarray(head["COUNTER"], dtype=np.int64),
             chunk.timestamp_s[rows], crc, self._enc_count + before, last_s, counts[0], counts[1],
-            counted))
+            counted, self._raw_count + np.searchsorted(raw, rows), refused))
 
 
 def crc_holds(frames: FrameArrays, decoder: BulkDecoder, rows: IntArray,

@@ -27,6 +27,7 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING, Any
 
+from odocan.host.judge.gapchecked import REFUSED, packed
 from odocan.host.judge.gapseen import (
     LOST_PAGE,
     NOTHING,
@@ -60,6 +61,7 @@ class LiveSeen:
         self.cycle_s = cycle_s
         self.seen = NOTHING  # what the pages kept prove, with the spans proven before
         self._enc_count = 0  # encoder frames of the life heard
+        self._raw_count = 0  # every encoder frame heard before its E2E check (gapchecked)
         self._last_enc_s = -math.inf
         self._gaps: list[tuple[int, int]] = []  # frame after, frames missing
         self._boot: tuple[float, float] | None = None  # with_boot's times while its page is kept
@@ -72,7 +74,7 @@ class LiveSeen:
         """A reboot: the new life's pages count from 0 (``host.judge.reboots``); the summary
         that told it (fed before) is the new life's first."""
         self.keeper, self._kept, self._gaps = self.keeper.new_life(), (0, 0), []
-        self._boot, self._first, self._enc_count = None, None, 0
+        self._boot, self._first, self._enc_count, self._raw_count = None, None, 0, 0
 
     def power_up(self, primed: int) -> None:
         """The firmware primed on encoder frame ``primed`` (seq): when it is the life's first
@@ -97,13 +99,19 @@ class LiveSeen:
             del self._gaps[: max(len(self._gaps) - KEPT_GAPS, 0)]  # no page came for long
         self._enc_count, self._last_enc_s = seq - self._first[0] + 1, t_s
 
+    def heard_encoder(self) -> None:
+        """A WHEEL_ENCODERS frame of its length heard, before its E2E check, once, in bus order
+        with the status frames (``gapchecked``'s frames logged, refused ones too)."""
+        self._raw_count += 1
+
     def on_status(self, page: int, counter: int, t_s: float, crc_ok: bool,
-                  value: tuple[int, int] | None) -> bool:
+                  value: tuple[int, ...] | None) -> bool:
         """An ODOM_STATUS frame (PAGE, COUNTER, bus time, its CRC holds, its page's two
         counts); True when a FRAME_TOTALS page was kept: ``proven`` may prove more (a window
         is proven only once the first FRAME_TOTALS page after its last page is kept)."""
         keeper = self.keeper
-        keeper.status((page, counter, t_s, crc_ok, self._enc_count, self._last_enc_s), value)
+        keeper.status((page, counter, t_s, crc_ok, self._enc_count, self._last_enc_s,
+                       self._raw_count), value)
         grew = len(keeper.totals) > self._kept[1]  # (a window ends in one)
         return self._kept_more() and grew
 
@@ -122,7 +130,8 @@ class LiveSeen:
             base = self._first[0] if self._first is not None else 0
             horizon = base + self._enc_count - KEPT_FRAMES
             self.seen = Seen(_joined(self.seen.same, new.same, base, horizon),
-                             _joined(self.seen.missed, new.missed, base, horizon))
+                             _joined(self.seen.missed, new.missed, base, horizon),
+                             counted=_joined(self.seen.counted, new.counted, base, horizon))
         return self.seen
 
     def through(self, a_s: float, b_s: float) -> int | None:
@@ -198,7 +207,7 @@ def _joined(old: list[Span], new: list[Span], base: int, horizon: int) -> list[S
 
 
 def status_values(message: Any, data: bytes, data_ids: Any, decode: Any = None
-                  ) -> tuple[int, int, bool, tuple[int, int] | None] | None:
+                  ) -> tuple[int, int, bool, tuple[int, ...] | None] | None:
     """PAGE, COUNTER, whether the CRC holds (whatever the E2E sequence: ``gapseen.crc_holds``)
     and the page's two counts (ENC_E2E_OK and ENC_E2E_LOST, or REJECTED_FRAMES and
     OVERFLOWED_FRAMES; None on the other pages) of an ODOM_STATUS frame, by the DBC
@@ -214,8 +223,10 @@ def status_values(message: Any, data: bytes, data_ids: Any, decode: Any = None
     page, counter = int(signals["PAGE"]), int(signals["COUNTER"])
     crc_ok = not data_ids or data[0] == crc8h2f_p02_one(data, data_ids[data[1] & ENC_COUNTER_MASK])
     names = _VALUES.get(page)
-    value = None if names is None or not set(names) <= signals.keys() else (
-        int(signals[names[0]]), int(signals[names[1]]))
+    value: tuple[int, ...] | None = None if names is None or not set(names) <= signals.keys() \
+        else (int(signals[names[0]]), int(signals[names[1]]))
+    if value is not None and page == LOST_PAGE and set(REFUSED) <= signals.keys():
+        value += (packed(*(int(signals[name]) for name in REFUSED)),)  # gapchecked
     return page, counter, crc_ok, value
 
 
@@ -237,6 +248,13 @@ def heard_status(tracker: PoseTracker, message: Any, data: bytes, data_ids: Any,
             placer.withdraw(placer.seen.proven())  # the reference moves at the next sample
         tracker.choice.paged(t_s)  # a held choice the pages may now decide (livechoice)
         tracker.laps.heard()  # ... and samples after a lap of the stamps (livelaphold)
+
+
+def heard_encoder(tracker: PoseTracker, message: Any, data: bytes) -> None:
+    """A frame heard before its E2E check, once (a frame held and judged again is not heard
+    again): a WHEEL_ENCODERS one of its length to the tracker's ``LiveSeen``."""
+    if message.name == "WHEEL_ENCODERS" and len(data) == message.length:
+        tracker.placer.seen.heard_encoder()
 
 
 def end_of_watch(tracker: PoseTracker) -> None:

@@ -62,6 +62,7 @@ from odocan.host.judge import sources as src  # status_frame, start_new_life
 from odocan.host.judge.busstats import LoadWindow
 from odocan.host.judge.liveconfig import SAME_TICK_S, ConfigFollower, follow_config_ack, rebooted
 from odocan.host.judge.livedistance import LiveDistance
+from odocan.host.judge.livegapseen import heard_encoder
 from odocan.host.judge.livekept import KeptWatch
 from odocan.host.judge.liverobot import (
     DEFAULT,
@@ -195,6 +196,8 @@ class BusMonitor:
         if self.tracker.wrongs.origin_s is None:  # the verdict's times count from here
             self.tracker.wrongs.origin_s = timestamp_s
         message = self._by_key.get(frame_key(msg.arbitration_id, msg.is_extended_id))
+        if verdict is None and message is not None:  # heard once (a held frame comes again)
+            heard_encoder(self.tracker, message, data)  # livegapseen: gapchecked's count
         summary = self._summary(message, data) if message is not None else None
         if summary is not None:  # before its E2E check, which a reboot or a second source fails
             self._watch_source(*summary, counter=data[1] & ENC_COUNTER_MASK)

@@ -25,12 +25,14 @@ from odocan.host.protocol.busfacts import ENC_COUNTER_MASK
 LOST_PAGE = busfacts.ENC_E2E_PAGE  # ODOM_STATUS page with ENC_E2E_OK and ENC_E2E_LOST
 TOTALS_PAGE = busfacts.TOTALS_PAGE  # ODOM_STATUS page with REJECTED_FRAMES and OVERFLOWED_FRAMES
 G = TypeVar("G", bound=np.generic)
-Status = tuple[int, int, float, bool, int, float]  # a status frame: page, COUNTER, time, CRC
-# good, encoder frames before it, the last one's time
+Status = tuple[int, int, float, bool, int, float, int]  # a status frame: page, COUNTER, time,
+# CRC good, encoder frames before it, the last one's time, every encoder frame logged before it
+# (refused by the host's E2E check too: ``gapchecked``; -1: not counted)
 
 
-Page = tuple[int, float, int, int, int, float, int, int]  # lo, lo_s, hi, ENC_E2E_OK, LOST,
-# sent_s, OK unwrapped and its chain (``pagechain.chained_ok``)
+Page = tuple[int, float, int, int, int, float, int, int, int, int, int]  # lo, lo_s, hi,
+# ENC_E2E_OK, LOST, sent_s, OK unwrapped and its chain (``pagechain.chained_ok``), then lo and
+# hi among every encoder frame logged and the E2E refusals (``gapchecked.REFUSED``; -1: unknown)
 Totals = tuple[float, int, int, int]  # sent_s, REJECTED_FRAMES, OVERFLOWED_FRAMES, breaks
 
 
@@ -48,16 +50,19 @@ class PageKeeper:
     _pending: list[tuple[int, tuple[int | float, ...]]] = field(default_factory=list)
     # pages made with the last summary, kept when the next one is not close (or at the end)
 
-    def status(self, frame: Status, value: tuple[int, int] | None) -> None:
-        """One ODOM_STATUS frame (``Status``) and its page's two counts (None: not decoded)."""
+    def status(self, frame: Status, value: tuple[int, ...] | None) -> None:
+        """One ODOM_STATUS frame (``Status``) and its page's counts (None: not decoded): two, and
+        on an ENC_E2E page its refusals packed (``gapchecked.packed``) when decoded."""
         prev, self._prev = self._prev, frame
         if frame[0] == 0 and frame[3]:
             self._summary(frame[2])
         if prev is None or value is None or not self._made_in_tick(prev, frame):
             return
-        a, b = value
+        a, b = value[0], value[1]
         if frame[0] == LOST_PAGE and prev[4] > 0:  # a frame before its summary: S_p known
-            self._pending.append((LOST_PAGE, (prev[4] - 1, prev[5], frame[4], a, b, frame[2])))
+            refused = value[2] if len(value) > 2 and prev[6] >= 0 <= frame[6] else -1
+            self._pending.append((LOST_PAGE, (prev[4] - 1, prev[5], frame[4], a, b, frame[2],
+                                              prev[6] - 1, frame[6], refused)))
         elif frame[0] == TOTALS_PAGE:
             self._pending.append((TOTALS_PAGE, (frame[2], a, b)))
 
@@ -88,7 +93,7 @@ class PageKeeper:
             last = self.pages[-1] if self.pages else None
             ok_u, chain = chained_ok(None if last is None else (last[6], last[7], last[5]),
                                      int(row[3]), float(row[5]))
-            self.pages.append((*row, ok_u, chain))  # type: ignore[arg-type]
+            self.pages.append((*row[:6], ok_u, chain, *row[6:]))  # type: ignore[arg-type]
         else:
             t = self.totals[-1] if self.totals else None
             breaks = chained_breaks(None if t is None else t, float(row[0]), int(row[1]),
@@ -107,7 +112,8 @@ class PageKeeper:
 @dataclass(frozen=True)
 class StatusRows:
     """A chunk's status frames in bus order, column by column (``Status``'s fields), and their
-    page's two counts (``counted``: the page is one whose counts were decoded)."""
+    page's counts (``counted``: the page is one whose counts were decoded; ``refused``: an
+    ENC_E2E page's refusals packed, -1 unknown)."""
 
     page: IntArray
     counter: IntArray
@@ -118,6 +124,8 @@ class StatusRows:
     a: IntArray
     b: IntArray
     counted: npt.NDArray[np.bool_]
+    raw_before: IntArray  # every encoder frame logged before it (in the life)
+    refused: IntArray
 
 
 def _after(first: object, column: npt.NDArray[G]) -> npt.NDArray[G]:
@@ -142,12 +150,14 @@ def statuses(keeper: PageKeeper, rows: StatusRows) -> None:
     last = np.cumsum(summary) - 1  # per frame: the last such summary at or before it
     queued = np.where(last >= 0, close[np.maximum(last, 0)] if len(at) else False,
                       keeper._queued)  # ``_queued`` after each frame
-    p = prev if prev is not None else (-1, -1, 0.0, False, 0, 0.0)
+    p = prev if prev is not None else (-1, -1, 0.0, False, 0, 0.0, -1)
     made = (_after(prev is not None and p[0] == 0 and p[3], summary)
             & ~_after(keeper._queued, queued) & rows.crc_ok & (rows.page != 0) & rows.counted
             & (rows.counter == (_after(p[1], rows.counter) + 1) & ENC_COUNTER_MASK)
             & (rows.t_s - _after(p[2], rows.t_s) < 0.5 * keeper.cycle_s))
     p_before, p_last_s = _after(p[4], rows.before), _after(p[5], rows.last_s)
+    p_raw = _after(p[6], rows.raw_before)
+    refused = np.where((p_raw >= 0) & (rows.raw_before >= 0), rows.refused, -1)
     made &= ((rows.page == LOST_PAGE) & (p_before > 0)) | (rows.page == TOTALS_PAGE)
     pages = np.flatnonzero(made)
     decided = np.searchsorted(at, pages)  # the next summary (a page is none)
@@ -155,17 +165,20 @@ def statuses(keeper: PageKeeper, rows: StatusRows) -> None:
         keeper.keep_pending(not bool(close[0]))
     waits = decided == len(at)  # no summary after it in the chunk: still pending
     keeps = waits | ~close[np.minimum(decided, len(at) - 1)] if len(at) else waits
-    for kind, lo, lo_s, hi, a, b, t_s, wait, keep in zip(
-            *(column[pages].tolist() for column in (rows.page, p_before - 1, p_last_s,
-                                                    rows.before, rows.a, rows.b, rows.t_s)),
+    for kind, lo, lo_s, hi, a, b, t_s, raw_lo, raw_hi, c, wait, keep in zip(
+            *(column[pages].tolist() for column in (
+                rows.page, p_before - 1, p_last_s, rows.before, rows.a, rows.b, rows.t_s,
+                p_raw - 1, rows.raw_before, refused)),
             waits.tolist(), keeps.tolist(), strict=True):
         if keep:
-            row = (lo, lo_s, hi, a, b, t_s) if kind == LOST_PAGE else (t_s, a, b)
+            row = ((lo, lo_s, hi, a, b, t_s, raw_lo, raw_hi, c) if kind == LOST_PAGE
+                   else (t_s, a, b))
             if wait:
                 keeper._pending.append((kind, row))
             else:
                 keeper._keep(kind, row)
     keeper._prev = (int(rows.page[-1]), int(rows.counter[-1]), float(rows.t_s[-1]),
-                    bool(rows.crc_ok[-1]), int(rows.before[-1]), float(rows.last_s[-1]))
+                    bool(rows.crc_ok[-1]), int(rows.before[-1]), float(rows.last_s[-1]),
+                    int(rows.raw_before[-1]))
     if len(at):
         keeper._summary_s, keeper._queued = float(sent[-1]), bool(close[-1])

@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING, Any
 from cantools.database.errors import DecodeError
 
 from odocan.host.judge.distfall import TWIST_MESSAGE, distance_field
+from odocan.host.judge.livegapseen import heard_encoder
 from odocan.host.judge.navrestart import NAV_MESSAGE
 from odocan.host.mqtt.liveroutes import Route
 from odocan.host.protocol.e2e import e2e_messages
@@ -59,6 +60,8 @@ def plan_of(telemetry: RobotTelemetry, can_id: int, route: Route,
         return _twist_kept(telemetry, can_id, route, plan)
     if route.name == NAV_MESSAGE:
         return _nav_kept(telemetry, can_id, plan)
+    if route.name == "WHEEL_ENCODERS" and check is None:  # not a hold's forced plan: the
+        return _encoder_heard(telemetry, route, plan)  # frame was heard when first fed
     if can_id not in telemetry._watched:
         return plan
     watch = telemetry._watch_source
@@ -68,6 +71,18 @@ def plan_of(telemetry: RobotTelemetry, can_id: int, route: Route,
         return plan(t_s, data)
 
     return watched_plan
+
+
+def _encoder_heard(telemetry: RobotTelemetry, route: Route, plan: Plan) -> Plan:
+    """WHEEL_ENCODERS' plan, each frame heard first, before its E2E check, by the live gapseen
+    (``livegapseen.heard_encoder``: ``gapchecked``'s count of the frames logged)."""
+    message = route.message
+
+    def encoder_plan(t_s: float, data: bytes) -> list[Publication]:
+        heard_encoder(telemetry.tracker, message, data)
+        return plan(t_s, data)
+
+    return encoder_plan
 
 
 def _twist_kept(telemetry: RobotTelemetry, can_id: int, route: Route, plan: Plan) -> Plan:
