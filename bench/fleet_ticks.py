@@ -12,6 +12,9 @@ reports): which periodic work makes the heavy ticks; then the late ticks and the
 heaviest ticks (loop-thread CPU from the previous tick's end to this one's), each with its parts
 and what ran before it. On a loaded machine wall times lie (other processes run meanwhile):
 compare the CPU columns; a late tick whose CPU is at the median was late for the machine's load.
+``runq`` is the time the loop thread waited for a CPU (another process had it); the slow handles
+(by name: how many, their CPU, how many came before a late tick, the frames each judged) are the
+work a tick waited behind: the frames judged per handle do not depend on the load.
 """
 
 from __future__ import annotations
@@ -24,6 +27,8 @@ from pathlib import Path
 from typing import Any
 
 PARTS = ("between", "step", "batch", "gc")
+# the fleet's clock task (its step after the sleep runs the tick: the trace's parts time it)
+OWN_TASKS = ("task run_fleet", "task _work", "task main")
 
 
 def quantile(values: list[float], q: float) -> float:
@@ -49,8 +54,35 @@ def describe(row: dict[str, Any]) -> str:
     """One tick's line: its lateness, each part's CPU/wall (us) and what ran before it."""
     parts = " ".join(f"{p} {row.get(f'{p}_cpu_us', 0):.0f}/{row.get(f'{p}_wall_us', 0):.0f}"
                      for p in PARTS)
-    return (f"  k {row['k']:5d} late {row['late_ms']:6.2f} ms  cpu {cpu_us(row):6.0f} "
-            f"proc {row['proc_cpu_us']:6.0f}  [{parts}] gc_n {row.get('gc_n', 0)}  {kinds(row)}")
+    slow = " ".join(f"<{h[0]} {h[1]}/{h[2]} f{h[3] if len(h) > 3 else '?'}>"
+                    for h in row.get("slow", []) if h[0] not in OWN_TASKS)
+    return (f"  k {row['k']:5d} late {row['late_ms']:6.2f} ms "
+            f" runq {row.get('runq_wait_us', 0):5.0f}"
+            f"  cpu {cpu_us(row):6.0f} "
+            f"proc {row['proc_cpu_us']:6.0f}  [{parts}] gc_n {row.get('gc_n', 0)}  {kinds(row)}"
+            + (f"  slow {slow}" if slow else ""))
+
+
+def slow_handles(rows: list[dict[str, Any]]) -> None:
+    """The loop's slow handles (``host.mqtt.ticktrace``'s ``slow``) by name: how many, their
+    median and largest thread CPU (us), and how many came just before a late tick."""
+    cpu: dict[str, list[float]] = defaultdict(list)
+    frames: dict[str, list[int]] = defaultdict(list)
+    before_late: dict[str, int] = defaultdict(int)
+    for row in rows:
+        for name, handle_cpu, _wall, *fed in row.get("slow", []):
+            if name in OWN_TASKS:
+                continue
+            cpu[name].append(handle_cpu)
+            frames[name].append(fed[0] if fed else 0)
+            before_late[name] += row["late_ms"] > 5
+    if not cpu:
+        return
+    print("  slow loop handles (count, median / max CPU us, before a late tick):")
+    for name, values in sorted(cpu.items(), key=lambda kv: -max(kv[1])):
+        print(f"    {name[:40]:40s} {len(values):5d} {statistics.median(values):7.0f} "
+              f"{max(values):7.0f}  {before_late[name]:5d}  frames judged median "
+              f"{statistics.median(frames[name]):5.0f} max {max(frames[name]):5d}")
 
 
 def by_periodic(rows: list[dict[str, Any]]) -> dict[str, list[float]]:
@@ -75,6 +107,9 @@ def report(path: Path, top: int) -> None:
         print(f"  {part:8s} cpu median {statistics.median(cpu):7.0f} p99 {quantile(cpu, .99):7.0f}"
               f" max {max(cpu):7.0f} | wall median {statistics.median(wall):7.0f} "
               f"p99 {quantile(wall, .99):7.0f} max {max(wall):7.0f}")
+    runq = [r.get("runq_wait_us", 0.0) for r in rows]
+    print(f"  runq wait median {statistics.median(runq):7.0f} p99 {quantile(runq, .99):7.0f} "
+          f"max {max(runq):7.0f} (us the loop thread was runnable, not running, per tick)")
     proc = [r["proc_cpu_us"] for r in rows]
     print(f"  process  cpu median {statistics.median(proc):7.0f} p99 {quantile(proc, .99):7.0f}"
           f" max {max(proc):7.0f}")
@@ -82,6 +117,7 @@ def report(path: Path, top: int) -> None:
     for key, values in sorted(by_periodic(rows).items(), key=lambda kv: -len(kv[1])):
         print(f"    {key:40s} {len(values):5d}  {statistics.median(values):6.0f} "
               f"{quantile(values, .99):6.0f} {max(values):6.0f}")
+    slow_handles(rows)
     late = [r for r in rows if r["late_ms"] > 5]
     print(f"  late ticks ({len(late)}), first 15:")
     for row in late[:15]:

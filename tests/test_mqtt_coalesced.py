@@ -243,3 +243,51 @@ def test_a_burst_written_at_once_registers_no_loop_writer(
     writers, got = asyncio.run(_bursts_and_a_qos1(mosquitto, busy=True))
     assert got == list(range(31))
     assert writers > 0  # what the socket did not take waits for the loop's writer
+
+
+def test_frames_a_hold_lets_go_at_once_are_judged_a_slice_at_a_time() -> None:
+    """With a hold (framehold, the fleet's), the frames judged in one loop turn are bounded by
+    ``slice_frames`` (+ what one ``slice_step`` of taken frames lets go), not by the frames
+    taken: eight robots whose holds end on the same tick were judged in one callback (a 64-frame
+    slice of the tick let ~240 go: ~6 ms of CPU before the fleet's next tick could run); every
+    frame is still judged, and each robot's telemetry is what judging it whole makes."""
+    robots, size = 8, 64
+    ticks = rig_ticks(1.0)
+    url = BrokerURL(host=LOOPBACK, port=1)  # never connected: handling needs no broker
+
+    def bridge(slice_frames: int) -> tuple[Bridge, list[int]]:
+        ends = [RobotEndpoint(f"{ROBOT}{i}", can.Bus(interface="virtual", channel=f"held-{i}"),
+                              GEOMETRY, counter_bits=PMIR.counter_bits) for i in range(robots)]
+        b = Bridge(ends, config=BridgeConfig(broker=url, slice_frames=slice_frames, hold_s=0.1))
+        per_turn = [0]
+        feed = b._feed
+
+        def counted(batch: Batch) -> None:
+            per_turn[-1] += len(batch)
+            feed(batch)
+        b._feed = counted  # type: ignore[method-assign]
+        return b, per_turn
+
+    async def run(slice_frames: int) -> tuple[Bridge, list[int]]:
+        b, per_turn = bridge(slice_frames)
+        for tick in ticks:  # every robot's frames of a tick, robot by robot, as a fleet's
+            b.offer([(i, m) for i in range(robots) for m in tick])
+        consume = asyncio.create_task(b._consume())
+        while b.frames_in < robots * sum(map(len, ticks)):
+            await asyncio.sleep(0)
+            per_turn.append(0)
+        consume.cancel()
+        b._drain()
+        return b, per_turn
+
+    sliced, per_turn = asyncio.run(run(size))
+    whole, _ = asyncio.run(run(10**6))
+    # 8 frames taken span at most 4 robots (~32 frames held each): 192 judged at most; 288 before
+    assert max(per_turn) <= size + 4 * 40, per_turn
+    assert sum(per_turn) == whole.frames_in == robots * sum(map(len, ticks))
+    for one, other in zip(sliced.robots, whole.robots, strict=True):
+        assert one.telemetry.frames == other.telemetry.frames
+        assert one.telemetry.tracker.vs_reference == other.telemetry.tracker.vs_reference
+    for b in (sliced, whole):
+        for robot in b.robots:
+            robot.endpoint.bus.shutdown()

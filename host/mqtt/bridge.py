@@ -11,8 +11,8 @@ transport queued (``sim.framebatch.Received``: no ``Message`` built per frame):
 
 A full queue drops the batch and counts it (``frames_dropped``): the bus never waits for MQTT. The
 task ``can-frames`` feeds each robot's ``RobotTelemetry`` and queues its publications on the
-robot's ``RobotLink``, ``slice_frames`` frames at a time with a loop turn between slices (so a
-large fleet's tick never holds the loop for long); ``periodic`` publishes ``status`` and ``rates``,
+robot's ``RobotLink``, a loop turn after each ``slice_frames`` frames judged (so a large fleet's
+tick never holds the loop for long); ``periodic`` publishes ``status`` and ``rates``,
 the robots' turns spread over the period (a robot a turn, up to ``periodic.SLOTS`` turns a period);
 each link runs its own connection. Commands are validated by the robot's ``CommandEncoder`` and
 only then sent on the robot's bus, paced (``host.mqtt.pacing``: a window of frames un-answered, the
@@ -358,21 +358,22 @@ class Bridge:
                 f"{c['reconnects']} reconnects")
 
     async def _consume(self) -> None:
-        """Handle the batches, ``slice_frames`` frames at a time with a loop turn between
-        slices: a whole tick of a large fleet in one callback would hold back the fleet's next
-        tick (and the links' sends) for milliseconds. The frames not handled yet wait in
-        ``_pending`` (handled by ``_drain`` when the bridge stops), in bus order."""
-        size = max(1, self.config.slice_frames)
+        """The batches, ``slice_step`` frames at a time, a loop turn after ``slice_frames`` judged
+        (a hold lets frames go at once: 64 taken judged up to 514, ~6 ms, a late tick at 100
+        robots); the rest waits in ``_pending`` (``_drain``'s at the end), in bus order."""
+        size, judged = max(1, self.config.slice_frames), 0
+        step = max(1, min(self.config.slice_step, size))
         while True:
             if not self._pending:
-                self._pending = await self.queue.get()
-                self._pending_at = 0
+                judged = 0 if self.queue.empty() else judged  # empty: the get gives a turn
+                self._pending, self._pending_at = await self.queue.get(), 0
             start = self._pending_at
-            self._pending_at = start + size
-            self._handle(self._pending[start:start + size])
+            self._pending_at = start + step
+            judged += self._handle(self._pending[start:self._pending_at])
             if self._pending_at >= len(self._pending):
                 self._pending = []
-            else:
+            if judged >= size:
+                judged = 0
                 await asyncio.sleep(0)
 
     def _abort(self) -> None:
@@ -382,11 +383,9 @@ class Bridge:
                 robot.link.publish(leaf, payload)
 
     def _end_watch(self) -> None:
-        """The watch ends as the fleet's report ends it (``RobotTelemetry.end_watch``): the
-        frames a hold kept judged and their publications queued, what the live judges still
-        wait with judged; each link's ``offline`` status then carries the robot's last status,
-        its verdicts (``pose_wrongs``, ``distance``, ``twist``) final. Before, the bridge
-        stopped with a hold's frames (up to ~1.5 s of the bus) never judged."""
+        """The watch ends as the fleet's report ends it (``RobotTelemetry.end_watch``): a hold's
+        frames judged (else up to ~1.5 s of the bus never was), their publications queued; each
+        link's ``offline`` status then carries the robot's final verdicts."""
         for robot in self.robots:
             for leaf, payload in robot.telemetry.end_watch():
                 robot.link.publish(leaf, payload)
@@ -400,9 +399,8 @@ class Bridge:
             robot.verdict = self.end_rule.judge(robot.telemetry, robot.endpoint.profile_name)
 
     def end_verdicts(self) -> list[tuple[str, EndVerdict]]:
-        """(robot name, verdict) of every robot, as ``run`` judged them when the watch ended
-        (the ones its ``offline`` statuses carry); RuntimeError before that, or without an
-        ``end_rule``: no verdict is made up afterwards."""
+        """(robot name, verdict) of every robot as ``run`` judged them at the watch's end (its
+        ``offline`` statuses'); RuntimeError before, or without an ``end_rule``: none made up."""
         judged = [(r.endpoint.name, r.verdict) for r in self.robots]
         verdicts = [(name, v) for name, v in judged if v is not None]
         if len(verdicts) != len(judged):
@@ -429,10 +427,12 @@ class Bridge:
     def _waits(self, index: int, t_s: float) -> bool:
         return not self.robots[index].pacer.busy and self.robots[index].telemetry.pose_waits(t_s)
 
-    def _handle(self, batch: Batch) -> None:
-        """``batch`` counted, held (``hold_s``) or judged (``_feed``)."""
+    def _handle(self, batch: Batch) -> int:
+        """``batch`` counted, held (``hold_s``) or judged (``_feed``); the frames judged."""
         self.frames_in += len(batch)
-        self._feed(batch if self.hold is None else self.hold.take(batch, self._waits))
+        judged = batch if self.hold is None else self.hold.take(batch, self._waits)
+        self._feed(judged)
+        return len(judged)
 
     def _feed(self, batch: Batch) -> None:
         """Feed each frame of ``batch`` to its robot's telemetry, queue what it publishes (and

@@ -21,7 +21,8 @@ class BridgeConfig:
     keepalive_s: int = 5
     client_prefix: str = DEFAULT_PREFIX
     queue_batches: int = 1024
-    slice_frames: int = 64  # frames handled in one go before the event loop gets a turn
+    slice_frames: int = 64  # frames judged in one go before the event loop gets a turn
+    slice_step: int = 8  # frames the bridge takes at a time, counting those judged (a hold's)
     connect_timeout_s: float = 5.0  # the first connection, else BrokerError
     command_expiry_s: float = 5.0  # a command without its own MQTT v5 expiry, at most this old
     telemetry_buffer: int = 1000  # QoS-0 publications per robot waiting for the socket

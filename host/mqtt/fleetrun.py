@@ -85,7 +85,7 @@ from odocan.host.mqtt.fleetjudge import (
 )
 from odocan.host.mqtt.framehold import HOLD_S
 from odocan.host.mqtt.options import broker_for
-from odocan.host.mqtt.ticktrace import TickTrace, from_env, young_collection
+from odocan.host.mqtt.ticktrace import TickTrace, from_env
 from odocan.host.protocol.secoc import SecocSigner
 from odocan.host.stopped import Stopped
 from odocan.sim.board import TICK_S
@@ -198,7 +198,8 @@ async def _paced(
     after_tick: Callable[[Any], None] = collector.after_tick
     if trace is not None:
         stats = trace.stats(TICK_S, TICK_S / 2)
-        after_tick = trace.collector_hook(on_batch, young_collection)
+        after_tick = trace.collector_hook(on_batch, collector.collect_due)
+        trace.time_handles()
         if on_progress is not None:
             on_progress = trace.counting(lambda _: "progress", on_progress)
     watcher = None
@@ -257,11 +258,17 @@ class TickCollector:
         class docstring)."""
         if self.on_batch is not None:
             self.on_batch(batch)
+        self.collect_due()
+
+    def collect_due(self) -> int:
+        """A tick ended: the young collection when one is due; the objects it freed (0: none
+        ran)."""
         self.ticks += 1
         if ((self.every_ticks and self.ticks >= self.every_ticks)
                 or gc.get_count()[0] > self.young_bound):
             self.ticks = 0
-            gc.collect(0)
+            return gc.collect(0)
+        return 0
 
     def close(self) -> None:
         """The full collection left for the end; the collector as it was before."""
@@ -279,6 +286,7 @@ def _trace_bridge(trace: TickTrace, bridge: Bridge) -> None:
     for commands in bridge.commands.robots.values():
         commands.wake.set = trace.counting(  # type: ignore[method-assign]
             lambda _: "reader", commands.wake.set)
+    bridge._feed = trace.count_fed(bridge._feed)  # type: ignore[method-assign,assignment]
 
 
 async def _watch(stats: DeadlineStats, on_progress: ProgressHook) -> None:

@@ -8,11 +8,19 @@ robot>.jsonl`` when its clock stops, one JSON object per tick run:
 loop thread's time the wall and the thread CPU (``time.thread_time``) in microseconds:
 ``between`` (from the end of the previous tick to this one's start: the event loop's other work,
 the MQTT links, the bridge's frame slices, the sleep), ``step`` (``Fleet.step`` and its batch),
-``batch`` (``on_batch``: the bridge's ``offer``), ``gc`` (the young collection, and ``gc_n`` the
-objects it freed); ``proc_cpu_us``, the whole process's CPU over the tick and the time before it
-(the command reader's thread included); and ``ran``, what the event loop ran meanwhile, counted:
+``batch`` (``on_batch``: the bridge's ``offer``), ``gc`` (``TickCollector``'s young collection
+when one is due, as in the run untraced: the worker's collector is off; ``gc_n`` the objects it
+freed); ``proc_cpu_us``, the whole process's CPU over the tick and the time before it (the
+command reader's thread included); ``ran``, what the event loop ran meanwhile, counted:
 publications by leaf (``pose``, ``status``, ``rates``...), the command reader's hand-overs to the
-loop (``reader``) and the progress reports (``progress``).
+loop (``reader``) and the progress reports (``progress``); ``runq_wait_us``, the time the loop
+thread waited, runnable, for a CPU another thread or process held (Linux's
+``/proc/thread-self/schedstat``); ``slow``, the event loop's handles (callbacks, task steps)
+since the previous tick that took more than ``SLOW_HANDLE_US`` of thread CPU or judged more than
+``BIG_HANDLE_FRAMES`` frames, each ``[name, cpu us, wall us, frames judged]`` (the step that ran
+the tick left out; a ``gc genN`` entry: a collection that ran anyway, its wall time): the work a
+tick's wake-up waits behind, whatever the load (the loop cannot preempt a handle: on an idle
+machine a tick released while a 6 ms handle runs starts up to 6 ms late).
 
 ``bench/fleet_ticks.py`` reads these files: the late ticks' anatomy against the median tick.
 Nothing of this runs without the variable (one ``os.environ`` lookup per run).
@@ -20,6 +28,7 @@ Nothing of this runs without the variable (one ``os.environ`` lookup per run).
 
 from __future__ import annotations
 
+import asyncio
 import gc
 import json
 import os
@@ -33,6 +42,8 @@ from odocan.host.outputs import replaced
 from odocan.sim.realtime import DeadlineStats
 
 ENV = "ODOCAN_TICK_TRACE"
+SLOW_HANDLE_US = 1000.0  # a loop handle taking more thread CPU than this is listed (``slow``)
+BIG_HANDLE_FRAMES = 100  # ... or judging more frames than this
 
 
 def from_env(first_robot: str) -> TickTrace | None:
@@ -53,6 +64,50 @@ class TickTrace:
         self._end_wall = self._end_cpu = self._end_proc = 0.0
         self._start_wall = self._start_cpu = 0.0
         self._row: dict[str, Any] = {}
+        self.slow: list[list[Any]] = []
+        self.fed = 0  # frames the bridge judged so far (``count_fed``)
+        self._gc_start = 0.0
+        self._schedstat = _open_schedstat()
+        self._waited_ns = self._run_wait_ns()
+
+    def _run_wait_ns(self) -> int:
+        """The loop thread's time runnable but not running so far (ns; 0: not on Linux)."""
+        if self._schedstat is None:
+            return 0
+        return int(os.pread(self._schedstat, 128, 0).split()[1])
+
+    def time_handles(self) -> None:
+        """Every asyncio handle's run timed from now on (this process): those over
+        ``SLOW_HANDLE_US`` of thread CPU noted for the next tick's row."""
+        run = asyncio.events.Handle._run
+        slow = self.slow
+
+        def timed(handle: asyncio.events.Handle) -> None:
+            wall0, cpu0, fed0, rows0 = time.perf_counter(), time.thread_time(), self.fed, len(
+                self.rows)
+            run(handle)
+            cpu_us = (time.thread_time() - cpu0) * 1e6
+            frames = self.fed - fed0
+            if (cpu_us > SLOW_HANDLE_US or frames > BIG_HANDLE_FRAMES) and len(self.rows) == rows0:
+                slow.append([_handle_name(handle), round(cpu_us),
+                             round((time.perf_counter() - wall0) * 1e6), frames])
+        asyncio.events.Handle._run = timed  # type: ignore[method-assign,assignment]
+        gc.callbacks.append(self._on_gc)
+
+    def count_fed(self, feed: Callable[[Any], None]) -> Callable[[Any], None]:
+        """``feed`` (the bridge's judge of a list of frames), its frames counted in ``fed``."""
+        def counted(batch: Any) -> None:
+            self.fed += len(batch)
+            feed(batch)
+        return counted
+
+    def _on_gc(self, phase: str, info: dict[str, Any]) -> None:
+        """A collection ran (the worker's collector should be off): noted as a slow handle."""
+        if phase == "start":
+            self._gc_start = time.perf_counter()
+        else:
+            self.slow.append([f"gc gen{info.get('generation')}", 0,
+                              round((time.perf_counter() - self._gc_start) * 1e6), 0])
 
     def stats(self, period_s: float, late_after_s: float) -> DeadlineStats:
         """The loop's deadline accounting, each tick's start noted here."""
@@ -86,8 +141,12 @@ class TickTrace:
         """Tick ``k`` starts ``lateness_s`` after its release."""
         wall, cpu, proc = time.perf_counter(), time.thread_time(), time.process_time()
         self._row = {"k": k, "late_ms": round(lateness_s * 1e3, 3),
-                     "proc_cpu_us": 0.0, "ran": dict(self.ran)}
+                     "proc_cpu_us": 0.0, "ran": dict(self.ran), "slow": list(self.slow)}
         self.ran.clear()
+        self.slow.clear()
+        waited_ns = self._run_wait_ns()
+        self._row["runq_wait_us"] = round((waited_ns - self._waited_ns) / 1e3, 1)
+        self._waited_ns = waited_ns
         if self._end_wall:
             self._part("between", wall - self._end_wall, cpu - self._end_cpu)
         self._start_wall, self._start_cpu = wall, cpu
@@ -125,6 +184,21 @@ class _TracedStats(DeadlineStats):
         super().record(lateness_s)
 
 
-def young_collection() -> int:
-    """``gc.collect(0)``: the objects the young collection freed."""
-    return gc.collect(0)
+def _open_schedstat() -> int | None:
+    """This thread's ``/proc/thread-self/schedstat`` open (None where there is none): its
+    second field is the time it waited on a run queue, runnable (another process had the
+    CPU)."""
+    try:
+        return os.open("/proc/thread-self/schedstat", os.O_RDONLY)
+    except OSError:
+        return None
+
+
+def _handle_name(handle: asyncio.events.Handle) -> str:
+    """A handle's callback by name: a task step by its coroutine's qualified name."""
+    callback = getattr(handle, "_callback", None)
+    task = getattr(callback, "__self__", None)
+    if isinstance(task, asyncio.Task):
+        coro = task.get_coro()
+        return f"task {getattr(coro, '__qualname__', coro)}"
+    return str(getattr(callback, "__qualname__", callback))
