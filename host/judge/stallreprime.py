@@ -80,6 +80,7 @@ from odocan.sim.mcu import HW_RX_FIFO_FRAMES
 SLACK_PERIODS = 3 * COUNTER_VALUES
 FIFO_SPAN = HW_RX_FIFO_FRAMES + 1  # frames after the last sample's the firmware may have taken
 R_SPAN = SILENCE_CYCLES  # frames before the first kept sample's the re-prime may lie on
+LATE_SPAN = SILENCE_CYCLES  # frames before the last sample's a late one in the FIFO may be (delay)
 COMPARED = 10  # samples after the stall the pairs are compared on
 LATE_S = 0.05  # a recorder's stamps of ODOM_STATUS this late (half its period) still read
 SUMMARY_S = 0.1  # ODOM_STATUS summary period (the DBC's cycle time of the page)
@@ -275,7 +276,7 @@ def _chosen(b: int, first: int, anchor: tuple[int, float, float, float],
     cos0, sin0 = math.cos(turn0), math.sin(turn0)
     at, on_x, on_y, on_h = samples
     best: tuple[float, int, int] | None = None
-    pairs = [(f, r) for f in range(b - 1, min(b - 1 + FIFO_SPAN, first - 1) + 1)
+    pairs = [(f, r) for f in range(max(b - 1 - LATE_SPAN, 0), min(b - 1 + FIFO_SPAN, first - 1) + 1)
              for r in range(max(f + 1, first - R_SPAN), first + 1)]
     for f, r in kept_pairs(pairs, lost):
         left = float(rh[r] - rh[f])  # the turn the re-prime left out
@@ -308,6 +309,14 @@ def left_out(d_left: IntArray, d_right: IntArray, reprimes: dict[int, Reprime]) 
     for rep in reprimes.values():
         d_left[rep.f : rep.r] = 0
         d_right[rep.f : rep.r] = 0
+
+
+def left_out_at(k: int, reprimes: dict[int, Reprime]) -> bool:
+    """Whether frame ``k`` (from e0) lies in a re-prime's left-out span (f + 1 .. r): the
+    firmware integrated nothing into it, so a gap of the log that ends there carries no motion
+    on board and its placement no allowance (issue #11: the log's gaps inside a 6 s halt the
+    firmware re-primed across summed to 1257 mm allowed, absorbing a pose 10 mm off)."""
+    return any(rep.f < k <= rep.r for rep in reprimes.values())
 
 
 def reprime_events(timestamp_s: Any, enc: Encoders, start: int,
