@@ -35,22 +35,18 @@ drive too).
 
 from __future__ import annotations
 
-import math
-from collections.abc import Iterator
-from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
 
-from odocan.firmware import odometry as fo
 from odocan.host.cli.app import main
 from odocan.host.io.logs import read_log
 from odocan.host.judge.analysis import analyze
 from odocan.sim.robot import load
+from tests.fw_watch import HEADING_LSB_RAD, POSITION_LSB_M, watched
 from tests.log_edit import raise_raw
 
 KOBUKI = load("kobuki")
-POSITION_LSB_M, HEADING_LSB_RAD = 1e-4, 2 * math.pi / 65536
 TAMPER_LSB = 100  # 10 mm in ODOM_POSE_X's 0.1 mm LSBs
 JUDGE_WRONG = ("issue #11: the judge's model of the frames the firmware took under delay + busoff "
                "/ long delay differs (its E2E window and bus-off receive order); analyze's "
@@ -123,63 +119,6 @@ def _params(drives: list[tuple[int, str, bool]]) -> list[object]:
             for seed, faults, wrong in drives]
 
 
-class _Watch:
-    """The firmware's steps integrated again in float64 from the pose it had (per odometry)."""
-
-    def __init__(self) -> None:
-        p = KOBUKI.firmware_params()
-        self.m_left = 2 * math.pi * p["wheel_radius_left_nm"] * 1e-9 / p["counts_per_rev"]
-        self.m_right = 2 * math.pi * p["wheel_radius_right_nm"] * 1e-9 / p["counts_per_rev"]
-        self.b = p["wheelbase_nm"] * 1e-9
-        self.poses: dict[int, list[float]] = {}
-        self.steps = 0
-        self.worst_m = self.worst_rad = 0.0
-
-    @staticmethod
-    def ram(odo: fo.Odometry) -> list[float]:
-        return [odo.x_q40_m / 2**40, odo.y_q40_m / 2**40,
-                (odo.heading_bam64 / 2**64 + odo.heading_turns) * 2 * math.pi]
-
-    def step(self, odo: fo.Odometry, d_left: int, d_right: int) -> None:
-        """After ``odo`` integrated (d_left, d_right): the same step in float64, compared."""
-        s = self.poses[id(odo)]
-        ds = 0.5 * (d_left * self.m_left + d_right * self.m_right)
-        dth = (d_right * self.m_right - d_left * self.m_left) / self.b
-        old, new = s[2], s[2] + dth
-        if abs(dth) < 1e-6:
-            factor = 1 - dth * dth / 24
-            s[0] += ds * factor * math.cos(old + dth / 2)
-            s[1] += ds * factor * math.sin(old + dth / 2)
-        else:
-            s[0] += ds / dth * (math.sin(new) - math.sin(old))
-            s[1] -= ds / dth * (math.cos(new) - math.cos(old))
-        s[2] = new
-        x, y, h = self.ram(odo)
-        self.steps += 1
-        self.worst_m = max(self.worst_m, math.hypot(x - s[0], y - s[1]))
-        self.worst_rad = max(self.worst_rad, abs((h - new + math.pi) % (2 * math.pi) - math.pi))
-
-
-@contextmanager
-def _watched() -> Iterator[_Watch]:
-    watch = _Watch()
-    step, set_pose = fo.Odometry.step_deltas, fo.Odometry.set_pose
-
-    def watched_step(odo: fo.Odometry, d_left: int, d_right: int) -> None:
-        watch.poses.setdefault(id(odo), watch.ram(odo))
-        step(odo, d_left, d_right)
-        watch.step(odo, d_left, d_right)
-
-    def watched_set_pose(odo: fo.Odometry, x: int, y: int, heading: int) -> None:
-        set_pose(odo, x, y, heading)
-        watch.poses[id(odo)] = watch.ram(odo)
-
-    with pytest.MonkeyPatch.context() as monkeypatch:
-        monkeypatch.setattr(fo.Odometry, "step_deltas", watched_step)
-        monkeypatch.setattr(fo.Odometry, "set_pose", watched_set_pose)
-        yield watch
-
-
 def _run(path: Path, seed: int, faults: str) -> int:
     return main(["run", "--robot", "kobuki", "--duration", "4", "--seed", str(seed),
                  "--faults", faults, "--firmware", "python", "--log", str(path)])
@@ -188,7 +127,7 @@ def _run(path: Path, seed: int, faults: str) -> int:
 @pytest.mark.parametrize(("seed", "faults"), [(s, f) for s, f, _ in DRIVES])
 def test_the_firmware_integrates_the_frames_it_took(seed: int, faults: str,
                                                     tmp_path: Path) -> None:
-    with _watched() as watch:
+    with watched(KOBUKI) as watch:
         _run(tmp_path / "drive.log", seed, faults)
     assert watch.steps > 100, watch.steps
     assert watch.worst_m <= POSITION_LSB_M / 1000, watch.worst_m
