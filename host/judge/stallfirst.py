@@ -255,9 +255,11 @@ def resume_across(verdict: FirstVerdict, kept: Poses, breaks: IntArray, enc: Enc
     at = kept.enc[order]
     for b in breaks.tolist():
         i = int(np.searchsorted(at, b, side="left"))
-        if 0 < i < len(at):
+        if 0 < i < len(at) and enc.cycle_s is not None:
             s0, s1 = int(order[i - 1]), int(order[i])
             span = slice(int(kept.enc[s0]), int(kept.enc[s1]) + 1)
+            if _one_by_one(enc.seq[span], enc.timestamp_s[span], enc.cycle_s):
+                continue  # heard one by one: judge_left_out's neighbours vouch (as before)
             verdict.resumed(float(enc.timestamp_s[kept.enc[s1]]), resume_excess(
                 (float(kept.x_m[s0]), float(kept.y_m[s0]), float(kept.heading_rad[s0])),
                 (float(kept.x_m[s1]), float(kept.y_m[s1])), (enc.left[span], enc.right[span]),

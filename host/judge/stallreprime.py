@@ -80,7 +80,6 @@ from odocan.sim.mcu import HW_RX_FIFO_FRAMES
 SLACK_PERIODS = 3 * COUNTER_VALUES
 FIFO_SPAN = HW_RX_FIFO_FRAMES + 1  # frames after the last sample's the firmware may have taken
 R_SPAN = SILENCE_CYCLES  # frames before the first kept sample's the re-prime may lie on
-LATE_SPAN = SILENCE_CYCLES  # frames before the last sample's a late one in the FIFO may be (delay)
 COMPARED = 10  # samples after the stall the pairs are compared on
 LATE_S = 0.05  # a recorder's stamps of ODOM_STATUS this late (half its period) still read
 SUMMARY_S = 0.1  # ODOM_STATUS summary period (the DBC's cycle time of the page)
@@ -276,7 +275,7 @@ def _chosen(b: int, first: int, anchor: tuple[int, float, float, float],
     cos0, sin0 = math.cos(turn0), math.sin(turn0)
     at, on_x, on_y, on_h = samples
     best: tuple[float, int, int] | None = None
-    pairs = [(f, r) for f in range(max(b - 1 - LATE_SPAN, 0), min(b - 1 + FIFO_SPAN, first - 1) + 1)
+    pairs = [(f, r) for f in range(b - 1, min(b - 1 + FIFO_SPAN, first - 1) + 1)
              for r in range(max(f + 1, first - R_SPAN), first + 1)]
     for f, r in kept_pairs(pairs, lost):
         left = float(rh[r] - rh[f])  # the turn the re-prime left out
