@@ -11,7 +11,7 @@ stall, broken after the last frame a pose named before it (``stalls.inner_silenc
 ``last_named_before``), the re-prime's left-out span carries no gap allowance, and the resume rule
 judges the first sample after every stall (``stallfirst.resume_across``): without it the told
 stall's placement absorbed a pose 10 mm off from the stall's end. The same seed halted 2 s FAILed
-13.5 mm and now PASSes; kobuki's 423.3 mm is 4.3 mm (strict xfail below, with the 6 s drive's
+13.5 mm and now PASSes; kobuki's 423.3 mm is 2.0 mm (strict xfail below, with the 6 s drive's
 residual 9.5 mrad).
 """
 
@@ -37,7 +37,7 @@ LATE_REPRIME = (
     "host refused, so no pair of the log's frames fits (stallreprime): 9.47 mrad off, the "
     "position within 0.07 mm (252.9 mm before)")
 KOBUKI_2S = (
-    "issue #11: kobuki seed 2 halted 2 s: 4.31 mm, 1.53 mrad off (423.3 mm, 7805 mrad before the "
+    "issue #11: kobuki seed 2 halted 2 s: 2.0 mm, 13.4 mrad off (423.3 mm, 7805 mrad before the "
     "stall was told); not traced")
 ABSORBED = (
     "issue #11: on the 6 s drive a pose 10 mm off from the stall's end (10.0 s) FAILs only by the "
