@@ -368,9 +368,9 @@ def last_named_before(sample_enc: IntArray, quiet_s: FloatArray, enc: Encoders,
                       halves: PoseHalves | None) -> IntArray:
     """Per stall, the last encoder frame (a position in ``enc``) the firmware named before its
     silence began at ``quiet_s``: its sample's (``sample_enc``) or a later one a pose half
-    heard before the silence's end named (issue #11: sparse samples under ``delay`` put the
-    last sample 0.3 s before the halt; the stall's break there left the re-prime's frames
-    ``stallreprime`` chooses from 30 frames short)."""
+    named whose bus time is at or before that start (issue #11: sparse samples under ``delay``
+    put the last sample 0.3 s before the halt; the stall's break there left the re-prime's
+    frames ``stallreprime`` chooses from 30 frames short)."""
     out = np.asarray(sample_enc, dtype=np.int64).copy()
     if halves is None or len(enc.timestamp_s) == 0:
         return out
