@@ -43,7 +43,13 @@ from odocan.host.judge.samples import (
     Poses,
     wrap_pi,
 )
-from odocan.host.judge.stallreprime import Reprime, declared_stalls, left_out, stall_reprimes
+from odocan.host.judge.stallreprime import (
+    Reprime,
+    declared_stalls,
+    left_out,
+    left_out_at,
+    stall_reprimes,
+)
 from odocan.host.judge.step_periods import pair_bound_periods, step_bound_periods
 from odocan.host.judge.unseenrestart import heading_offsets, restarted_path, unseen_restarts
 from odocan.host.judge.unseenrestart import restart_detail as restart_detail
@@ -153,8 +159,8 @@ def build_reference(
     def gap_allowance(b: int) -> float:
         if b - e0 in unseen:  # frames lost before a restart: a new start, placed freely
             return math.inf
-        if b in uptime_reprimed:  # the gap ends in a controller restart or an ambiguous
-            return 0.0  # step: nothing integrated across it on board (re-primed), exact
+        if b in uptime_reprimed or left_out_at(b - e0, reprimes):  # a controller restart,
+            return 0.0  # an ambiguous step, a stall's re-prime: nothing integrated across it
         if seen.gap_missed(b, reprimed):
             return 0.0  # the firmware took the gap as the reference's one step
         return gap_allowance_at(enc, b, seen.filled(b, reprimed), geometry, bits, integrator,

@@ -193,6 +193,7 @@ def quiet_times(tx_s: FloatArray, pose_sent_s: FloatArray | None) -> FloatArray:
 def judge_left_out(
     halves: PoseHalves, kept: Poses, enc: Encoders, geometry: Geometry, integrator: str,
     bits: int, tolerance: tuple[float, float], pose_sent_s: FloatArray | None = None,
+    breaks: IntArray | None = None,
 ) -> FirstVerdict:
     """Judge every pose sent first after a silence of ``SILENCE_CYCLES`` encoder cycles or
     more (as ``stalls.silent`` reads one) that the samples ``kept`` lack: left out by
@@ -202,10 +203,13 @@ def judge_left_out(
     those the E2E check refused too) narrows the silence: under a reordering bus the poses
     refused as out of sequence were sent all the same (delay=0.5:100, kobuki seed 2: the quiet
     read from the accepted halves alone FAILed a correct firmware 163.9 mm). The first pose
-    of the life is not this rule's (the reboot rules judge it)."""
+    of the life is not this rule's (the reboot rules judge it). ``breaks``: the stalls' (
+    ``stalls.after_stalls``), each judged by the resume rule too (``resume_across``)."""
     verdict = FirstVerdict()
     if enc.cycle_s is None or len(enc.index) < 2 or len(kept.enc) == 0:
         return verdict
+    if breaks is not None:
+        resume_across(verdict, kept, breaks, enc, (geometry, integrator, bits), tolerance[0])
     tx = np.asarray(halves.px["timestamp_s"], dtype=np.float64)
     quiet_s = quiet_times(tx, pose_sent_s)
     queued = queued_frames(tx, enc.cycle_s)
@@ -233,6 +237,33 @@ def judge_left_out(
         if pose.lone:  # counted here, not by lonehalves
             verdict.lone_rows.add(k)
     return verdict
+
+
+def resume_across(verdict: FirstVerdict, kept: Poses, breaks: IntArray, enc: Encoders,
+                  robot: tuple[Geometry, str, int], tolerance_m: float) -> None:
+    """``stallresume.resume_excess`` of the first kept sample after each of ``breaks`` (frames
+    the reference restarts at after a stall) from the last kept before it, on the accepted
+    frames between, into ``verdict`` (at the later sample's frame's bus time). Issue #11 (rule
+    3): under ``delay`` and ``dup`` the host's E2E refuses the reordered frames and pairs few
+    poses, so the firmware's first pose after a stall is seldom a sample and ``judge_left_out``
+    never judges it (nor where the log's sequence skips); the first sample after was placed
+    within the stall's merge allowance plus the gaps' (pmir, seed 2,
+    ``delay=0.3:55,dup=0.1,stall=4:2``: 32 mm), absorbing a pose 10 mm off from the stall's
+    end. The counts are absolute: a frame the host refused changes the fine path only between
+    frames, within the rule's merge allowance at either end."""
+    order = np.argsort(kept.enc, kind="stable")
+    at = kept.enc[order]
+    for b in breaks.tolist():
+        i = int(np.searchsorted(at, b, side="left"))
+        if 0 < i < len(at) and enc.cycle_s is not None:
+            s0, s1 = int(order[i - 1]), int(order[i])
+            span = slice(int(kept.enc[s0]), int(kept.enc[s1]) + 1)
+            if _one_by_one(enc.seq[span], enc.timestamp_s[span], enc.cycle_s):
+                continue  # heard one by one: judge_left_out's neighbours vouch (as before)
+            verdict.resumed(float(enc.timestamp_s[kept.enc[s1]]), resume_excess(
+                (float(kept.x_m[s0]), float(kept.y_m[s0]), float(kept.heading_rad[s0])),
+                (float(kept.x_m[s1]), float(kept.y_m[s1])), (enc.left[span], enc.right[span]),
+                robot, tolerance_m))
 
 
 def _kept_test(kept: Poses) -> Callable[[Pair], bool]:

@@ -310,6 +310,14 @@ def left_out(d_left: IntArray, d_right: IntArray, reprimes: dict[int, Reprime]) 
         d_right[rep.f : rep.r] = 0
 
 
+def left_out_at(k: int, reprimes: dict[int, Reprime]) -> bool:
+    """Whether frame ``k`` (from e0) lies in a re-prime's left-out span (f + 1 .. r): the
+    firmware integrated nothing into it, so a gap of the log that ends there carries no motion
+    on board and its placement no allowance (issue #11: the log's gaps inside a 6 s halt the
+    firmware re-primed across summed to 1257 mm allowed, absorbing a pose 10 mm off)."""
+    return any(rep.f < k <= rep.r for rep in reprimes.values())
+
+
 def reprime_events(timestamp_s: Any, enc: Encoders, start: int,
                    reprimes: dict[int, Reprime]) -> list[dict[str, Any]]:
     """``analyze``'s events of the declared re-primes (frames from ``start``), at the frame

@@ -5,6 +5,8 @@ placed again there, within the bound of ``host.judge.breaks``."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import numpy.typing as npt
 
@@ -50,18 +52,14 @@ def after_stalls(
     # Silent while the encoder frames went on, on time (a log that lacks both is a recorder's
     # gap; a bus that held both back let the frames out in a burst), measured from the last pose
     # the firmware sent before each next sample (queued ones naming the same frame included).
-    talked = sent[:-1]
-    if pose_sent_s is not None and len(pose_sent_s):
-        k = np.searchsorted(pose_sent_s, sent[1:], side="left") - 1
-        talked = np.maximum(talked, np.where(k >= 0, pose_sent_s[np.maximum(k, 0)], -np.inf))
-    heard = frames_on_time(
-        enc, np.searchsorted(enc.timestamp_s, talked), np.searchsorted(enc.timestamp_s, sent[1:])
-    )
+    # Any silence between two samples is a stall; only a sample right after its silence (the
+    # firmware's first pose after it) may name a backlog frame: that one is left out.
+    quiet_from, first_after = inner_silences(sent, pose_sent_s, enc)
     # A sample let out in a burst (queued_frames) was not silent: the bus held it back.
     queued = queued_frames(sent, enc.cycle_s)
-    after = np.flatnonzero(silent(sent[1:] - talked, heard, enc.cycle_s) & ~queued[1:]) + 1
+    after = np.flatnonzero(np.isfinite(quiet_from) & ~queued[1:]) + 1
     keep = np.ones(len(sent_s), dtype=bool)
-    keep[order[after]] = False
+    keep[order[after[first_after[after - 1]]]] = False
     primed = stalled_first(sent_s, enc, alive_s, pose_sent_s)
     if primed is not None:
         keep[order[0]] = False
@@ -73,7 +71,8 @@ def after_stalls(
         named_again(halves, len(enc.seq), enc.timestamp_s)[kept.enc], sent_s[keep],
         sent if pose_sent_s is None else pose_sent_s, enc.cycle_s)
     frozen = _frozen(kept, enc, queued_by_sample[keep], evidence)
-    restarts = [onboard.enc[order[after - 1]] + 1, frozen]
+    restarts = [last_named_before(onboard.enc[order[after - 1]], quiet_from[after - 1], enc,
+                                  halves) + 1, frozen]
     if primed is not None:
         restarts.append(np.array([primed + 1], dtype=np.int64))
     breaks = np.sort(np.concatenate(restarts))
@@ -333,3 +332,54 @@ def silent(
         (quiet_s >= (SILENCE_CYCLES - 0.5) * cycle_s) & (heard >= SILENCE_CYCLES - 1)
     )
     return quiet
+
+
+def inner_silences(sent: FloatArray, pose_sent_s: FloatArray | None,
+                   enc: Encoders) -> tuple[FloatArray, npt.NDArray[np.bool_]]:
+    """Per two consecutive samples (``sent``: their send times, sorted), the bus time the
+    firmware's first silence between them (``silent``: no ODOM_POSE_Y, ``pose_sent_s``, while
+    the encoder frames went on, on time) began (inf: none), and whether a silence ended right
+    at the second sample (it is the firmware's first pose after it). Issue #11: under ``delay`` and
+    ``dup`` the host pairs few of the poses a firmware sends after a stall, so the next sample
+    may come long after its first poses; read only right before that sample, a 6 s halt was
+    no stall (pmir, seed 2, ``delay=0.3:55,dup=0.1,stall=4:6``: the reference integrated the
+    halt the firmware re-primed across and FAILed it by 252.9 mm)."""
+    out = np.full(max(len(sent) - 1, 0), np.inf)
+    ends = np.zeros(len(out), dtype=bool)
+    if enc.cycle_s is None or len(sent) < 2:
+        return out, ends
+    talk = sent if pose_sent_s is None else np.sort(np.concatenate((sent, pose_sent_s)))
+    t_a, t_b = talk[:-1], talk[1:]
+    heard = frames_on_time(enc, np.searchsorted(enc.timestamp_s, t_a),
+                           np.searchsorted(enc.timestamp_s, t_b))
+    quiet = np.flatnonzero(silent(t_b - t_a, heard, enc.cycle_s))
+    k = np.searchsorted(sent, t_a[quiet], side="right") - 1  # the sample before each silence
+    inside = (k >= 0) & (k < len(sent) - 1)
+    for pair, start in zip(k[inside][::-1].tolist(), t_a[quiet][inside][::-1].tolist(),
+                           strict=True):
+        out[pair] = start  # reversed: the first silence of a pair is written last
+    last = k[inside]
+    ends[last[t_b[quiet][inside] == sent[last + 1]]] = True
+    return out, ends
+
+
+def last_named_before(sample_enc: IntArray, quiet_s: FloatArray, enc: Encoders,
+                      halves: PoseHalves | None) -> IntArray:
+    """Per stall, the last encoder frame (a position in ``enc``) the firmware named before its
+    silence began at ``quiet_s``: its sample's (``sample_enc``) or a later one a pose half
+    named whose bus time is at or before that start (issue #11: sparse samples under ``delay``
+    put the last sample 0.3 s before the halt; the stall's break there left the re-prime's
+    frames ``stallreprime`` chooses from 30 frames short)."""
+    out = np.asarray(sample_enc, dtype=np.int64).copy()
+    if halves is None or len(enc.timestamp_s) == 0:
+        return out
+    named = np.concatenate((halves.ex, halves.ey))
+    ok = named >= 0
+    named = named[ok]
+    named_t = enc.timestamp_s[named]
+    for i, t in enumerate(quiet_s.tolist()):
+        if math.isfinite(t):
+            before = named[named_t <= t]
+            if len(before):
+                out[i] = max(int(out[i]), int(np.max(before)))
+    return out

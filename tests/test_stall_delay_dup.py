@@ -1,0 +1,157 @@
+"""A firmware stall under a delaying, duplicating bus (issue #11: a FAIL blamed a correct firmware).
+
+pmir, random, seed 2, 12 s, ``delay=0.3:55,dup=0.1,stall=4:6`` FAILed the correct firmware by
+252.9 mm (158 of 221 poses judged): the Python firmware's every step, watched and integrated again
+in float64 (``tests.fw_watch``), is within 1/1000 LSB. The judge's fault: under the delay the host
+pairs few poses (its E2E refuses the reordered pose frames), so the next sample after the 6 s halt
+came after the firmware's first poses, and the silence rule read only the silence right before a
+sample: the halt was no stall, the reference integrated across it where the firmware re-primed
+(its step's bound reached half the counters' range). Now any silence between two samples is a
+stall, broken after the last frame a pose named before it (``stalls.inner_silences``,
+``last_named_before``), the re-prime's left-out span carries no gap allowance, and the resume rule
+judges the first sample after every stall (``stallfirst.resume_across``): without it the told
+stall's placement absorbed a pose 10 mm off from the stall's end. The same seed halted 2 s FAILed
+13.5 mm and now PASSes; kobuki's 423.3 mm is 2.0 mm (strict xfail below, with the 6 s drive's
+residual 9.5 mrad).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from odocan.host.cli.app import main
+from tests.fw_watch import Watch, watched
+from tests.log_edit import raise_raw
+
+TAMPER_LSB = 100  # 10 mm in ODOM_POSE_X's 0.1 mm LSBs
+FAULTS_6S = "delay=0.3:55,dup=0.1,stall=4:6"
+FAULTS_2S = "delay=0.3:55,dup=0.1,stall=4:2"
+LATE_REPRIME = (
+    "issue #11: after the 6 s halt the host's E2E takes the on-time encoder frames the firmware "
+    "refused (seq 1000, 1003, 1004) and reads the late COUNTER 7 (seq 999, CTRL_UPTIME 10) as seq "
+    "1015, a controller restart (CTRL_UPTIME went back): the reference re-primes there too; the "
+    "firmware re-primed on the late seq 996 after a late seq 394 from its FIFO, both frames the "
+    "host refused, so no pair of the log's frames fits (stallreprime): 9.47 mrad off, the "
+    "position within 0.07 mm (252.9 mm before)")
+KOBUKI_2S = (
+    "issue #11: kobuki seed 2 halted 2 s: 2.0 mm, 13.4 mrad off (423.3 mm, 7805 mrad before the "
+    "stall was told); not traced")
+ABSORBED = (
+    "issue #11: on the 6 s drive a pose 10 mm off from the stall's end (10.0 s) FAILs only by the "
+    "heading the judge gets wrong on the correct firmware too (6.3 mrad): the resume rule's "
+    "re-primed candidates (stallresume: any frame q of the halt re-primed on, the tail turned) "
+    "reach within 0.31 mm of it, and the log's gaps after it (late frames read a lap on) are "
+    "placed within 1293 mm summed; from 11.0 s it FAILs by 10.0 mm")
+
+Drive = tuple[Path, Watch, int]  # the log, the firmware's watch, run's exit code
+
+
+def _drive(root: Path, robot: str, faults: str) -> Drive:
+    log = root / f"{robot}.log"
+    with watched(robot) as watch:
+        code = main(["run", "--robot", robot, "--scenario", "random", "--seed", "2",
+                     "--duration", "12", "--faults", faults, "--firmware", "python",
+                     "--log", str(log)])
+    return log, watch, code
+
+
+@pytest.fixture(scope="module")
+def six(tmp_path_factory: pytest.TempPathFactory) -> Drive:
+    return _drive(tmp_path_factory.mktemp("six"), "pmir", FAULTS_6S)
+
+
+@pytest.fixture(scope="module")
+def two(tmp_path_factory: pytest.TempPathFactory) -> Drive:
+    return _drive(tmp_path_factory.mktemp("two"), "pmir", FAULTS_2S)
+
+
+@pytest.fixture(scope="module")
+def kobuki_two(tmp_path_factory: pytest.TempPathFactory) -> Drive:
+    return _drive(tmp_path_factory.mktemp("ktwo"), "kobuki", FAULTS_2S)
+
+
+def _analyze(log: Path, stream: str, report: Path | None = None) -> int:
+    extra = [] if report is None else ["--report", str(report)]
+    return main(["analyze", str(log), "--stream", stream, *extra])
+
+
+@pytest.mark.parametrize("name", ["six", "two", "kobuki_two"])
+def test_the_firmware_integrates_the_frames_it_took(name: str,
+                                                    request: pytest.FixtureRequest) -> None:
+    _, watch, _ = request.getfixturevalue(name)
+    assert watch.steps > 300, watch.steps
+    assert watch.within_a_thousandth_lsb(), (watch.worst_m, watch.worst_rad)
+
+
+def test_the_six_second_halt_is_a_stall_the_firmware_re_primed_across(
+        six: Drive, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The halt is told where it was (not only a false one at 2.79 s) and the reference
+    re-primes with the firmware: the position within the tolerance (252.9 mm off before)."""
+    log, _, _ = six
+    _analyze(log, "never", tmp_path / "r.json")
+    capsys.readouterr()
+    report = json.loads((tmp_path / "r.json").read_text())
+    stalls = [e["t_s"] for e in report["events"] if e["kind"] == "firmware_stall"]
+    reprimes = [e["t_s"] for e in report["events"] if e["kind"] == "stall_reprime"]
+    assert any(3.9 <= t <= 4.0 for t in stalls), stalls
+    assert len(reprimes) == 1, reprimes
+    assert 9.9 <= reprimes[0] <= 10.1, reprimes
+    assert report["onboard_vs_reference"]["max_position_error_beyond_allowance_m"] < 1e-4
+
+
+@pytest.mark.xfail(strict=True, reason=LATE_REPRIME)
+def test_the_correct_firmware_passes_a_six_second_halt(
+        six: Drive, capsys: pytest.CaptureFixture[str]) -> None:
+    log, _, code = six
+    codes = [code, *(_analyze(log, s) for s in ("never", "always"))]
+    capsys.readouterr()
+    assert codes == [0, 0, 0]
+
+
+def test_the_correct_firmware_passes_a_two_second_halt(
+        two: Drive, capsys: pytest.CaptureFixture[str]) -> None:
+    """13.5 mm beyond the allowance before: the halt was no stall."""
+    log, _, code = two
+    codes = [code, *(_analyze(log, s) for s in ("never", "always"))]
+    capsys.readouterr()
+    assert codes == [0, 0, 0]
+
+
+@pytest.mark.xfail(strict=True, reason=KOBUKI_2S)
+def test_the_correct_firmware_passes_a_two_second_halt_on_kobuki(
+        kobuki_two: Drive, capsys: pytest.CaptureFixture[str]) -> None:
+    log, _, code = kobuki_two
+    codes = [code, *(_analyze(log, s) for s in ("never", "always"))]
+    capsys.readouterr()
+    assert codes == [0, 0, 0]
+
+
+@pytest.mark.parametrize("from_s", [6.0, 8.0])  # the stall's end, and 2 s after it
+def test_a_pose_10_mm_off_after_a_two_second_halt_fails(
+        two: Drive, from_s: float, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    log, _, _ = two
+    tampered = tmp_path / "t.log"
+    assert raise_raw(log, tampered, "ODOM_POSE_X", (2, 4), TAMPER_LSB, from_s) > 100
+    codes = [_analyze(tampered, s) for s in ("never", "always")]
+    capsys.readouterr()
+    assert codes == [1, 1]
+
+
+@pytest.mark.parametrize("from_s", [  # the stall's end, and 1 s after (a 12 s drive)
+    pytest.param(10.0, marks=pytest.mark.xfail(strict=True, reason=ABSORBED)), 11.0])
+def test_a_pose_10_mm_off_after_a_six_second_halt_fails_by_its_position(
+        six: Drive, from_s: float, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """FAIL by the position, beyond the allowance by most of the 10 mm (a FAIL by the heading
+    alone says nothing: the correct firmware FAILs by it too)."""
+    log, _, _ = six
+    tampered = tmp_path / "t.log"
+    assert raise_raw(log, tampered, "ODOM_POSE_X", (2, 4), TAMPER_LSB, from_s) > 40
+    codes = [_analyze(tampered, s, tmp_path / f"{s}.json") for s in ("never", "always")]
+    capsys.readouterr()
+    assert codes == [1, 1]
+    for s in ("never", "always"):
+        report = json.loads((tmp_path / f"{s}.json").read_text())
+        assert report["onboard_vs_reference"]["max_position_error_beyond_allowance_m"] > 5e-3
