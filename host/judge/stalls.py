@@ -50,10 +50,10 @@ def after_stalls(
     order = np.argsort(sent_s, kind="stable")  # samples are sorted by encoder frame, not sent
     sent = sent_s[order]
     # Silent while the encoder frames went on, on time (a log that lacks both is a recorder's
-    # gap; a bus that held both back let the frames out in a burst), measured from the last pose
-    # the firmware sent before each next sample (queued ones naming the same frame included).
-    # Any silence between two samples is a stall; only a sample right after its silence (the
-    # firmware's first pose after it) may name a backlog frame: that one is left out.
+    # gap; a bus that held both back let the frames out in a burst), anywhere between two
+    # samples (``inner_silences``: between any two poses the firmware sent, queued ones naming
+    # the same frame included); only a sample right after its silence (the firmware's first
+    # pose after it) may name a backlog frame: that one is left out.
     quiet_from, first_after = inner_silences(sent, pose_sent_s, enc)
     # A sample let out in a burst (queued_frames) was not silent: the bus held it back.
     queued = queued_frames(sent, enc.cycle_s)
