@@ -102,31 +102,30 @@ def test_the_six_second_halt_is_a_stall_the_firmware_re_primed_across(
     assert report["onboard_vs_reference"]["max_position_error_beyond_allowance_m"] < 1e-4
 
 
+def _run_and_judges(log: Path, _watch: Watch, code: int,
+                    capsys: pytest.CaptureFixture[str]) -> list[int]:
+    """run's exit code, then analyze's whole and streamed, on a drive's log."""
+    codes = [code, *(_analyze(log, s) for s in ("never", "always"))]
+    capsys.readouterr()
+    return codes
+
+
 @pytest.mark.xfail(strict=True, reason=LATE_REPRIME)
 def test_the_correct_firmware_passes_a_six_second_halt(
         six: Drive, capsys: pytest.CaptureFixture[str]) -> None:
-    log, _, code = six
-    codes = [code, *(_analyze(log, s) for s in ("never", "always"))]
-    capsys.readouterr()
-    assert codes == [0, 0, 0]
+    assert _run_and_judges(*six, capsys) == [0, 0, 0]
 
 
 def test_the_correct_firmware_passes_a_two_second_halt(
         two: Drive, capsys: pytest.CaptureFixture[str]) -> None:
     """13.5 mm beyond the allowance before: the halt was no stall."""
-    log, _, code = two
-    codes = [code, *(_analyze(log, s) for s in ("never", "always"))]
-    capsys.readouterr()
-    assert codes == [0, 0, 0]
+    assert _run_and_judges(*two, capsys) == [0, 0, 0]
 
 
 @pytest.mark.xfail(strict=True, reason=KOBUKI_2S)
 def test_the_correct_firmware_passes_a_two_second_halt_on_kobuki(
         kobuki_two: Drive, capsys: pytest.CaptureFixture[str]) -> None:
-    log, _, code = kobuki_two
-    codes = [code, *(_analyze(log, s) for s in ("never", "always"))]
-    capsys.readouterr()
-    assert codes == [0, 0, 0]
+    assert _run_and_judges(*kobuki_two, capsys) == [0, 0, 0]
 
 
 @pytest.mark.parametrize("from_s", [6.0, 8.0])  # the stall's end, and 2 s after it
