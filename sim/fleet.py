@@ -32,6 +32,7 @@ other tasks (MQTT I/O): one thread, no lock, no GIL contention with the timer.
 from __future__ import annotations
 
 import asyncio
+import time
 from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
@@ -47,6 +48,7 @@ from odocan.sim.framebatch import DataFrame, FrameBatchListener, Received
 from odocan.sim.lookahead import PlannedVehicle
 from odocan.sim.provision import robot_key
 from odocan.sim.realtime import DeadlineStats, send_skipped_samples
+from odocan.sim.releasegate import ReleaseGate
 from odocan.sim.rig import LockstepRig, RigConfig
 from odocan.sim.robot import RobotProfile
 
@@ -333,10 +335,12 @@ async def run_realtime(
     stop: asyncio.Event | None = None,
     period_s: float = TICK_S,
     stats: DeadlineStats | None = None,
+    gate: ReleaseGate | None = None,
 ) -> DeadlineStats:
     """Step ``fleet`` every ``period_s`` of the wall clock for ``duration_s`` (None: until
     ``stop``); returns the deadline accounting (see the module docstring), kept in ``stats``
-    when given (so another task can watch it while the fleet runs)."""
+    when given (so another task can watch it while the fleet runs); ``gate`` is told each
+    release before the wait for it (``sim.releasegate``)."""
     clock = RealTimeClock()
     if stats is None:
         stats = DeadlineStats(period_s, period_s / 2)
@@ -346,6 +350,8 @@ async def run_realtime(
         if duration_s is not None and release >= duration_s - 1e-9:
             break
         delay = release - clock.now_s()
+        if gate is not None:
+            gate.next_s = time.monotonic() + delay
         await asyncio.sleep(max(delay, 0.0))  # 0: still let the MQTT tasks run once
         lateness = max(clock.now_s() - release, 0.0)
         if lateness >= period_s:

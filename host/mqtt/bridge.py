@@ -67,6 +67,7 @@ from odocan.host.protocol.commands import (
 )
 from odocan.host.protocol.secoc import SecocSigner
 from odocan.sim.framebatch import Received
+from odocan.sim.releasegate import ReleaseGate
 
 log = logging.getLogger(__name__)
 # (robot index, frame): a live bus's frames are Messages, the lockstep fleet's mostly DataFrames
@@ -268,12 +269,14 @@ class Bridge:
     """CAN <-> MQTT for ``robots`` (see the module docstring)."""
 
     def __init__(self, robots: Sequence[RobotEndpoint], *, config: BridgeConfig,
-                 end_rule: EndJudge | None = None) -> None:
+                 end_rule: EndJudge | None = None, gate: ReleaseGate | None = None) -> None:
         """``end_rule``: how each robot is judged when its watch ends, the verdict its
         ``offline`` status carries (``watch_verdict``; ``odocan bridge``'s ``EndRule``, ``odocan
-        fleet``'s ``FleetEndRule``); None: none."""
+        fleet``'s ``FleetEndRule``); None: none. ``gate``: a real-time fleet's releases
+        (``sim.releasegate``): no slice or periodic turn starts just before one."""
         self.config = config
         self.end_rule = end_rule
+        self.gate = gate
         names = [r.name for r in robots]
         # one thread and one connection read every robot's commands (``host.mqtt.cmdreader``)
         self.commands = CommandReader(
@@ -316,7 +319,9 @@ class Bridge:
                     tg.create_task(robot.link.run(stop=stop),
                                    name=f"mqtt-link-{robot.link.robot}")
                 frames = tg.create_task(self._consume(), name="can-frames")
-                periodic = tg.create_task(self._periodic(), name="periodic")
+                periodic = tg.create_task(self._periodic(
+                    sleep=asyncio.sleep if self.gate is None else self.gate.sleep),
+                    name="periodic")
                 pacing = tg.create_task(self._pace(), name="command-pacing")
                 stalls = tg.create_task(self.stalls.run(), name="loop-stalls")
                 await stop.wait()
@@ -345,17 +350,8 @@ class Bridge:
             "commands_failed": sum(r.commands_failed for r in self.robots),
             **totals,
             **self.stalls.counters(),  # commands a broker held for us may be lost (stallwatch)
+            "release_holds": 0 if self.gate is None else self.gate.holds,  # (sim.releasegate)
         }
-
-    def summary(self) -> str:
-        """One line of what was dropped, refused or expired (printed when the bridge stops)."""
-        c = self.counters()
-        return (f"{c['frames_in']} frames in ({c['frames_dropped']} dropped), telemetry "
-                f"dropped {c['telemetry_dropped']} (queue full) + {c['telemetry_offline']} "
-                f"(broker away), QoS-1 dropped {c['reliable_dropped']}, refused by the broker "
-                f"{c['refused']}, commands expired {c['commands_expired']}, commands timed out "
-                f"{c['commands_timeout']}, aborted {c['commands_aborted']}, "
-                f"{c['reconnects']} reconnects")
 
     async def _consume(self) -> None:
         """The batches, ``slice_step`` frames at a time, a loop turn after ``slice_frames`` judged
@@ -367,6 +363,8 @@ class Bridge:
             if not self._pending:
                 judged = 0 if self.queue.empty() else judged  # empty: the get gives a turn
                 self._pending, self._pending_at = await self.queue.get(), 0
+            if self.gate is not None:
+                await self.gate.clear()
             start = self._pending_at
             self._pending_at = start + step
             judged += self._handle(self._pending[start:self._pending_at])

@@ -93,6 +93,7 @@ from odocan.sim.contract import cycle_ticks
 from odocan.sim.fleet import Fleet, FleetConfig, run_realtime
 from odocan.sim.provision import robot_key
 from odocan.sim.realtime import DeadlineStats
+from odocan.sim.releasegate import ReleaseGate, phased_start_s
 
 
 @dataclass(frozen=True)
@@ -113,6 +114,9 @@ class FleetRun:
     # the deadline_miss_ratio its run may reach (``--max-miss-ratio``): each robot's ``offline``
     # status says whether its loop broke it (``fleetjudge.loop_figures``)
     max_miss_ratio: float = DEFAULT_MAX_MISS_RATIO
+    # (monotonic epoch, fraction of a period): where this worker's clock starts among the
+    # machine's workers (``sim.releasegate.phased_start_s``); None: when it is ready
+    clock_phase: tuple[float, float] | None = None
 
 
 StartHook = Callable[[int, "BrokerURL | None"], None]
@@ -129,7 +133,7 @@ async def run_fleet(
     with Fleet(run.fleet) as fleet:
         trace = from_env(fleet.names[0])  # bench-only (``ODOCAN_TICK_TRACE``), else None
         if not run.bridge:
-            stats, cpu_s, stopped = await _paced(fleet, run.duration_s, None,
+            stats, cpu_s, stopped = await _paced(fleet, run, None,
                                                  lambda: _started(on_start, fleet, None),
                                                  on_progress, trace)
             return {**_report(run, fleet, stats, None, None, False), "cpu_s": cpu_s,
@@ -141,7 +145,8 @@ async def run_fleet(
             bridge = Bridge(_endpoints(fleet, run), end_rule=rule, config=BridgeConfig(
                 broker=url, publish_hz=run.publish_hz, client_prefix=run.client_prefix,
                 connect_timeout_s=run.connect_timeout_s, command_expiry_s=run.command_expiry_s,
-                hold_s=HOLD_S))  # each robot's frames judged in one go (framehold)
+                hold_s=HOLD_S),  # each robot's frames judged in one go (framehold)
+                gate=ReleaseGate())  # no slice just before a tick
             watch_halts(fleet, [robot.telemetry for robot in bridge.robots])
             if trace is not None:
                 _trace_bridge(trace, bridge)
@@ -151,8 +156,8 @@ async def run_fleet(
                     tg.create_task(bridge.run(stop=stop), name="bridge")
                     await _all_connected(bridge, run.connect_timeout_s + 5.0)
                     stats, cpu_s, stopped = await _paced(
-                        fleet, run.duration_s, bridge.offer,
-                        lambda: _started(on_start, fleet, url), on_progress, trace)
+                        fleet, run, bridge.offer, lambda: _started(on_start, fleet, url),
+                        on_progress, trace, bridge.gate)
                     rule.stats = stats  # the clock stopped: the loop's figures are final
                     stop.set()
             except BaseExceptionGroup as group:
@@ -175,14 +180,17 @@ def _started(on_start: StartHook | None, fleet: Fleet, url: BrokerURL | None) ->
 
 
 async def _paced(
-    fleet: Fleet, duration_s: float, on_batch: Any, started: Callable[[], None],
+    fleet: Fleet, run: FleetRun, on_batch: Any, started: Callable[[], None],
     on_progress: ProgressHook | None = None, trace: TickTrace | None = None,
+    gate: ReleaseGate | None = None,
 ) -> tuple[DeadlineStats, float, dict[str, Any] | None]:
-    """Run the fleet until ``duration_s`` or SIGINT/SIGTERM, whichever comes first: a signal ends
-    the run early, and the report is still written. Returns the deadline figures, the CPU seconds
-    this process spent meanwhile (every thread: loop, bridge, MQTT I/O), and the report's
-    ``stopped`` (``host.stopped``) when a signal ended it before ``duration_s``. ``trace``
-    (``host.mqtt.ticktrace``, bench-only) times each tick's parts."""
+    """Run the fleet until ``run.duration_s`` or SIGINT/SIGTERM, whichever comes first: a
+    signal ends the run early, and the report is still written. Returns the deadline figures,
+    the CPU seconds this process spent meanwhile (every thread: loop, bridge, MQTT I/O), and the
+    report's ``stopped`` (``host.stopped``) when a signal ended it before its duration.
+    ``trace`` (``host.mqtt.ticktrace``, bench-only) times each tick's parts; ``gate`` is told
+    the releases; the clock starts at ``run.clock_phase`` (``sim.releasegate``)."""
+    duration_s = run.duration_s
     stop = asyncio.Event()
     signals: list[int] = []
     loop = asyncio.get_running_loop()
@@ -192,6 +200,7 @@ async def _paced(
         stop.set()
 
     handled = _on_stop_signals(loop, on_signal)
+    await _phase_wait(run.clock_phase)
     started()
     collector = TickCollector(on_batch)
     stats = DeadlineStats(TICK_S, TICK_S / 2)
@@ -207,8 +216,8 @@ async def _paced(
         watcher = asyncio.create_task(_watch(stats, on_progress), name="fleet-progress")
     cpu0_s = time.process_time()
     try:
-        await run_realtime(fleet, duration_s=duration_s, on_batch=after_tick,
-                           stop=stop, stats=stats)
+        await run_realtime(fleet, duration_s=duration_s, on_batch=after_tick, stop=stop,
+                           stats=stats, gate=gate)
         done_s = stats.ticks * TICK_S
         stopped = (Stopped(signals[0], round(done_s, 6), duration_s).as_dict()
                    if signals and done_s < duration_s else None)
@@ -221,6 +230,13 @@ async def _paced(
             trace.write()
         for signum in handled:
             loop.remove_signal_handler(signum)
+
+
+async def _phase_wait(phase: tuple[float, float] | None) -> None:
+    """Until this worker's clock may start (``FleetRun.clock_phase``; at once when None)."""
+    if phase is not None:
+        now_s = time.monotonic()
+        await asyncio.sleep(phased_start_s(*phase, TICK_S, now_s) - now_s)
 
 
 class TickCollector:

@@ -195,8 +195,9 @@ def run_sharded(
             run, on_start=on_start,
             on_progress=None if on_progress is None else
             lambda s: on_progress(s.ticks, s.late_ticks)))
-    runs = [replace(run, fleet=run.fleet.shard(first, count))
-            for first, count in split(run.fleet.robots, workers)]
+    epoch_s = time.monotonic()  # the workers' clocks 1/workers of a period apart after it
+    runs = [replace(run, fleet=run.fleet.shard(first, count), clock_phase=(epoch_s, w / workers))
+            for w, (first, count) in enumerate(split(run.fleet.robots, workers))]
     return aggregate(_run_workers(runs, on_start, on_progress, debug))
 
 

@@ -24,6 +24,7 @@ import signal
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import can
 
@@ -162,13 +163,24 @@ async def _bridge(
         finally:
             announced.cancel()
             reader.stop()
-        print(f"bridge {name}: {bridge.summary()}", file=sys.stderr)
+        print(f"bridge {name}: {counters_line(bridge.counters())}", file=sys.stderr)
         if said := bridge.robots[0].telemetry.robot.said(f"bridge {name}"):  # the page chose
             print(said, file=sys.stderr)
         if lost := lost_here_text(reader.reader.stats()):
             print(f"bridge {name}: lost here: {lost}", file=sys.stderr)
     # judged once, when the watch ended: the verdicts the retained ``offline`` statuses carry
     return (signals[0] if signals else None), bridge.end_verdicts()
+
+
+def counters_line(c: dict[str, Any]) -> str:
+    """The bridge's counters as one line: what was dropped, refused or expired (said when the
+    bridge stops)."""
+    return (f"{c['frames_in']} frames in ({c['frames_dropped']} dropped), telemetry "
+            f"dropped {c['telemetry_dropped']} (queue full) + {c['telemetry_offline']} "
+            f"(broker away), QoS-1 dropped {c['reliable_dropped']}, refused by the broker "
+            f"{c['refused']}, commands expired {c['commands_expired']}, commands timed out "
+            f"{c['commands_timeout']}, aborted {c['commands_aborted']}, "
+            f"{c['reconnects']} reconnects")
 
 
 def _stop_after(duration_s: float, stop: asyncio.Event) -> None:
