@@ -13,9 +13,13 @@ name before a gap and the first after it is held to the sum of its gaps' allowan
 
 Where the log says its firmware merged frames on board (a stall: TIME_LOST or
 MAILBOX_OVERFLOW, ``replay_compare.replayable`` False) any two poses may have been reached by
-different steps, so every jump between two consecutive poses both name is held to twice the
-allowance of their whole span (each firmware within one allowance of the span as one merged
-step), where before nothing was compared after the first gap.
+different steps, so every jump between two consecutive poses both name is held to what each
+firmware's steps may have done differently from the log's frames there, where before nothing
+was compared after the first gap: for a firmware whose pages prove it took exactly the log's
+frames (``gapseen``), the gaps' allowances above; else, where its steps are runs of the log's
+frames (the replay's always; the recording one's where no gap lies between or its pages prove
+it missed each), the worst merge error of such runs (``breaks.merge_allowance_m``, the analysis
+judge's stall bound); else the gap allowance of the whole span.
 
 Rounding: each pose on the bus is within half an LSB per axis of its firmware's, so a jump of
 the offset within 2 LSB per axis; turned by an anchor's heading offset (``anchors``), the drift
@@ -35,6 +39,7 @@ import numpy.typing as npt
 from odocan.firmware.encoders import WIRE_COUNTER_BITS
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.analysis import HEADING_LSB_RAD, POSITION_LSB_M
+from odocan.host.judge.breaks import merge_allowance_m
 from odocan.host.judge.gapbound import gap_allowance_of_counts
 from odocan.host.judge.gapseen import NOTHING, Seen, seen_in_log
 from odocan.host.judge.reference import PROFILE_SPEED, Geometry
@@ -69,6 +74,13 @@ class JumpModel:
             return math.inf
         return gap_allowance_of_counts(before, after, periods, self.geometry, self.bits,
                                        self.integrator, PROFILE_SPEED)
+
+
+    def merge_m(self, counts: IntArray) -> float:
+        """``breaks.merge_allowance_m`` of the frames with wire ``counts`` (n x 2): the worst
+        merge error of a firmware whose steps are runs of them."""
+        return merge_allowance_m(counts[:, 0], counts[:, 1], self.geometry, self.bits,
+                                 self.integrator)
 
 
 @dataclass(frozen=True)
@@ -162,10 +174,12 @@ def _pair_allowance_m(model: JumpModel, steps: tuple[LogSteps, LogSteps | None],
                                    int(ticks[g + 1] - ticks[g])) for g in gaps.tolist())
     if replayed is None:
         return across if len(gaps) else None
+    runs = model.merge_m(counts[a:b + 1])  # steps of runs of the log's frames
+    seen = all(log.gap_missed(a + g + 1) for g in gaps.tolist())
     periods = int(ticks[-1] - ticks[0])
-    whole = model.allowance_m(_pair(counts[a]), _pair(counts[b]), periods) if periods > 1 else 0.0
+    whole = runs if seen else model.allowance_m(_pair(counts[a]), _pair(counts[b]), periods)
     own = across if log.took_all(a, b) else whole
-    return own + (0.0 if replayed.took_all(*ends[1]) else whole)
+    return own + (0.0 if replayed.took_all(*ends[1]) else runs)
 
 
 def _pair(row: IntArray) -> tuple[int, int]:
