@@ -6,7 +6,10 @@ naming it in the log and in the replay: positions up to the log's first gap of t
 sequence, after it their offset's drift between two gaps (when the log says its firmware took
 its frames on time, ``replayable``), headings everywhere, and the log's resent positions against
 its first at the same frame (one firmware's poses at one frame agree). A half of the log whose
-partner the bus lost is compared on what it carries, the same way (``replay_lone``).
+partner the bus lost is compared on what it carries, the same way (``replay_lone``). The
+offset's jump across each gap (and, where the log's firmware merged frames on board, between
+any two poses) is held to what the encoder counts either side allow (``replay_jumps``): a
+re-anchoring at a gap is no free pass.
 """
 
 from __future__ import annotations
@@ -381,8 +384,8 @@ def compared(vs_log: dict[str, Any]) -> str:
     drift = vs_log.get("max_position_drift_between_gaps_m")
     parts.append(f"{where} by their position drift between gaps (max {drift * 1e3:.4f} mm)"
                  if drift is not None else
-                 f"{where}: positions not compared (the log's firmware did not take its "
-                 "frames on time)")
+                 f"{where}: positions by their jumps between poses, held to what the counts "
+                 "allow (the log's firmware did not take its frames on time)")
     anchored = bool(vs_log.get("heading_offsets_bam16"))
     parts.append(f"heading {heading}" + (" less its offset where re-anchored" if anchored else ""))
     return "; ".join(parts) + _lone_said(vs_log)
@@ -422,7 +425,8 @@ def not_comparable(vs_log: dict[str, Any]) -> list[str]:
                      "headings are compared less the log's offset at the first frame both "
                      f"name ({offset:.4f} rad), "
                      + ("its positions by their drift, turned by that offset" if drift else
-                        "its positions not (the log's firmware did not take its frames on time)"))
+                        "its positions by their jumps, held to what the counts allow (the "
+                        "log's firmware did not take its frames on time)"))
     holes = vs_log.get("holes") or []
     for hole in holes[:SAID_HOLES]:
         lines.append(f"the log has a hole at t={hole['t_s']:.2f} s ({hole['length_s']:.2f} s "
@@ -430,7 +434,8 @@ def not_comparable(vs_log: dict[str, Any]) -> list[str]:
                      "is not fed, so its poses are not comparable as they are after it: "
                      "headings are compared less their offset at the first frame both name "
                      "after it, " + ("positions by their drift between gaps" if drift else
-                                     "positions not"))
+                                     "positions by their jumps") + ", their jump across it "
+                     "held to what the encoder counts either side allow")
     if len(holes) > SAID_HOLES:
         lines.append(f"... and {len(holes) - SAID_HOLES} more holes")
     return lines
