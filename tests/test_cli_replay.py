@@ -73,6 +73,7 @@ def test_replay_reproduces_the_run(
         "max_position_diff_m": 0.0, "max_position_diff_raw_m": 0.0, "max_heading_diff_rad": 0.0,
         "before_first_gap": 300, "max_position_diff_before_gap_m": 0.0,
         "max_resent_position_diff_m": 0.0, "max_position_drift_between_gaps_m": 0.0,
+        "max_position_jump_excess_m": 0.0, "max_jump_allowance_m": 0.0, "jumps_compared": 0,
         "logged": 300, "log_starts_mid_drive": False, "holes": [], "heading_offsets_bam16": [],
         "not_compared": {"unnamed": 0, "unpaired": 0},  # every pose of the log compared
         "lone_halves": {"x": 0, "y": 0, "not_compared": 0},  # a lossless bus: none

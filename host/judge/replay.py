@@ -70,6 +70,7 @@ from odocan.host.judge.replay_events import (
     unfed_truth,
 )
 from odocan.host.judge.replay_halts import fit_halts
+from odocan.host.judge.replay_jumps import JumpModel
 from odocan.host.judge.replay_lives import LifePlan, fit_first_prime, judge_lives, plan_lives
 from odocan.host.judge.replay_track import EncoderTrack, late_frames
 from odocan.host.outputs import OutputError
@@ -455,12 +456,14 @@ def replay_and_analyze(
         "ticks": replay.ticks,
         "ticks_without_frame": replay.ticks - min(replay.ticks, len(feed.encoders.index)),
         "interrupted": replay.stopped is not None,
-        "onboard_vs_log": versus_log(frames, feed.accepted, replayed),
+        "onboard_vs_log": versus_log(frames, feed.accepted, replayed,
+                                     jumps=JumpModel.of(profile, integrator)),
     }
     if not plan.trivial:
         _, replayed_accepted = check_frames(replayed)
         analysis.report["replay"]["lives"] = judge_lives(
-            frames, feed.accepted, replayed, replayed_accepted, feed.encoders, plan, tolerance)
+            frames, feed.accepted, replayed, replayed_accepted, feed.encoders, plan, tolerance,
+            JumpModel.of(profile, integrator))
     if replay.stopped is not None:
         analysis.report["stopped"] = replay.stopped.as_dict()
     return analysis

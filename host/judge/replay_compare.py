@@ -6,7 +6,10 @@ naming it in the log and in the replay: positions up to the log's first gap of t
 sequence, after it their offset's drift between two gaps (when the log says its firmware took
 its frames on time, ``replayable``), headings everywhere, and the log's resent positions against
 its first at the same frame (one firmware's poses at one frame agree). A half of the log whose
-partner the bus lost is compared on what it carries, the same way (``replay_lone``).
+partner the bus lost is compared on what it carries, the same way (``replay_lone``). The
+offset's jump across each gap (and, where the log's firmware merged frames on board, between
+any two poses) is held to what the encoder counts either side allow (``replay_jumps``): a
+re-anchoring at a gap is no free pass.
 """
 
 from __future__ import annotations
@@ -23,6 +26,7 @@ from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.analysis import HEADING_LSB_RAD, POSITION_LSB_M, Tolerance
 from odocan.host.judge.posehalves import BAM, HALVES
 from odocan.host.judge.powerup import starts_at_power_up
+from odocan.host.judge.replay_jumps import JumpModel, Jumps, LogSteps, offset_jumps
 from odocan.host.judge.replay_lone import (
     Anchoring,
     LoneFigures,
@@ -97,7 +101,7 @@ def x_pose_ticks(frames: FrameArrays, track: EncoderTrack, decoder: BulkDecoder)
 
 def versus_log(
     log: FrameArrays, log_accepted: npt.NDArray[np.bool_], replayed: FrameArrays,
-    from_power_up: bool = False,
+    from_power_up: bool = False, jumps: JumpModel | None = None,
 ) -> dict[str, Any]:
     """The replayed on-board poses against the logged ones at the same encoder frames (at each,
     the largest difference between any pose sent naming it in the log and in the replay).
@@ -114,7 +118,10 @@ def versus_log(
     for a log cut mid-drive: its positions have no common origin). ``from_power_up``: the log
     is known to start at its firmware's power-up, where the replay's does too (a life
     ``replay_lives`` cut at it), so never mid-drive: its positions are compared as they are,
-    whatever the cut's first poses look like (re-anchoring there would absorb an offset)."""
+    whatever the cut's first poses look like (re-anchoring there would absorb an offset).
+    ``jumps``: the robot's bound on the firmware's steps, to hold the offset's jump across each
+    gap (or, where the log's firmware merged frames, between any two poses) to what the counts
+    either side allow (``replay_jumps``; None: not compared)."""
     _, accepted = check_frames(replayed)
     px, py = halves_by_tick(log, log_accepted)
     old, new, lone = paired(px, py), onboard_by_tick(replayed, accepted), LoneHalves.of(px, py)
@@ -153,6 +160,10 @@ def versus_log(
     drift = _larger(drift_between_gaps_m(common, log_xy, replay_xy, gap_ends, turn, anchored),
                     alone.drift_m) if drifts else None
     before_gap = _larger(float(position[:before].max()) if before else None, alone.before_gap_m)
+    jumped = Jumps() if jumps is None else offset_jumps(
+        jumps, common, log_xy - turned(replay_xy, turn), turn, anchored, replay_xy,
+        (LogSteps.of(log, log_accepted, track, not mid), None if drifts else
+         LogSteps.of(replayed, accepted, EncoderTrack.of(replayed, accepted, decoder), not mid)))
     judged = [v for v in (before_gap, drift) if v is not None]
     return {
         "samples": len(common),
@@ -165,7 +176,7 @@ def versus_log(
         "before_first_gap": before,
         "max_position_diff_before_gap_m": before_gap,
         "heading_offsets_bam16": offsets,
-        "max_position_drift_between_gaps_m": drift,
+        "max_position_drift_between_gaps_m": drift, **jumped.facts(),
         **facts, **_lone_facts(named, common, alone),
     }
 
@@ -317,6 +328,11 @@ def departures(vs_log: dict[str, Any], tolerance: Tolerance) -> list[str]:
     if drift is not None and drift > tolerance.position_m:
         reasons.append(f"between gaps of the log its position moves off the log's by up to "
                        f"{drift * 1e3:.4f} mm (tolerance {tolerance.position_m * 1e3:.4g} mm)")
+    jump = vs_log.get("max_position_jump_excess_m")
+    if jump is not None and jump > tolerance.position_m:
+        reasons.append(f"across a gap or stall of the log its position jumps off the log's by "
+                       f"up to {jump * 1e3:.4f} mm more than the encoder counts either side "
+                       f"allow (tolerance {tolerance.position_m * 1e3:.4g} mm)")
     resent = vs_log.get("max_resent_position_diff_m")
     if resent is not None and resent > tolerance.position_m:
         reasons.append(f"the log's resent positions differ from its first at the same encoder "
@@ -368,8 +384,8 @@ def compared(vs_log: dict[str, Any]) -> str:
     drift = vs_log.get("max_position_drift_between_gaps_m")
     parts.append(f"{where} by their position drift between gaps (max {drift * 1e3:.4f} mm)"
                  if drift is not None else
-                 f"{where}: positions not compared (the log's firmware did not take its "
-                 "frames on time)")
+                 f"{where}: positions by their jumps between poses, held to what the counts "
+                 "allow (the log's firmware did not take its frames on time)")
     anchored = bool(vs_log.get("heading_offsets_bam16"))
     parts.append(f"heading {heading}" + (" less its offset where re-anchored" if anchored else ""))
     return "; ".join(parts) + _lone_said(vs_log)
@@ -409,7 +425,8 @@ def not_comparable(vs_log: dict[str, Any]) -> list[str]:
                      "headings are compared less the log's offset at the first frame both "
                      f"name ({offset:.4f} rad), "
                      + ("its positions by their drift, turned by that offset" if drift else
-                        "its positions not (the log's firmware did not take its frames on time)"))
+                        "its positions by their jumps, held to what the counts allow (the "
+                        "log's firmware did not take its frames on time)"))
     holes = vs_log.get("holes") or []
     for hole in holes[:SAID_HOLES]:
         lines.append(f"the log has a hole at t={hole['t_s']:.2f} s ({hole['length_s']:.2f} s "
@@ -417,7 +434,8 @@ def not_comparable(vs_log: dict[str, Any]) -> list[str]:
                      "is not fed, so its poses are not comparable as they are after it: "
                      "headings are compared less their offset at the first frame both name "
                      "after it, " + ("positions by their drift between gaps" if drift else
-                                     "positions not"))
+                                     "positions by their jumps") + ", their jump across it "
+                     "held to what the encoder counts either side allow")
     if len(holes) > SAID_HOLES:
         lines.append(f"... and {len(holes) - SAID_HOLES} more holes")
     return lines

@@ -47,6 +47,7 @@ from odocan.host.judge.reboots import (
 )
 from odocan.host.judge.replay_compare import departures, versus_log
 from odocan.host.judge.replay_events import replayed_positions
+from odocan.host.judge.replay_jumps import JumpModel
 from odocan.host.judge.replay_track import EncoderTrack
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.protocol.e2e import check_frames
@@ -185,9 +186,10 @@ def firmware_silences(frames: FrameArrays, decoder: BulkDecoder,
 
 def judge_lives(log: FrameArrays, accepted: npt.NDArray[np.bool_], replayed: FrameArrays,
                 replayed_accepted: npt.NDArray[np.bool_], track: EncoderTrack, plan: LifePlan,
-                tolerance: Tolerance) -> list[dict[str, Any]]:
-    """Each life compared with the log's on its own: ``onboard_vs_log`` (``versus_log``), the
-    stalls in it, and ``unjudged`` (why, from which stall: the part before it agrees) or None."""
+                tolerance: Tolerance, jumps: JumpModel | None = None) -> list[dict[str, Any]]:
+    """Each life compared with the log's on its own: ``onboard_vs_log`` (``versus_log``, its
+    jumps across gaps held to ``jumps``), the stalls in it, and ``unjudged`` (why, from which
+    stall: the part before it agrees) or None."""
     fed = replayed_positions(log, track.index, replayed)  # the log's frames on the replay's bus
     t0 = float(log.timestamp_s[0])
     bounds = [*plan.starts, len(track.index)]
@@ -197,7 +199,7 @@ def judge_lives(log: FrameArrays, accepted: npt.NDArray[np.bool_], replayed: Fra
         stalls = [(a, b) for a, b in plan.halts if track.tick[first] < a < track.tick[end - 1]]
         rebooted = k > 0 or plan.primed_known  # its start known: from (0, 0, 0) there
         vs = versus_log(log.select(span[0]), accepted[span[0]], replayed.select(span[1]),
-                        rebooted)
+                        rebooted, jumps)
         life: dict[str, Any] = {
             "life": k, "t_s": round(float(log.timestamp_s[track.index[first]]) - t0, 3),
             "from_power_up": rebooted or plan.powered,
@@ -207,7 +209,7 @@ def judge_lives(log: FrameArrays, accepted: npt.NDArray[np.bool_], replayed: Fra
             cut = int(np.searchsorted(track.tick, stalls[0][0]))
             pre = _span(track, fed, first, cut, len(log), len(replayed))
             before = versus_log(log.select(pre[0]), accepted[pre[0]], replayed.select(pre[1]),
-                                rebooted)
+                                rebooted, jumps)
             if not departures(before, tolerance):
                 life["onboard_vs_log_before_stall"] = before
                 life["unjudged"] = _stalled_reason(k, life)
