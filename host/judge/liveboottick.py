@@ -16,9 +16,10 @@ Now the summary's frame (the latest encoder frame heard before the boot summary 
 not INIT, less than a cycle before it), refused with its CRC right, is taken into the window as
 the new firmware took it, and the host's sequence restarts at it as the firmware's did
 (``E2EMonitor.retake``, its counts unchanged): the frames after it are judged as the new
-firmware judged them, and the first count page names it by the window's own rule. A frame
-refused as a repeat of one less than half a COUNTER lap before is a twin (``livetwins``), not
-taken."""
+firmware judged them, and the first count page names it by the window's own rule. Not taken:
+a frame whose COUNTER goes back from the latest taken (a late frame the firmware drained after
+a newer one it primed on), nor a repeat less than half a COUNTER lap after it (a twin,
+``livetwins``, or the frame again)."""
 
 from __future__ import annotations
 
@@ -27,6 +28,7 @@ from typing import TYPE_CHECKING, Any
 
 from odocan.host.judge.livetwins import refused_encoders
 from odocan.host.judge.livewindow import CYCLE_S, HALF_LAP
+from odocan.host.protocol.busfacts import ENC_COUNTER_MASK
 from odocan.host.protocol.e2e import REPEATED, WRONG_SEQUENCE
 
 if TYPE_CHECKING:
@@ -75,11 +77,12 @@ def boot_frame(tracker: PoseTracker, e2e: E2EMonitor, told: tuple[int, str, int 
         return None
     if tracker.now_s - frame[3] >= CYCLE_S:  # not the summary's tick's frame
         return None
-    rows = tracker.window.rows
-    if tick.status == REPEATED and rows and frame[3] - rows[-1][3] < TWIN_S:
-        return None  # a twin, or the same frame again
     if tick.status not in (REPEATED, WRONG_SEQUENCE):
         return None
+    rows = tracker.window.rows
+    step = (frame[0] - int(rows[-1][2])) & ENC_COUNTER_MASK if rows else 1
+    if step >= HALF_LAP or (step == 0 and frame[3] - rows[-1][3] < TWIN_S):
+        return None  # a late frame (its COUNTER going back), a twin or the same frame again
     e2e.retake(tick.can_id, frame[0], frame[3])
     take((frame[0], frame[1], frame[2], frame[4]), frame[3])
     return frame
