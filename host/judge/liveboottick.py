@@ -62,20 +62,20 @@ class BootTick:
         self.status = status
 
 
-def boot_frame(tracker: PoseTracker, e2e: E2EMonitor, told: tuple[int, str, int | None],
+def boot_frame(tracker: PoseTracker, e2e: E2EMonitor, told: tuple[int, str, int | None, float],
                take: Callable[[tuple[int, int, int, int], float], object]) -> Frame | None:
     """The refused encoder frame the firmware booted by the summary heard now primed on
-    (module docstring; ``told``: the summary's UPTIME s, STATE, and the latest encoder frame at
-    it when the reboot was told after it), the host's WHEEL_ENCODERS sequence restarted at
-    it, and given to ``take`` as an accepted frame (the judges' WHEEL_ENCODERS handler:
-    COUNTER, LEFT_COUNT, RIGHT_COUNT, CTRL_UPTIME; bus time s). None when the summary's rule
-    names an accepted frame (or none)."""
-    uptime_s, state, seq = told
+    (module docstring; ``told``: the summary's UPTIME s, STATE, the latest encoder frame at it
+    when the reboot was told after it, and its bus time s), the host's WHEEL_ENCODERS
+    sequence restarted at it, and given to ``take`` as an accepted frame (the judges'
+    WHEEL_ENCODERS handler: COUNTER, LEFT_COUNT, RIGHT_COUNT, CTRL_UPTIME; bus time s). None
+    when the summary's rule names an accepted frame (or none)."""
+    uptime_s, state, seq, t_s = told
     tick = tracker.boot_tick
     frame, tick.frame = tick.frame, None
     if frame is None or uptime_s != 0 or state == "INIT" or seq is not None:
         return None
-    if tracker.now_s - frame[3] >= CYCLE_S:  # not the summary's tick's frame
+    if t_s - frame[3] >= CYCLE_S:  # not the summary's tick's frame
         return None
     if tick.status not in (REPEATED, WRONG_SEQUENCE):
         return None

@@ -408,7 +408,8 @@ class BusMonitor:
         """A reboot told (``seq``: the encoder frame latest heard at its summary, when told by
         the first pose after it): its counters restarted, not frames lost or out of sequence."""
         lost = rebooted(self, self.config, self._bus_time_s)  # its configs were in its RAM
-        boot_frame(self.tracker, self.e2e, (uptime_s, state, seq), self._take_encoders)
+        boot_frame(self.tracker, self.e2e, (uptime_s, state, seq, self._bus_time_s),
+                   self._take_encoders)
         detail += ": " + src.start_new_life(self.tracker, self.e2e, self.db, uptime_s, state, seq)
         self.distance.new_life()
         self.first_after.new_life()
