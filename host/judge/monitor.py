@@ -60,6 +60,7 @@ from cantools.database.can import Database, Message
 
 from odocan.host.judge import sources as src  # status_frame, start_new_life
 from odocan.host.judge.busstats import LoadWindow
+from odocan.host.judge.liveboottick import boot_frame, refused_frame
 from odocan.host.judge.liveconfig import SAME_TICK_S, ConfigFollower, follow_config_ack, rebooted
 from odocan.host.judge.livedistance import LiveDistance
 from odocan.host.judge.livegapseen import heard_encoder
@@ -75,7 +76,7 @@ from odocan.host.judge.liverobot import (
 from odocan.host.judge.livesetpose import SetPoseFollower, apply_set_pose, set_pose_event
 from odocan.host.judge.livesettle import SettleHold
 from odocan.host.judge.livestallfirst import first_after_of
-from odocan.host.judge.livetwins import CRC_RIGHT_REFUSED, refused_encoders
+from odocan.host.judge.livetwins import CRC_RIGHT_REFUSED
 from odocan.host.judge.livetwist import LiveTwist
 from odocan.host.judge.messagestats import MessageStats
 from odocan.host.judge.monitorauth import AUTH_COUNTS as AUTH_COUNTS  # re-exported (its API)
@@ -236,8 +237,8 @@ class BusMonitor:
         if status in ACCEPTED:
             self._use(message, stats, data)
         elif crc_right and message.name == "WHEEL_ENCODERS":
-            refused_encoders(self.tracker.twins, message.decode(data, decode_choices=False),
-                             timestamp_s, self.tracker.placer.fill)  # a twin, or a gap's frame
+            refused_frame(self.tracker, message.frame_id, message.decode(
+                data, decode_choices=False), timestamp_s, status)  # a twin, a gap's, a boot's
 
     def _watch_senders(self, can_id: int, data: bytes, t_s: float) -> None:
         """A CRC-right command frame: a second sender's signature is a ``two senders`` event
@@ -315,8 +316,13 @@ class BusMonitor:
             self.events.append(refused)
 
     def _on_encoders(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
-        frame = (int(s["COUNTER"]), int(s["LEFT_COUNT"]), int(s["RIGHT_COUNT"]), self._bus_time_s,
-                 int(s.get("CTRL_UPTIME", 0)))
+        self._take_encoders((int(s["COUNTER"]), int(s["LEFT_COUNT"]), int(s["RIGHT_COUNT"]),
+                             int(s.get("CTRL_UPTIME", 0))), self._bus_time_s)
+
+    def _take_encoders(self, s: tuple[int, int, int, int], t_s: float) -> None:
+        """An accepted WHEEL_ENCODERS frame (COUNTER, counts, CTRL_UPTIME; bus time s: a boot's
+        refused frame taken, ``liveboottick``, is the one before the summary heard now)."""
+        frame = (s[0], s[1], s[2], t_s, s[3])
         self.tracker.on_encoders(*frame)
         self.first_after.on_encoders(*frame[:4])
         if self.robot.unjudged:  # the page contradicts the default: not judged (liverobot)
@@ -402,6 +408,8 @@ class BusMonitor:
         """A reboot told (``seq``: the encoder frame latest heard at its summary, when told by
         the first pose after it): its counters restarted, not frames lost or out of sequence."""
         lost = rebooted(self, self.config, self._bus_time_s)  # its configs were in its RAM
+        boot_frame(self.tracker, self.e2e, (uptime_s, state, seq, self._bus_time_s),
+                   self._take_encoders)
         detail += ": " + src.start_new_life(self.tracker, self.e2e, self.db, uptime_s, state, seq)
         self.distance.new_life()
         self.first_after.new_life()

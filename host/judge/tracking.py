@@ -22,6 +22,7 @@ from odocan.host.judge.liveadopted import (
     REBOOT_BEFORE_INTEGRATOR,
     AdoptedStarts,
 )
+from odocan.host.judge.liveboottick import BootTick
 from odocan.host.judge.livechoice import LiveChoice
 from odocan.host.judge.livecutreprime import CutHold
 from odocan.host.judge.livedark import NO_FRAME_S
@@ -90,6 +91,7 @@ class PoseTracker:
         self._pos = 0  # frames fed so far (the order of encoder frames, pose halves, twists)
         self.window = Columns(ENC_COLUMNS, ENC_WINDOW)  # the latest encoder frames heard
         self.twins = TwinWatch(self.window.rows)  # frames with a twin: their poses left out
+        self.boot_tick = BootTick()  # the latest refused since the last taken (liveboottick)
         self.pairs = HalfPairs(self)  # the pose halves heard, settled and paired (livehalves)
         self.settled: list[Sample] = []  # samples settled since ``take_samples``
         self.fit = LiveFit(0.0, 0.0, exact=True)  # the start narrowed (host.judge.livefit)
@@ -160,6 +162,7 @@ class PoseTracker:
         self.advance(t_s)
         self.enc_seq += 1
         self._pos += 1
+        self.boot_tick.frame = None  # a frame taken after it (liveboottick)
         prev = self.window.rows[-1] if self.window.rows else None  # (no __len__ call)
         if self.choice.pending is not None and prev is not None:  # a hole: the choice first
             self.choice.ahead(counter, t_s, prev)

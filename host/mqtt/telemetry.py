@@ -55,6 +55,7 @@ import can
 from cantools.database.can import Database
 
 from odocan.host.judge.bootticks import POSE_MESSAGE, pose_heard
+from odocan.host.judge.liveboottick import boot_frame, refused_frame
 from odocan.host.judge.liveconfig import SAME_TICK_S, rebooted
 from odocan.host.judge.livedistance import LiveDistance, robot_of
 from odocan.host.judge.livefit import pose_wrong
@@ -62,7 +63,7 @@ from odocan.host.judge.livegapseen import heard_status
 from odocan.host.judge.livepose import FramePose, difference, pose_dict
 from odocan.host.judge.liverobot import DEFAULT, GIVEN, LiveRobot, PageWait
 from odocan.host.judge.livestreams import hear_pose_frame
-from odocan.host.judge.livetwins import CRC_RIGHT_REFUSED, refused_encoders
+from odocan.host.judge.livetwins import CRC_RIGHT_REFUSED
 from odocan.host.judge.livetwist import LiveTwist
 from odocan.host.judge.reference import Geometry
 from odocan.host.judge.sources import SourceWatch, boot_summary, start_new_life
@@ -229,7 +230,7 @@ class RobotTelemetry(CommandFollowing):
         tracker.advance(t_s)
         if status in CRC_RIGHT_REFUSED and route is not None \
                 and route.name == "WHEEL_ENCODERS":  # a twin of the latest accepted one?
-            refused_encoders(tracker.twins, route.signals(data), t_s, tracker.placer.fill)
+            refused_frame(tracker, can_id, route.signals(data), t_s, status)  # liveboottick
         message = self._by_id.get(can_id)
         self.rejected[message.name if message else self._unknown_key(can_id)] += 1
         return self._samples() if tracker.settled else []
@@ -301,6 +302,7 @@ class RobotTelemetry(CommandFollowing):
         self.reboots += 1
         lost = rebooted(self, self.config, t_s)  # its staging and configs were in its RAM
         self.config_doubt = None  # and the config in doubt with them
+        boot_frame(self.tracker, self.e2e, (uptime_s, state, seq, t_s), self._on_encoders)
         start_new_life(self.tracker, self.e2e, self.db, uptime_s, state, seq)
         self.distance.new_life()
         since_s = self.sources.life_from_s - SAME_TICK_S  # its first ticks' (bootticks)
@@ -484,15 +486,13 @@ class RobotTelemetry(CommandFollowing):
 
     def _adopted(self) -> dict[str, Any]:
         """``reference_adopted`` while the reference carries a start at the firmware's own pose
-        (``host.judge.liveadopted``: the monitor's OK says it too); nothing else (a clean
-        drive's status as before)."""
+        (``liveadopted``: the monitor's OK says it too); nothing else (a clean drive's)."""
         adopted = self.tracker.adopted.as_dict()
         return {"reference_adopted": adopted} if adopted else {}
 
 
 def _handlers() -> dict[str, Any]:
-    """``RobotTelemetry``'s handler of each message (read off the class once it exists: a
-    mypyc-compiled class body cannot name its own methods)."""
+    """``RobotTelemetry``'s handler of each message (a compiled class names none itself)."""
     t, c = RobotTelemetry, CommandFollowing
     return {"WHEEL_ENCODERS": t._on_encoders, "ODOM_POSE_X": t._on_pose_x,
             "ODOM_POSE_Y": t._on_pose_y, "ODOM_TWIST": t._on_twist, "SIM_TRUTH": t._on_truth,

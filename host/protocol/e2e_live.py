@@ -249,6 +249,18 @@ class E2EMonitor:
         if state is not None:
             state.waiting = True
 
+    def retake(self, can_id: int, counter: int, timestamp_s: float) -> None:
+        """A frame of the message refused, taken after all (a receiver that booted at it took
+        it: ``host.judge.liveboottick``): the sequence restarts at it, as the first frame of a
+        fresh one starts it (COUNTER ``counter`` at bus time ``timestamp_s``). The counts
+        stay."""
+        state, live = self._states.get(can_id), self._live.get(can_id)
+        if state is None or live is None:
+            return
+        state.waiting, state.last_valid, state.window = False, counter, state.max_delta_init
+        state.last_valid_s = state.last_ok_s = timestamp_s
+        live.last = counter
+
     def count_frame_kind(self, *, error: bool = False, remote: bool = False) -> None:
         """Count an error or remote frame (they are never checked)."""
         if error:

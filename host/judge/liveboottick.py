@@ -1,0 +1,97 @@
+"""The live judges' boot tick (issue #11: "a FAIL must never blame a correct firmware"): the
+encoder frame a rebooted firmware primed on, when the host's own E2E check refused it.
+
+The host checks WHEEL_ENCODERS with one sequence run on across a reboot (the motor controller
+did not reboot); the new firmware's receiver starts fresh at its first tick. A delay that
+reordered a frame of the boot made the host's sequence refuse the frames after it until it
+resynchronised, while the new firmware, booted after the reorder, primed on one of them and
+took the next: kobuki ``--seed 1 --faults delay=0.1:15,reboot=10:0.3``, COUNTER 6 at 10.30 s
+(the boot summary at 10.301 s). The live window held only the frames the host's sequence took
+(COUNTER 2 at 10.275 s, then COUNTER 8 at 10.32 s), so neither the first count page
+(``livewindow.primed_at``) nor the summary's rule could name it: the correct firmware FAILed
+5.89 mm, 11.5 mrad off, which ``analyze`` PASSes (``silentboot.fresh_counted_start``: the boot
+summary's frame, its E2E check fresh there).
+
+Now the summary's frame (the latest encoder frame heard before the boot summary of UPTIME 0,
+not INIT, less than a cycle before it), refused with its CRC right, is taken into the window as
+the new firmware took it, and the host's sequence restarts at it as the firmware's did
+(``E2EMonitor.retake``, its counts unchanged): the frames after it are judged as the new
+firmware judged them, and the first count page names it by the window's own rule. Not taken:
+a frame whose COUNTER goes back from the latest taken (a late frame the firmware drained after
+a newer one it primed on), nor a repeat less than half a COUNTER lap after it (a twin,
+``livetwins``, or the frame again)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
+
+from odocan.host.judge.livetwins import refused_encoders
+from odocan.host.judge.livewindow import CYCLE_S, HALF_LAP
+from odocan.host.protocol.busfacts import ENC_COUNTER_MASK
+from odocan.host.protocol.e2e import REPEATED, WRONG_SEQUENCE
+
+if TYPE_CHECKING:
+    from odocan.host.judge.tracking import PoseTracker
+    from odocan.host.protocol.e2e_live import E2EMonitor
+
+Frame = tuple[int, int, int, float, int]  # COUNTER, LEFT_COUNT, RIGHT_COUNT, bus time s, uptime
+TWIN_S = HALF_LAP * CYCLE_S  # a repeat nearer than this to the frame it repeats: a twin
+
+
+class BootTick:
+    """The latest WHEEL_ENCODERS frame refused with its CRC right (``frame``, its E2E
+    ``status``), while no encoder frame was accepted after it (``PoseTracker.on_encoders``
+    forgets it)."""
+
+    frame: Frame | None
+    status: str
+    can_id: int
+
+    def __init__(self) -> None:
+        self.frame = None
+        self.status = ""
+        self.can_id = -1
+
+    def refused(self, can_id: int, signals: Any, t_s: float, status: str) -> None:
+        """A WHEEL_ENCODERS frame (identifier ``can_id``, 11-bit) refused (``signals``: its raw
+        signals, a mapping) at bus time ``t_s``, by ``status``."""
+        self.can_id = can_id
+        self.frame = (int(signals["COUNTER"]), int(signals["LEFT_COUNT"]),
+                      int(signals["RIGHT_COUNT"]), t_s, int(signals.get("CTRL_UPTIME", 0)))
+        self.status = status
+
+
+def boot_frame(tracker: PoseTracker, e2e: E2EMonitor, told: tuple[int, str, int | None, float],
+               take: Callable[[tuple[int, int, int, int], float], object]) -> Frame | None:
+    """The refused encoder frame the firmware booted by the summary heard now primed on
+    (module docstring; ``told``: the summary's UPTIME s, STATE, the latest encoder frame at it
+    when the reboot was told after it, and its bus time s), the host's WHEEL_ENCODERS
+    sequence restarted at it, and given to ``take`` as an accepted frame (the judges'
+    WHEEL_ENCODERS handler: COUNTER, LEFT_COUNT, RIGHT_COUNT, CTRL_UPTIME; bus time s). None
+    when the summary's rule names an accepted frame (or none)."""
+    uptime_s, state, seq, t_s = told
+    tick = tracker.boot_tick
+    frame, tick.frame = tick.frame, None
+    if frame is None or uptime_s != 0 or state == "INIT" or seq is not None:
+        return None
+    if t_s - frame[3] >= CYCLE_S:  # not the summary's tick's frame
+        return None
+    if tick.status not in (REPEATED, WRONG_SEQUENCE):
+        return None
+    rows = tracker.window.rows
+    step = (frame[0] - int(rows[-1][2])) & ENC_COUNTER_MASK if rows else 1
+    if step >= HALF_LAP or (step == 0 and frame[3] - rows[-1][3] < TWIN_S):
+        return None  # a late frame (its COUNTER going back), a twin or the same frame again
+    e2e.retake(tick.can_id, frame[0], frame[3])
+    take((frame[0], frame[1], frame[2], frame[4]), frame[3])
+    return frame
+
+
+def refused_frame(tracker: PoseTracker, can_id: int, signals: Any, t_s: float,
+                  status: str) -> None:
+    """A WHEEL_ENCODERS frame (11-bit ``can_id``) E2E refused (``status``) with its CRC right,
+    decoded (``signals``: a mapping of its raw signals), heard at bus time ``t_s``: to the twins
+    and a gap's fill (``livetwins.refused_encoders``) and to ``tracker.boot_tick``."""
+    refused_encoders(tracker.twins, signals, t_s, tracker.placer.fill)
+    tracker.boot_tick.refused(can_id, signals, t_s, status)
