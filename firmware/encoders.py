@@ -76,6 +76,7 @@ class EncoderInput:
         "_resync_first",
         "_resync_frames",
         "_resync_last",
+        "_sample_doubt",
         "_samples_stale",
         "_this_step_periods",
         "_tick_late",
@@ -139,6 +140,7 @@ class EncoderInput:
         # taken in a tick that lost time were sampled at unknown times during the stall).
         self._periods_since_sample = 0  # u16, saturated
         self._samples_stale = False  # the last accepted frame was taken in a tick that lost time
+        self._sample_doubt = 0  # u16: _periods_since_sample when the last frame was accepted
         self.tick_budget = 0  # _periods_since_sample at the start of this tick
         self._tick_late = 0  # u32: periods this tick came after its due time
         self._this_step_periods = 1  # u32: the sample periods of the step being accepted
@@ -238,8 +240,13 @@ class EncoderInput:
             self._reprime(counter, wire, counts)  # any step is as plausible as another
             return
         if not self._plausible(self._counts_prev, counts, bound):
-            self._on_implausible(counter, wire, counts)
-            return
+            periods = self._doubted_periods(advance)
+            if periods == 0 or not self._plausible(self._counts_prev, counts, periods):
+                self._on_implausible(counter, wire, counts)
+                return
+            if periods >= self._ambiguous_periods:
+                self._reprime(counter, wire, counts)
+                return
         self._resync_first = None
         self._this_step_periods = periods
         # ENC_E2E_LOST (the E2E receiver's ``lost_frames``) also counts the whole COUNTER
@@ -266,6 +273,7 @@ class EncoderInput:
         self.periods_since_frame = 0
         time_lost_now = self._clock.time_lost_now
         self._samples_stale = time_lost_now
+        self._sample_doubt = 0 if time_lost_now else self._periods_since_sample
         if not time_lost_now:
             self._periods_since_sample = 0
         self._overflows_at_accept = health.overflows_before
@@ -308,6 +316,25 @@ class EncoderInput:
             return advance - COUNTER_VALUES  # d counted frames that were not the encoders'
         return advance
 
+    def _doubted_periods(self, advance: int) -> int:
+        """The periods of a step the bound refused, counted from the sample before the last
+        accepted frame's (``_step_periods`` with ``_sample_doubt`` more periods since it); 0
+        when that frame came in the period after it (nothing to doubt) or none was accepted.
+
+        The last accepted frame may have waited out the silence before it: a sender's frame a
+        delay held back when its bus went off went out first at the recovery, a second old,
+        and the next frames, sampled then, were refused against it as if one was due a period
+        after it, taken for a counter restart (COUNTER_RESET: the second's motion lost, pmir
+        figure8 ``--seed 80 --faults delay=0.3:55,busoff=1:1`` 767 mm off the truth). Its
+        sample was taken no earlier than the one before it, so the step's periods are at most
+        those since that one; the step is judged by them only when the nearer count refused
+        it, so a regular stream's periods (and its twist) are the nearer count's."""
+        doubt = self._sample_doubt
+        if doubt <= 1 or advance == 0:
+            return 0
+        since = self._periods_since_sample + doubt  # u32: < 2^17
+        return self._periods_nearest(advance, since if since < STEP_PERIODS_MAX else STEP_PERIODS_MAX)
+
     def _dropped_bound_periods(self, periods: int) -> int:
         """The periods a step may span after the mailbox dropped frames (u32, saturated at
         ``STEP_PERIODS_MAX``): ``periods`` (the advance counts the dropped frames whose CRC
@@ -346,7 +373,12 @@ class EncoderInput:
         stream (1)."""
         if advance == 0:
             return 1
-        since, late = self._periods_since_sample, self._tick_late
+        return self._periods_nearest(advance, self._periods_since_sample)
+
+    def _periods_nearest(self, advance: int, since: int) -> int:
+        """``advance`` (1..) plus the whole counter cycles nearest to ``since`` periods (u16)
+        less this tick's lateness (``_step_periods``)."""
+        late = self._tick_late
         budget = (since - late if since > late else 0) + COUNTER_VALUES // 2  # <= U16_MAX + 8
         if budget <= advance:
             return advance
