@@ -16,7 +16,8 @@ genuine frame does (``_refuse_unused_bits``): neither its step nor a restart is 
 
 A restarted motor controller is told by its age (CTRL_UPTIME: ``firmware.restartage``) and taken
 when the next frame confirms it (``firmware.restarthold``); a step too long to read its counts
-unambiguously is never integrated (``firmware.ambiguity``).
+unambiguously is never integrated (``firmware.ambiguity``); a step refused against a frame that
+may have waited out a silence is judged again from the sample before it (``firmware.sampledoubt``).
 """
 
 from __future__ import annotations
@@ -24,7 +25,7 @@ from __future__ import annotations
 from odocan.firmware import frames as fr
 from odocan.firmware.ambiguity import least_ambiguous_periods
 from odocan.firmware.clock import FirmwareClock
-from odocan.firmware.config import MAX_WHEEL_SPEED_DEFAULT_MM_S
+from odocan.firmware.config import MAX_WHEEL_SPEED_DEFAULT_MM_S, unused_wire_bits
 from odocan.firmware.e2e import COUNTER_MASK, FRAME_LEN, E2EReceiver, p02_crc
 from odocan.firmware.errors import ErrorFlag, ErrorMask, Reason, State
 from odocan.firmware.fixmath import U16_MAX, U32_MAX, muldiv_round_u64, wrap_signed, wrap_u32
@@ -36,6 +37,7 @@ from odocan.firmware.restartage import PERIODS_PER_S as PERIODS_PER_S
 from odocan.firmware.restartage import RESTART_SLACK_PERIODS as RESTART_SLACK_PERIODS
 from odocan.firmware.restartage import aged_uptime, young_counts
 from odocan.firmware.restarthold import RestartHold
+from odocan.firmware.sampledoubt import doubted_periods, step_periods
 from odocan.firmware.twist import ENCODER_PERIOD_US, Twist
 
 # The plausibility bound of a robot whose parameters state none (RobotParams.max_wheel_speed_mm_s)
@@ -115,7 +117,7 @@ class EncoderInput:
         self._counter_bits = odometry.consts.counter_bits  # u8: the counters' width (16 or 32)
         self._count_half = 1 << (self._counter_bits - 1)  # u32: half the counters' range
         self._wide_counters = self._counter_bits > WIRE_COUNTER_BITS  # wider than the wire's
-        self._wire_unused_mask = self._unused_wire_bits()  # u32: wire bits a counter never sets
+        self._wire_unused_mask = unused_wire_bits(self._counter_bits)  # u32: never set
         self._max_counts_per_period = self.step_bounds()
         self._ambiguous_periods = self._least_ambiguous_periods()
         # The window widens once per tick (not per frame): a replay cannot widen it.
@@ -240,12 +242,8 @@ class EncoderInput:
             self._reprime(counter, wire, counts)  # any step is as plausible as another
             return
         if not self._plausible(self._counts_prev, counts, bound):
-            periods = self._doubted_periods(advance)
-            if periods == 0 or not self._plausible(self._counts_prev, counts, periods):
-                self._on_implausible(counter, wire, counts)
-                return
-            if periods >= self._ambiguous_periods:
-                self._reprime(counter, wire, counts)
+            periods = self._doubted_step(counter, wire, counts, advance)
+            if periods == 0:  # refused, or re-primed on
                 return
         self._resync_first = None
         self._this_step_periods = periods
@@ -258,6 +256,19 @@ class EncoderInput:
             if advance != plain:
                 self.rx.lost_frames = wrap_u32(self.rx.lost_frames + advance - plain)
         self._accept(counter, wire, counts)
+
+    def _doubted_step(self, counter: int, wire: Counts, counts: Counts, advance: int) -> int:
+        """A step the bound refused, judged again over ``sampledoubt.doubted_periods``: those
+        periods if plausible, else 0 (refused; re-primed on where they reach the ambiguous)."""
+        periods = doubted_periods(advance, self._periods_since_sample, self._sample_doubt,
+                                  self._tick_late)
+        if periods == 0 or not self._plausible(self._counts_prev, counts, periods):
+            self._on_implausible(counter, wire, counts)
+            return 0
+        if periods >= self._ambiguous_periods:
+            self._reprime(counter, wire, counts)
+            return 0
+        return periods
 
     def _accept(self, counter: int, wire: Counts, counts: Counts) -> None:
         """Integrate an accepted WHEEL_ENCODERS frame; it feeds the watchdog's recovery."""
@@ -316,25 +327,6 @@ class EncoderInput:
             return advance - COUNTER_VALUES  # d counted frames that were not the encoders'
         return advance
 
-    def _doubted_periods(self, advance: int) -> int:
-        """The periods of a step the bound refused, counted from the sample before the last
-        accepted frame's (``_step_periods`` with ``_sample_doubt`` more periods since it); 0
-        when that frame came in the period after it (nothing to doubt) or none was accepted.
-
-        The last accepted frame may have waited out the silence before it: a sender's frame a
-        delay held back when its bus went off went out first at the recovery, a second old,
-        and the next frames, sampled then, were refused against it as if one was due a period
-        after it, taken for a counter restart (COUNTER_RESET: the second's motion lost, pmir
-        figure8 ``--seed 80 --faults delay=0.3:55,busoff=1:1`` 767 mm off the truth). Its
-        sample was taken no earlier than the one before it, so the step's periods are at most
-        those since that one; the step is judged by them only when the nearer count refused
-        it, so a regular stream's periods (and its twist) are the nearer count's."""
-        doubt = self._sample_doubt
-        if doubt <= 1 or advance == 0:
-            return 0
-        since = self._periods_since_sample + doubt  # u32: < 2^17
-        return self._periods_nearest(advance, since if since < STEP_PERIODS_MAX else STEP_PERIODS_MAX)
-
     def _dropped_bound_periods(self, periods: int) -> int:
         """The periods a step may span after the mailbox dropped frames (u32, saturated at
         ``STEP_PERIODS_MAX``): ``periods`` (the advance counts the dropped frames whose CRC
@@ -363,26 +355,8 @@ class EncoderInput:
         return self._overflows_at_accept != self._health.overflows_before
 
     def _step_periods(self, advance: int) -> int:
-        """The encoder periods between this frame's sample and the last accepted one's: the
-        frames' advance n (``_counter_advance``; 0: none accepted yet, 1), plus the whole counter
-        cycles that bring it nearest to the periods since that frame was accepted (0 for a
-        second frame in one tick; after a tick that lost time, since the last sample before it),
-        less the periods this tick came late (its frames waited in the mailbox meanwhile). Exact
-        while the two frames' queueing, beyond that, differs by less than 8 periods (a frame
-        held 15 ms lands two ticks late: the nearest cycle, not the one below); n in a regular
-        stream (1)."""
-        if advance == 0:
-            return 1
-        return self._periods_nearest(advance, self._periods_since_sample)
-
-    def _periods_nearest(self, advance: int, since: int) -> int:
-        """``advance`` (1..) plus the whole counter cycles nearest to ``since`` periods (u16)
-        less this tick's lateness (``_step_periods``)."""
-        late = self._tick_late
-        budget = (since - late if since > late else 0) + COUNTER_VALUES // 2  # <= U16_MAX + 8
-        if budget <= advance:
-            return advance
-        return advance + (((budget - advance) >> 4) << 4)
+        """``sampledoubt.step_periods`` of this frame's ``advance`` (``_counter_advance``)."""
+        return step_periods(advance, self._periods_since_sample, self._tick_late)
 
     def step_bounds(self) -> tuple[int, int]:
         """Per wheel, the most counts one encoder period can hold at ``max_wheel_speed_mm_s``:
@@ -514,7 +488,7 @@ class EncoderInput:
         self._counter_bits = self._odometry.consts.counter_bits
         self._count_half = 1 << (self._counter_bits - 1)
         self._wide_counters = self._counter_bits > WIRE_COUNTER_BITS
-        self._wire_unused_mask = self._unused_wire_bits()
+        self._wire_unused_mask = unused_wire_bits(self._counter_bits)
         self._max_counts_per_period = self.step_bounds()
         self._ambiguous_periods = self._least_ambiguous_periods()
 
@@ -522,10 +496,3 @@ class EncoderInput:
         """``ambiguity.least_ambiguous_periods`` of this robot (configuration time)."""
         bits = min(self._counter_bits, WIRE_COUNTER_BITS)
         return least_ambiguous_periods(bits, self._max_counts_per_period, STEP_PERIODS_MAX)
-
-    def _unused_wire_bits(self) -> int:
-        """The wire's count bits above the counters' width (0 for counters of 24 bits or more):
-        (2^24 - 1) less (2^bits - 1)."""
-        if self._counter_bits >= WIRE_COUNTER_BITS:
-            return 0
-        return ((1 << WIRE_COUNTER_BITS) - 1) ^ ((1 << self._counter_bits) - 1)

@@ -553,7 +553,7 @@ static uint32_t step_periods(const struct odom_ecu *ecu, uint32_t advance)
 }
 
 /* advance (1..) plus the whole counter cycles nearest to since periods (u16) less this tick's
- * lateness (step_periods; encoders.py _periods_nearest). */
+ * lateness (step_periods; sampledoubt.py periods_nearest). */
 static uint32_t periods_nearest(const struct odom_ecu *ecu, uint32_t advance, uint32_t since)
 {
     uint32_t budget = (since > ecu->tick_late ? since - ecu->tick_late : 0u) + 8u; /* <= 2^16 + 8 */
@@ -567,7 +567,7 @@ static uint32_t periods_nearest(const struct odom_ecu *ecu, uint32_t advance, ui
  * frame's (step_periods with sample_doubt more periods since it); 0 when that frame came in the
  * period after it or none was accepted. That frame may have waited out the silence before it (a
  * delayed frame held in a bus-off sender's transmit buffer goes out first at the recovery): its
- * sample is no earlier than the one before it (encoders.py _doubted_periods). */
+ * sample is no earlier than the one before it (sampledoubt.py doubted_periods). */
 static uint32_t doubted_periods(const struct odom_ecu *ecu, uint32_t advance)
 {
     uint32_t doubt = ecu->sample_doubt;
