@@ -44,6 +44,14 @@ WIRE_COUNTER_BITS = 24  # WHEEL_ENCODERS carries the low 24 bits of each counter
 READABLE_PERIODS = 2
 
 
+def unused_wire_bits(counter_bits: int) -> int:
+    """The wire's count bits above the counters' width (u32; 0 for counters of 24 bits or
+    more): (2^24 - 1) less (2^bits - 1). Configuration time (encoders.py)."""
+    if counter_bits >= WIRE_COUNTER_BITS:
+        return 0
+    return ((1 << WIRE_COUNTER_BITS) - 1) ^ ((1 << counter_bits) - 1)
+
+
 class Integrator(IntEnum):
     """Odometry integrator (the ``INTEGRATOR`` signal)."""
 

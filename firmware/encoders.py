@@ -16,7 +16,8 @@ genuine frame does (``_refuse_unused_bits``): neither its step nor a restart is 
 
 A restarted motor controller is told by its age (CTRL_UPTIME: ``firmware.restartage``) and taken
 when the next frame confirms it (``firmware.restarthold``); a step too long to read its counts
-unambiguously is never integrated (``firmware.ambiguity``).
+unambiguously is never integrated (``firmware.ambiguity``); a step refused against a frame that
+may have waited out a silence is judged again from the sample before it (``firmware.sampledoubt``).
 """
 
 from __future__ import annotations
@@ -24,7 +25,7 @@ from __future__ import annotations
 from odocan.firmware import frames as fr
 from odocan.firmware.ambiguity import least_ambiguous_periods
 from odocan.firmware.clock import FirmwareClock
-from odocan.firmware.config import MAX_WHEEL_SPEED_DEFAULT_MM_S
+from odocan.firmware.config import MAX_WHEEL_SPEED_DEFAULT_MM_S, unused_wire_bits
 from odocan.firmware.e2e import COUNTER_MASK, FRAME_LEN, E2EReceiver, p02_crc
 from odocan.firmware.errors import ErrorFlag, ErrorMask, Reason, State
 from odocan.firmware.fixmath import U16_MAX, U32_MAX, muldiv_round_u64, wrap_signed, wrap_u32
@@ -36,6 +37,7 @@ from odocan.firmware.restartage import PERIODS_PER_S as PERIODS_PER_S
 from odocan.firmware.restartage import RESTART_SLACK_PERIODS as RESTART_SLACK_PERIODS
 from odocan.firmware.restartage import aged_uptime, young_counts
 from odocan.firmware.restarthold import RestartHold
+from odocan.firmware.sampledoubt import doubted_periods, step_periods
 from odocan.firmware.twist import ENCODER_PERIOD_US, Twist
 
 # The plausibility bound of a robot whose parameters state none (RobotParams.max_wheel_speed_mm_s)
@@ -76,6 +78,7 @@ class EncoderInput:
         "_resync_first",
         "_resync_frames",
         "_resync_last",
+        "_sample_doubt",
         "_samples_stale",
         "_this_step_periods",
         "_tick_late",
@@ -114,7 +117,7 @@ class EncoderInput:
         self._counter_bits = odometry.consts.counter_bits  # u8: the counters' width (16 or 32)
         self._count_half = 1 << (self._counter_bits - 1)  # u32: half the counters' range
         self._wide_counters = self._counter_bits > WIRE_COUNTER_BITS  # wider than the wire's
-        self._wire_unused_mask = self._unused_wire_bits()  # u32: wire bits a counter never sets
+        self._wire_unused_mask = unused_wire_bits(self._counter_bits)  # u32: never set
         self._max_counts_per_period = self.step_bounds()
         self._ambiguous_periods = self._least_ambiguous_periods()
         # The window widens once per tick (not per frame): a replay cannot widen it.
@@ -139,6 +142,7 @@ class EncoderInput:
         # taken in a tick that lost time were sampled at unknown times during the stall).
         self._periods_since_sample = 0  # u16, saturated
         self._samples_stale = False  # the last accepted frame was taken in a tick that lost time
+        self._sample_doubt = 0  # u16: _periods_since_sample when the last frame was accepted
         self.tick_budget = 0  # _periods_since_sample at the start of this tick
         self._tick_late = 0  # u32: periods this tick came after its due time
         self._this_step_periods = 1  # u32: the sample periods of the step being accepted
@@ -238,8 +242,9 @@ class EncoderInput:
             self._reprime(counter, wire, counts)  # any step is as plausible as another
             return
         if not self._plausible(self._counts_prev, counts, bound):
-            self._on_implausible(counter, wire, counts)
-            return
+            periods = self._doubted_step(counter, wire, counts, advance)
+            if periods == 0:  # refused, or re-primed on
+                return
         self._resync_first = None
         self._this_step_periods = periods
         # ENC_E2E_LOST (the E2E receiver's ``lost_frames``) also counts the whole COUNTER
@@ -251,6 +256,19 @@ class EncoderInput:
             if advance != plain:
                 self.rx.lost_frames = wrap_u32(self.rx.lost_frames + advance - plain)
         self._accept(counter, wire, counts)
+
+    def _doubted_step(self, counter: int, wire: Counts, counts: Counts, advance: int) -> int:
+        """A step the bound refused, judged again over ``sampledoubt.doubted_periods``: those
+        periods if plausible, else 0 (refused; re-primed on where they reach the ambiguous)."""
+        periods = doubted_periods(advance, self._periods_since_sample, self._sample_doubt,
+                                  self._tick_late)
+        if periods == 0 or not self._plausible(self._counts_prev, counts, periods):
+            self._on_implausible(counter, wire, counts)
+            return 0
+        if periods >= self._ambiguous_periods:
+            self._reprime(counter, wire, counts)
+            return 0
+        return periods
 
     def _accept(self, counter: int, wire: Counts, counts: Counts) -> None:
         """Integrate an accepted WHEEL_ENCODERS frame; it feeds the watchdog's recovery."""
@@ -266,6 +284,7 @@ class EncoderInput:
         self.periods_since_frame = 0
         time_lost_now = self._clock.time_lost_now
         self._samples_stale = time_lost_now
+        self._sample_doubt = 0 if time_lost_now else self._periods_since_sample
         if not time_lost_now:
             self._periods_since_sample = 0
         self._overflows_at_accept = health.overflows_before
@@ -336,21 +355,8 @@ class EncoderInput:
         return self._overflows_at_accept != self._health.overflows_before
 
     def _step_periods(self, advance: int) -> int:
-        """The encoder periods between this frame's sample and the last accepted one's: the
-        frames' advance n (``_counter_advance``; 0: none accepted yet, 1), plus the whole counter
-        cycles that bring it nearest to the periods since that frame was accepted (0 for a
-        second frame in one tick; after a tick that lost time, since the last sample before it),
-        less the periods this tick came late (its frames waited in the mailbox meanwhile). Exact
-        while the two frames' queueing, beyond that, differs by less than 8 periods (a frame
-        held 15 ms lands two ticks late: the nearest cycle, not the one below); n in a regular
-        stream (1)."""
-        if advance == 0:
-            return 1
-        since, late = self._periods_since_sample, self._tick_late
-        budget = (since - late if since > late else 0) + COUNTER_VALUES // 2  # <= U16_MAX + 8
-        if budget <= advance:
-            return advance
-        return advance + (((budget - advance) >> 4) << 4)
+        """``sampledoubt.step_periods`` of this frame's ``advance`` (``_counter_advance``)."""
+        return step_periods(advance, self._periods_since_sample, self._tick_late)
 
     def step_bounds(self) -> tuple[int, int]:
         """Per wheel, the most counts one encoder period can hold at ``max_wheel_speed_mm_s``:
@@ -482,7 +488,7 @@ class EncoderInput:
         self._counter_bits = self._odometry.consts.counter_bits
         self._count_half = 1 << (self._counter_bits - 1)
         self._wide_counters = self._counter_bits > WIRE_COUNTER_BITS
-        self._wire_unused_mask = self._unused_wire_bits()
+        self._wire_unused_mask = unused_wire_bits(self._counter_bits)
         self._max_counts_per_period = self.step_bounds()
         self._ambiguous_periods = self._least_ambiguous_periods()
 
@@ -490,10 +496,3 @@ class EncoderInput:
         """``ambiguity.least_ambiguous_periods`` of this robot (configuration time)."""
         bits = min(self._counter_bits, WIRE_COUNTER_BITS)
         return least_ambiguous_periods(bits, self._max_counts_per_period, STEP_PERIODS_MAX)
-
-    def _unused_wire_bits(self) -> int:
-        """The wire's count bits above the counters' width (0 for counters of 24 bits or more):
-        (2^24 - 1) less (2^bits - 1)."""
-        if self._counter_bits >= WIRE_COUNTER_BITS:
-            return 0
-        return ((1 << WIRE_COUNTER_BITS) - 1) ^ ((1 << self._counter_bits) - 1)

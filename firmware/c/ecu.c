@@ -88,6 +88,8 @@ static void commit_counters(struct odom_ecu *ecu, const uint32_t wire[2],
 static uint32_t counter_advance(const struct odom_ecu *ecu, uint8_t counter);
 static bool mailbox_dropped(const struct odom_ecu *ecu);
 static uint32_t step_periods(const struct odom_ecu *ecu, uint32_t advance);
+static uint32_t periods_nearest(const struct odom_ecu *ecu, uint32_t advance, uint32_t since);
+static uint32_t doubted_periods(const struct odom_ecu *ecu, uint32_t advance);
 static uint32_t bound_periods(const struct odom_ecu *ecu, uint32_t periods);
 static void count_cycles_dropped(struct odom_ecu *ecu, uint8_t counter, uint32_t advance);
 static void step_bounds(struct odom_ecu *ecu);
@@ -414,9 +416,17 @@ static void on_wheel_encoders(struct odom_ecu *ecu, const uint8_t *data, size_t 
         reprime(ecu, counter, wire, counts); /* any step is as plausible as another */
         return;
     }
-    if (!plausible(ecu, ecu->counts_prev_valid ? ecu->counts_prev : NULL, counts, bound)) {
-        on_implausible(ecu, counter, wire, counts);
-        return;
+    const uint32_t *prev = ecu->counts_prev_valid ? ecu->counts_prev : NULL;
+    if (!plausible(ecu, prev, counts, bound)) {
+        periods = doubted_periods(ecu, advance);
+        if (periods == 0u || !plausible(ecu, prev, counts, periods)) {
+            on_implausible(ecu, counter, wire, counts);
+            return;
+        }
+        if (periods >= ecu->ambiguous_periods) {
+            reprime(ecu, counter, wire, counts);
+            return;
+        }
     }
     ecu->resync_first_valid = false;
     ecu->this_step_periods = periods;
@@ -456,6 +466,7 @@ static void accept_encoders(struct odom_ecu *ecu, uint8_t counter, const uint32_
     ecu->enc_overflows_at_accept = ecu->overflows_before;
     ecu->enc_dropped_at_accept = ecu->enc_dropped_before;
     ecu->samples_stale = ecu->time_lost_now;
+    ecu->sample_doubt = ecu->time_lost_now ? 0u : ecu->periods_since_sample;
     if (!ecu->time_lost_now) {
         ecu->periods_since_sample = 0u;
     }
@@ -538,12 +549,33 @@ static uint32_t step_periods(const struct odom_ecu *ecu, uint32_t advance)
     if (advance == 0u) {
         return 1u;
     }
-    uint32_t since = ecu->periods_since_sample;
+    return periods_nearest(ecu, advance, ecu->periods_since_sample);
+}
+
+/* advance (1..) plus the whole counter cycles nearest to since periods (u16) less this tick's
+ * lateness (step_periods; sampledoubt.py periods_nearest). */
+static uint32_t periods_nearest(const struct odom_ecu *ecu, uint32_t advance, uint32_t since)
+{
     uint32_t budget = (since > ecu->tick_late ? since - ecu->tick_late : 0u) + 8u; /* <= 2^16 + 8 */
     if (budget <= advance) {
         return advance;
     }
     return advance + (((budget - advance) >> 4) << 4);
+}
+
+/* The periods of a step the bound refused, counted from the sample before the last accepted
+ * frame's (step_periods with sample_doubt more periods since it); 0 when that frame came in the
+ * period after it or none was accepted. That frame may have waited out the silence before it (a
+ * delayed frame held in a bus-off sender's transmit buffer goes out first at the recovery): its
+ * sample is no earlier than the one before it (sampledoubt.py doubted_periods). */
+static uint32_t doubted_periods(const struct odom_ecu *ecu, uint32_t advance)
+{
+    uint32_t doubt = ecu->sample_doubt;
+    if (doubt <= 1u || advance == 0u) {
+        return 0u;
+    }
+    uint32_t since = ecu->periods_since_sample + doubt; /* < 2^17 */
+    return periods_nearest(ecu, advance, since < STEP_PERIODS_MAX ? since : STEP_PERIODS_MAX);
 }
 
 /* The periods the plausibility bound allows this step: periods, or, when the mailbox may have

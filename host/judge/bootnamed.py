@@ -69,6 +69,9 @@ PowerUpPoses = tuple[npt.NDArray[np.int64], npt.NDArray[np.float64], npt.NDArray
 # (log positions, bus times s, E2E COUNTERs, ENC_COUNTERs) of every pose whose CRC holds
 PoseRows = tuple[npt.NDArray[np.int64], npt.NDArray[np.float64], npt.NDArray[np.int64],
                  npt.NDArray[np.int64]]
+# (log positions, COUNTERs) of the encoder frames whose CRC holds (``heard_encoders``)
+Framed = tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]
+ENCODER_MESSAGE = "WHEEL_ENCODERS"
 ENC_FRAMES_PER_POSE = (busfacts.POSE_CYCLE_MS // busfacts.POSE_FRAMES_PER_CYCLE
                        // busfacts.ENC_CYCLE_MS)  # 2: encoder frames from one pose to the next
 
@@ -160,30 +163,76 @@ def pose_before(poses: PowerUpPoses, position: int, t_s: float) -> tuple[int, in
 
 
 def named_frame(encoders: tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]], pose: int,
-                enc_counter: int) -> int | None:
+                enc_counter: int, heard: Framed | None = None) -> int | None:
     """The encoder frame a pose at log position ``pose`` names: the latest of the last
     ``NAMED_SPAN`` accepted before it (``encoders``: their positions and COUNTERs, in order)
-    whose COUNTER is ``enc_counter``; None when the log lacks it."""
+    whose COUNTER is ``enc_counter``; None when the log lacks it. With ``heard``
+    (``heard_encoders``: every encoder frame whose CRC holds), the last ``NAMED_SPAN`` of those
+    before it (``heard_named``)."""
+    if heard is not None:
+        return heard_named(encoders[0], heard, pose, enc_counter)
     at, counters = encoders
     last = int(np.searchsorted(at, pose))
     tail = np.flatnonzero(counters[max(last - NAMED_SPAN, 0):last] == enc_counter)
     return int(at[max(last - NAMED_SPAN, 0) + int(tail[-1])]) if len(tail) else None
 
 
+def heard_named(accepted: npt.NDArray[np.int64], heard: Framed, pose: int,
+                enc_counter: int) -> int | None:
+    """The encoder frame a power-up pose at log position ``pose`` names among the last
+    ``NAMED_SPAN`` frames heard before it whose CRC holds (``heard``: their positions and
+    COUNTERs), whatever the whole log's E2E check said of them: the latest of COUNTER
+    ``enc_counter`` that check took (``accepted``: positions), else the latest of them all;
+    None when none of them has it.
+
+    A new firmware's E2E receiver starts afresh and takes the first frame it drains whatever
+    its sequence, so it may prime on a frame the whole log's check refused: a delay (or a
+    burst) before the boot left that check refusing the frames after a late one until their
+    COUNTER came round, and the last ``NAMED_SPAN`` frames it took reached back before the boot
+    (issue #11: kobuki figure8 ``--seed 115 --faults delay=0.1:15,reboot=6:0.5`` primed on
+    COUNTER 10 at 6.50 s, refused; the COUNTER 10 taken at 6.355 s, while the MCU booted, was
+    named: 43 mm and 85 mrad off, DISTANCE 63.5 mm; pmir random ``--seed 304 --faults
+    burst=0.01:12,delay=0.1:15,reboot=6:0.5``: 33.4 mm). A taken one first: a frame refused
+    as a lap-old late copy of its COUNTER is no new firmware's first frame."""
+    at, counters = heard
+    last = int(np.searchsorted(at, pose))
+    lo = max(last - NAMED_SPAN, 0)
+    tail = at[lo:last][counters[lo:last] == enc_counter]
+    if not len(tail):
+        return None
+    taken = tail[np.isin(tail, accepted)]
+    return int((taken if len(taken) else tail)[-1])
+
+
+def heard_encoders(every: tuple[FrameArrays, npt.NDArray[np.int64]], decoder: BulkDecoder
+                   ) -> Framed:
+    """The positions and COUNTERs of the encoder frames ``every`` (the frames, their positions
+    in the log) whose CRC holds, whatever their sequence (``heard_named``)."""
+    frames, at = every
+    data = frames.data
+    config = e2e_messages(decoder.db).get(decoder.message(ENCODER_MESSAGE).frame_id)
+    good = np.ones(len(at), dtype=bool)
+    if config is not None and config.data_ids is not None and len(at):
+        ids = np.array(config.data_ids, dtype=np.uint8)[data[:, 1] & busfacts.ENC_COUNTER_MASK]
+        good = crc8h2f_p02(data, ids) == data[:, 0]
+    return (at[good].astype(np.int64),
+            (data[good, 1] & busfacts.ENC_COUNTER_MASK).astype(np.int64))
+
+
 def named_start(poses: PowerUpPoses, encoders: tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]],
-                position: int, t_s: float, after: PoseRows | None = None
-                ) -> tuple[int, int] | None:
+                position: int, t_s: float, after: PoseRows | None = None,
+                heard: Framed | None = None) -> tuple[int, int] | None:
     """The encoder frame the firmware whose boot summary (UPTIME 0) is at log ``position``, bus
     time ``t_s``, primed on, as its power-up pose names it, and that pose's ENC_COUNTER (module
     docstring); None when no power-up pose precedes it in the window, the log lacks the frame it
     names, or (``after``: the log's poses) the first pose after the summary does not count on
-    from it (``first_after``; a stream tells that later)."""
+    from it (``first_after``; a stream tells that later). ``heard``: ``named_frame``'s."""
     pose = pose_before(poses, position, t_s)
     if pose is None or restarted_after(poses, position, t_s):
         return None
     if after is not None and not first_after(after, position, t_s, pose[1]):
         return None
-    frame = named_frame(encoders, *pose)
+    frame = named_frame(encoders, *pose, heard)
     return None if frame is None else (frame, pose[1])
 
 

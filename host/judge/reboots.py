@@ -62,7 +62,7 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
-from odocan.host.judge.bootnamed import named_start, pose_enc_rows, powerup_poses
+from odocan.host.judge.bootnamed import heard_encoders, named_start, pose_enc_rows, powerup_poses
 from odocan.host.judge.bootticks import (
     TWIST_COUNTERS,
     ahead_ticks,
@@ -112,8 +112,10 @@ def split_lives(frames: FrameArrays, decoder: BulkDecoder) -> list[Life]:
     rows = decoder.decode(frames, "WHEEL_ENCODERS")
     keep = accepted[rows["index"]]
     encoders, counters = rows["index"][keep], rows["COUNTER"][keep].astype(np.int64)
-    pages = encoder_count_pages(frames, decoder)
+    pages, every = encoder_count_pages(frames, decoder), (frames.select(rows["index"]),
+                                                          rows["index"].astype(np.int64))
     poses, after = powerup_poses(frames, decoder), pose_enc_rows(frames, decoder)
+    heard = heard_encoders(every, decoder)  # the power-up pose's word (``bootnamed``)
     starts: list[int] = []
     counted_boots: list[bool] = []  # the start named by the new firmware's first count page
     silent: list[bool] = []  # primed in a silence on a frame nothing names (``silentboot``)
@@ -122,11 +124,11 @@ def split_lives(frames: FrameArrays, decoder: BulkDecoder) -> list[Life]:
         start = summary_start(position, uptime_s, state, encoders)
         counted = (None if stalled_first(frames, decoder, encoders, position, limit)
                    else page_counted_start(position, limit, (encoders, counters), pages, (
-                       (frames.select(rows["index"]), rows["index"].astype(np.int64)),
-                       decoder, (starts[-1] if starts else 0,
-                                 summary_start(position, uptime_s, state, rows["index"])))))
+                       every, decoder, (starts[-1] if starts else 0,
+                                        summary_start(position, uptime_s, state, rows["index"])))))
         said = (named_start(poses, (encoders.astype(np.int64), counters), position,
-                            float(frames.timestamp_s[position]), after) if uptime_s == 0 else None)
+                            float(frames.timestamp_s[position]), after, heard)
+                if uptime_s == 0 else None)
         named = None if said is None else said[0]
         for found in (counted, named):  # the power-up pose's word last: not stamp-bound
             if found is not None and found > (starts[-1] if starts else 0):

@@ -50,7 +50,7 @@ from odocan.host.judge.stallreprime import (
     left_out_at,
     stall_reprimes,
 )
-from odocan.host.judge.step_periods import pair_bound_periods, step_bound_periods
+from odocan.host.judge.step_periods import DOUBTED, step_bound_periods
 from odocan.host.judge.unseenrestart import heading_offsets, restarted_path, unseen_restarts
 from odocan.host.judge.unseenrestart import restart_detail as restart_detail
 from odocan.sim.robot import RobotProfile
@@ -218,7 +218,8 @@ def firmware_steps(
     """The steps as firmware/ecu.py takes them: a frame whose step from the last accepted one
     exceeds the robot's maximum wheel speed (``max_wheel_speed_mm_s``; ``PROFILE_SPEED``: the
     profile's) over its periods (``step_periods``: widened by the bus time, as the firmware
-    widens them by its clock's) is refused (IMPLAUSIBLE_STEP, not integrated);
+    widens them by its clock's; else from the frame before, ``doubted_bound_periods``) is
+    refused (IMPLAUSIBLE_STEP, not integrated);
     ``RESYNC_FRAMES`` refused frames plausible among themselves are a counter restart
     (COUNTER_RESET): the odometry re-primes on the first of them and integrates one step from it to
     the last. A frame whose CTRL_UPTIME is below the last accepted frame's (both non-zero: the
@@ -230,8 +231,7 @@ def firmware_steps(
     firmware's Q48 integer bound may differ by a count at the limit). ``through``: per gap (its
     encoder frame after) the firmware's longest step there, its pages' (``holetaken``): shorter
     than an ambiguous step, the gap is no ambiguous step (the firmware took frames in it).
-    ``resets``: the firmware's COUNTER_RESET word, followed within a period of the threshold
-    (``nearthreshold``)."""
+    ``resets``: the firmware's COUNTER_RESET word, followed within a period of the threshold."""
     left, right = enc.left[e0:], enc.right[e0:]
     seq = enc.seq[e0:]
     steps = Steps(wrap_delta(np.diff(left), bits), wrap_delta(np.diff(right), bits))
@@ -261,7 +261,7 @@ def firmware_steps(
         return abs(d[0]) <= periods * bound[0] and abs(d[1]) <= periods * bound[1]
 
     def plausible(a: int, b: int) -> bool:  # from the last accepted frame: periods widened
-        return within(a, b, pair_bound_periods(seq, stamps, enc.cycle_s, a, b))
+        return any(within(a, b, rule(seq, stamps, enc.cycle_s, a, b)) for rule in DOUBTED)
 
     def consistent(a: int, b: int) -> bool:  # among refused frames: the sequence's periods
         return within(a, b, max(1, int(seq[b] - seq[a])))

@@ -51,3 +51,21 @@ def pair_bound_periods(seq: IntArray, timestamp_s: FloatArray, cycle_s: float | 
     """``widened_periods`` of the step from frame ``a`` (the last accepted) to frame ``b``."""
     return int(widened_periods(np.array([int(seq[b] - seq[a])]),
                                np.array([float(timestamp_s[b] - timestamp_s[a])]), cycle_s)[0])
+
+
+def doubted_bound_periods(seq: IntArray, timestamp_s: FloatArray, cycle_s: float | None,
+                          a: int, b: int) -> int:
+    """The firmware's ``sampledoubt.doubted_periods`` as the judges count them: the step from
+    frame ``a`` (the last accepted) to frame ``b``, its sequence step, widened by the bus time
+    since the frame before ``a``: ``a`` may have waited out the silence before it (a delayed
+    frame held in a bus-off sender's transmit buffer goes out first at the recovery), its sample
+    no earlier than that frame's. 0 (no second chance) when ``a`` is the first frame, or came
+    within a period and a half of the one before (nothing to doubt), or without bus times."""
+    if a == 0 or cycle_s is None or timestamp_s[a] - timestamp_s[a - 1] < 1.5 * cycle_s:
+        return 0
+    return int(widened_periods(np.array([int(seq[b] - seq[a])]),
+                               np.array([float(timestamp_s[b] - timestamp_s[a - 1])]), cycle_s)[0])
+
+
+DOUBTED = (pair_bound_periods, doubted_bound_periods)  # the bound's periods, then the second
+# chance's (``reference_path.firmware_steps``)

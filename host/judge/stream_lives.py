@@ -1,5 +1,4 @@
-"""Where each firmware life of a log starts, chunk by chunk (issue #14.1):
-``host.judge.reboots.split_lives`` over a log fed in chunks, the same lives.
+"""Where each firmware life of a log starts, chunk by chunk (issue #14.1): ``split_lives``.
 
 A reboot is a summary (ODOM_STATUS page 0, CRC holding) that ``SourceWatch`` calls one, fed in
 bus order as in the whole log. Its life starts at the summary, at the latest accepted encoder
@@ -32,6 +31,7 @@ from odocan.host.judge.bootnamed import (
     PowerUpPoses,
     carried_on,
     first_after,
+    heard_encoders,
     named_start,
     no_powerup_poses,
     pose_enc_rows,
@@ -430,8 +430,9 @@ class StreamLives:
         ``name``; ``before``: the UPTIME before it): where its life starts."""
         earlier = self._encoders[self._encoders < at]
         start = int(earlier[-1]) if uptime_s == 0 and name != "INIT" and len(earlier) else at
-        named = (named_start(self._powerups, (self._encoders, self._counters), at, t_s)
-                 if uptime_s == 0 else None)
+        heard = heard_encoders(self._every, self.decoder) if uptime_s == 0 else None
+        named = None if heard is None else named_start(
+            self._powerups, (self._encoders, self._counters), at, t_s, heard=heard)
         boot = _Boot(at, uptime_s, t_s, before, start, name, naming=named)
         self._tracking.append(boot)
         self._naming += [boot] if named is not None else []
