@@ -42,10 +42,10 @@ SKIPPED_BY_PLAUSIBILITY = (
     "issue #11: kobuki seed 3, delay=0.5:150: ODOM_TWIST DISTANCE 17.0 mm off (3.8 mm on main, "
     "59 samples then, 181 now): the firmware's E2E took the late COUNTER 5 of 4.20 s (sent "
     "4.05 s; OKSOMELOST), refused its step as implausible and then the on-time COUNTER 5 of "
-    "4.21 s as REPEATED; the host's E2E refused the late one and took the on-time one into "
-    "its reference. Not traced further (the poses naming the frame before both may read as "
-    "proof the late one was skipped: e2e_evidence cannot tell an E2E refusal from a "
-    "plausibility one)")
+    "4.21 s as REPEATED. The host's E2E takes the same two frames' verdicts without the pose "
+    "evidence, but e2e_evidence's 'skipped' (the poses after 4.20 s name the frame before it) "
+    "refuses the late one, and the on-time one is then taken into the reference: the evidence "
+    "cannot tell an E2E refusal from a plausibility one")
 RESUME_EDGE = (
     "issue #11: kobuki seed 2, delay=0.5:150: the first sample after a hold at 5.14 s is "
     "0.097 mm beyond the resume rule's tolerance (stallfirst.resume_across; 7.4 mm beyond on "
