@@ -50,6 +50,12 @@ RESUME_EDGE = (
     "issue #11: kobuki seed 2, delay=0.5:150: the first sample after a hold at 5.14 s is "
     "0.097 mm beyond the resume rule's tolerance (stallfirst.resume_across; 7.4 mm beyond on "
     "main, at 8.93 s); not traced")
+ABSORBED = (
+    "issue #11: pmir seed 2, delay=0.5:100 (the correct firmware FAILed on main by its DISTANCE, "
+    "PASSes now): X raised 10 mm from 5.0 s PASSes: the log's encoder sequence has 109 gaps "
+    "(frames the host's E2E refused that the log holds) and each gap's placement may move the "
+    "position by its gap bound (2275 mm summed), which absorbs the 10 mm (10.05 mm absorbed); "
+    "the firmware's ENC_E2E pages do not prove it took exactly the log's frames there (gapseen)")
 
 
 def _drive(root: Path, robot: str, seed: int, faults: str) -> Drive:
@@ -133,3 +139,14 @@ def test_frames_stamped_late_in_bus_order_keep_their_place() -> None:
     late, sent = late_sends(heard, counter, POSE_PERIOD_S)
     assert not late.any()
     assert np.array_equal(sent, heard)
+
+
+@pytest.mark.xfail(strict=True, reason=ABSORBED)
+def test_a_pose_10_mm_off_fails_across_refused_gaps(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    log, _, code = _drive(tmp_path, "pmir", 2, "delay=0.5:100")
+    tampered = tmp_path / "t.log"
+    assert raise_raw(log, tampered, "ODOM_POSE_X", (2, 4), TAMPER_LSB, 5.0) > 100
+    codes = [code, *(_analyze(tampered, s) for s in ("never", "always"))]
+    capsys.readouterr()
+    assert codes == [0, 1, 1]
