@@ -51,7 +51,7 @@ RESUME_EDGE = (
     "0.097 mm beyond the resume rule's tolerance (stallfirst.resume_across; 7.4 mm beyond on "
     "main, at 8.93 s); not traced")
 ABSORBED = (
-    "issue #11: pmir seed 2, delay=0.5:100 (the correct firmware FAILed on main by its DISTANCE, "
+    "issue #11: pmir seed 2, delay=0.5:100 (the correct firmware FAILed on main by 69 mrad, "
     "PASSes now): X raised 10 mm from 5.0 s PASSes: the log's encoder sequence has 109 gaps "
     "(frames the host's E2E refused that the log holds) and each gap's placement may move the "
     "position by its gap bound (2275 mm summed), which absorbs the 10 mm (10.05 mm absorbed); "
