@@ -131,6 +131,17 @@ def test_a_frame_after_a_late_one_is_late_when_its_counter_says_so() -> None:
     assert np.allclose(sent, [8.801, 8.661, 8.681, 8.761, 8.781, 8.821, 8.841])
 
 
+def test_a_frame_after_a_silence_continues_no_late_run() -> None:
+    """A late frame, then the sender silent 2 s (an MCU halt; kobuki circle seed 7163,
+    ``delay=0.1:150,stall=8:2``, FAILed 77.6 mm when a step from the last frame heard in order
+    read the first send after the halt as held back): that send is on time."""
+    heard = np.array([7.981, 7.991, 10.021, 10.041])
+    counter = np.array([3, 2, 5, 6], dtype=np.int64)
+    late, sent = late_sends(heard, counter, POSE_PERIOD_S)
+    assert late.tolist() == [False, True, False, False]
+    assert np.array_equal(sent[2:], heard[2:])
+
+
 def test_frames_stamped_late_in_bus_order_keep_their_place() -> None:
     """A recorder that stamps a burst late keeps the bus order: nothing is late there, however
     far the stamps run behind the COUNTER."""

@@ -14,10 +14,11 @@ A frame heard after a send of its own message that came later (every frame of th
 whose CRC is right, in bus order: ``e2e_evidence.sent_times``) is known late, and its send time
 is that later send's less the sends between. So is a frame that follows a known late one in
 its sender's sequence (``late_sends``) and comes ``LATE_CYCLES`` or more after the time its
-COUNTER step from the latest frame heard in order puts its send at: every send after that one
-held back too (seed 2: ODOM_POSE_Y 8 to 15 heard 150 ms late, after 0 to 6 as late, the last in
-order 7): ``sent_times`` reads each as in order (the step forward from 7), heard when sent, and
-its name, resolved 15 encoder frames on, named a frame 16 after its own (28.6 mm off). A frame
+COUNTER step puts its send at, from that one (at the sender's cadence) or from the latest frame
+heard in order (less than a COUNTER lap before it): every send after that one held back too
+(seed 2: ODOM_POSE_Y 8 to 15 heard 150 ms late, after 0 to 6 as late, the last in order 7):
+``sent_times`` reads each as in order (the step forward from 7), heard when sent, and its
+name, resolved 15 encoder frames on, named a frame 16 after its own (28.6 mm off). A frame
 heard in order whose predecessor was too keeps its place: a recorder that stamped a burst late
 keeps the bus order, and the encoder frames around it are as late.
 
@@ -28,20 +29,18 @@ A late frame's name is resolved at its send time: against the encoder frames hea
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
-from odocan.host.protocol.busfacts import ENC_COUNTER_MASK, POSE_PERIOD_S
+from odocan.host.protocol.busfacts import ENC_COUNTER_LAP, ENC_COUNTER_MASK, POSE_PERIOD_S
 from odocan.host.protocol.decode import BulkDecoder
 from odocan.host.protocol.e2e import e2e_messages
 from odocan.host.protocol.e2e_crc import crc8h2f_p02
 from odocan.host.protocol.e2e_evidence import sent_times
-from odocan.host.protocol.e2e_periods import COUNTER_MODULO
 
 LATE_CYCLES = 1.5  # a frame heard this many send periods after its COUNTER's send: held back
+RUN_STEPS = 3  # a late run's next frame: at most this many sends on (the others lost)
 
 IntArray = npt.NDArray[np.int64]
 FloatArray = npt.NDArray[np.float64]
@@ -91,23 +90,46 @@ def sent_places(frames: FrameArrays, decoder: BulkDecoder, name: str, index: Int
 def late_sends(timestamp_s: FloatArray, counter: IntArray,
                period_s: float) -> tuple[npt.NDArray[np.bool_], FloatArray]:
     """``sent_times`` of one periodic sender's frames (bus order), with a frame it reads in
-    order taken late when the frame heard just before it was late and its COUNTER step from
-    the latest frame heard in order puts its send ``LATE_CYCLES`` or more before its stamp
-    (module docstring): per frame, whether it was late and when it was sent."""
+    order taken late when the frame heard just before it was late and its send, one of
+    (module docstring) ``_run_send`` and ``_top_send``, lies ``LATE_CYCLES`` or more before its
+    stamp. Per frame, whether it was late and when it was sent."""
     ordered, sent = sent_times(timestamp_s, counter, period_s)
     late = ~np.asarray(ordered, dtype=bool)
     times = np.asarray(sent, dtype=np.float64)
-    top_c, top_s = -1, 0.0  # the latest frame heard in order (-1: none yet)
-    for k, (t_s, c) in enumerate(zip(timestamp_s.tolist(), counter.tolist(), strict=True)):
+    t, c = timestamp_s.tolist(), counter.tolist()
+    top = -1  # the latest frame heard in order (-1: none yet)
+    for k in range(len(late)):
         if late[k]:
             continue
-        if top_c >= 0 and k > 0 and late[k - 1]:
-            step = (c - top_c) & ENC_COUNTER_MASK
-            x = (t_s - top_s) / period_s
-            sends = step + COUNTER_MODULO * math.floor((x - step + COUNTER_MODULO // 2)
-                                                       / COUNTER_MODULO)
-            if sends > 0 and x - sends >= LATE_CYCLES:
-                late[k], times[k] = True, top_s + sends * period_s
+        if k > 0 and late[k - 1]:
+            sent_s = _run_send(t, c, times, k, period_s)
+            if sent_s is None and top >= 0:
+                sent_s = _top_send(t[k] - t[top], (c[k] - c[top]) & ENC_COUNTER_MASK,
+                                   t[top], period_s)
+            if sent_s is not None and t[k] - sent_s >= LATE_CYCLES * period_s:
+                late[k], times[k] = True, sent_s
                 continue
-        top_c, top_s = c, t_s
+        top = k
     return late, times
+
+
+def _run_send(t: list[float], c: list[int], times: FloatArray, k: int,
+              period_s: float) -> float | None:
+    """Frame ``k``'s send when it continues the late frame ``k - 1``'s run: heard at the
+    sender's cadence after it (its COUNTER step, 1 to ``RUN_STEPS``, within half a period of
+    the stamps' gap), it was sent that step after that one was; None: no run (a silence: a
+    stall's first sends are on time)."""
+    step = (c[k] - c[k - 1]) & ENC_COUNTER_MASK
+    gap = (t[k] - t[k - 1]) / period_s
+    if not 1 <= step <= RUN_STEPS or abs(gap - step) > 0.5:
+        return None
+    return float(times[k - 1]) + step * period_s
+
+
+def _top_send(dt_s: float, step: int, top_s: float, period_s: float) -> float | None:
+    """A frame's send ``step`` sends (its COUNTER step) after the latest frame heard in order,
+    ``dt_s`` before it: only while that one is less than a COUNTER lap old (beyond, the step
+    cannot tell the sends: after a stall's silence it read the first send late)."""
+    if dt_s >= ENC_COUNTER_LAP * period_s or step == 0:
+        return None
+    return top_s + step * period_s
