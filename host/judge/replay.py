@@ -57,6 +57,7 @@ from odocan.host.io.logs import (
 from odocan.host.io.recording import Recording
 from odocan.host.judge.analysis import Analysis, Tolerance, analyze
 from odocan.host.judge.diagnosis import fitting_profiles
+from odocan.host.judge.replay_boots import boot_starts, fresh_accepted, fresh_ticks
 from odocan.host.judge.replay_compare import (
     onboard_by_tick,
     pose_phase_ticks,
@@ -114,8 +115,10 @@ class ReplayInput:
     def from_log(cls, frames: FrameArrays) -> ReplayInput:
         """Check the log's frames; ``ReplayError`` without an encoder frame to feed."""
         decoder = BulkDecoder(contract.database())
-        _, accepted = check_frames(frames)
-        encoders = EncoderTrack.of(frames, accepted, decoder)
+        _, accepted = check_frames(frames)  # a rebooted firmware's receiver fresh: replay_boots
+        starts = [start for start, _ in boot_starts(frames, decoder)]
+        accepted = fresh_accepted(frames, accepted, starts, decoder)
+        encoders = fresh_ticks(EncoderTrack.of(frames, accepted, decoder), starts)
         total = len(decoder.select(frames, "WHEEL_ENCODERS"))
         if total == 0:
             raise ReplayError("no WHEEL_ENCODERS frame (ID 0x100, 8 bytes) in the log: "

@@ -42,9 +42,9 @@ from odocan.host.judge.powerup import holds_first_cycle
 from odocan.host.judge.reboots import (
     encoder_count_pages,
     page_counted_start,
-    split_lives,
     summary_start,
 )
+from odocan.host.judge.replay_boots import boot_starts
 from odocan.host.judge.replay_compare import departures, versus_log
 from odocan.host.judge.replay_events import replayed_positions
 from odocan.host.judge.replay_track import EncoderTrack
@@ -104,12 +104,8 @@ def plan_lives(frames: FrameArrays, accepted: npt.NDArray[np.bool_],
                track: EncoderTrack) -> LifePlan:
     """The log's firmware lives and stalls (module docstring)."""
     decoder = BulkDecoder(contract.database())
-    lives = split_lives(frames, decoder)
-    said = [(life.index[0], life.t_s) for life in lives[1:]
-            if len(life.index) and life.set_pose is None and life.config is None]
     first = first_power_up(frames, decoder, track)
-    boots = ([] if first is None else [first]) + [
-        (int(p), int(np.flatnonzero(frames.timestamp_s == t_s)[0])) for p, t_s in said]
+    boots = ([] if first is None else [first]) + boot_starts(frames, decoder)
     resets: dict[int, bool] = {}
     starts = [0]
     for start, summary in boots:
