@@ -23,6 +23,8 @@ from pathlib import Path
 
 import pytest
 
+from odocan.host.cli.app import main
+from tests.fw_watch import watched
 from tests.log_edit import raise_raw
 
 TAMPER_LSB = 100  # 10 mm in ODOM_POSE_X's 0.1 mm LSBs
@@ -43,9 +45,12 @@ def _cli(*args: str) -> subprocess.CompletedProcess[str]:
 def test_replay_after_a_boot_under_a_delay_passes_and_a_tamper_fails(
         robot: str, seed: int, scenario: str, duration: int, tmp_path: Path) -> None:
     log, tampered = tmp_path / "drive.log", tmp_path / "t.log"
-    assert _cli("run", "--robot", robot, "--scenario", scenario, "--seed", str(seed),
-                "--duration", str(duration), "--faults", FAULTS,
-                "--log", str(log)).returncode == 0
+    with watched(robot) as watch:
+        code = main(["run", "--robot", robot, "--scenario", scenario, "--seed", str(seed),
+                     "--duration", str(duration), "--faults", FAULTS, "--firmware", "python",
+                     "--log", str(log)])
+    assert watch.within_a_thousandth_lsb(), (watch.worst_m, watch.worst_rad)
+    assert code == 0
     assert _cli("analyze", str(log)).returncode == 0
     replayed = _cli("replay", str(log))
     assert replayed.returncode == 0, replayed.stdout[-2000:]

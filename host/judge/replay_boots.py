@@ -14,10 +14,19 @@ one) nor feed what the firmware took after it:
   there (kobuki ``--seed 6 --scenario random --duration 14 --faults
   delay=0.1:15,reboot=6:0.5``: the correct firmware FAILed, 99.8 mrad off; seed 7: none of
   life 1's 74 poses paired, UNJUDGED). ``boot_starts`` names it among every encoder frame on
-  the bus (``bootnamed.named_start``, the same rule), as a fresh receiver sees them;
+  the bus (``bootnamed.named_start``, the same rule), as a fresh receiver sees them; and when
+  the delay put the power-up pose just after the boot summary (where ``named_start`` has no
+  word) and the count page names a frame two late (kobuki seed 10, figure8, 11 s: 7.9 mm,
+  10.8 mrad off), by that pose when it names the summary's own frame or one of its tick
+  (``_named_after``);
 * ``fresh_accepted``: from each such start to the next, the WHEEL_ENCODERS verdicts are those
   of an E2E check fresh there (``silentboot.taken_fresh``), the firmware's own; every other
-  frame keeps the whole log's verdict.
+  frame keeps the whole log's verdict;
+* ``fresh_ticks``: the step into each start counted by bus time, not COUNTER.
+
+A boot summary is found as the first ODOM_STATUS at its life's time (``Life.t_s``): the first
+frame of any kind at that time was the power-up pose sent in the same tick, which the power-up
+pose rules then took for the summary and found no pose before.
 """
 
 from __future__ import annotations

@@ -7,8 +7,9 @@ SIGSTOP, a debugger halt: TIME_LOST, MAILBOX_OVERFLOW, a re-prime) then departed
 although the firmware was right, and the replay FAILed it (issue #11: 2660 mrad on a live log).
 What the log tells, the replay now lives too:
 
-* **a power-up or reboot**: where the judges find each firmware life (``reboots.split_lives``,
-  and for the log's first life a summary at UPTIME 0, ``first_power_up``) the replayed firmware
+* **a power-up or reboot**: where the judges find each firmware life (``reboots.split_lives``
+  as ``replay_boots.boot_starts`` reads it for a receiver fresh at the reboot, and for the
+  log's first life a summary at UPTIME 0, ``first_power_up``) the replayed firmware
   is reset (``FirmwareBoard.reboot``, its receive FIFO cleared) on the frame that life primed
   on, so each life runs from its own power-up; before the first power-up the board is off;
 * **a stall**: where the firmware sent nothing for ``LOST_TIME_PERIODS`` ticks or more while the
