@@ -4,8 +4,10 @@
 (``host.e2e.check_frames``) are fed, byte for byte, to a ``sim.board.FirmwareBoard`` on python-can
 ``virtual`` buses, one firmware tick per 10 ms encoder period: the frames' ticks come from the
 sender's sequence (the E2E COUNTER unwrapped, widened by 16 where the timestamps say so, as
-``host.analysis`` does), so a gap in the log is a run of ticks without a frame, exactly as the
-firmware would have lived it (its E2E window widens, its watchdog may fire). Gaps longer than
+``host.analysis`` does; after a reboot, the frames a receiver fresh there takes, the step into
+its priming frame by bus time: ``replay_boots``), so a gap in the log is a run of ticks without a
+frame, exactly as the firmware would have lived it (its E2E window widens, its watchdog may
+fire). Gaps longer than
 ``MAX_GAP_TICKS`` are shortened to it. The firmware's clock is the first encoder frame's
 timestamp plus 10 ms per tick; the log's own SIM_TRUTH frames are put back on the bus where the
 log had them. Everything on the replayed bus is analysed as ``odocan run`` does
@@ -57,6 +59,7 @@ from odocan.host.io.logs import (
 from odocan.host.io.recording import Recording
 from odocan.host.judge.analysis import Analysis, Tolerance, analyze
 from odocan.host.judge.diagnosis import fitting_profiles
+from odocan.host.judge.replay_boots import boot_starts, fresh_accepted, fresh_ticks
 from odocan.host.judge.replay_compare import (
     onboard_by_tick,
     pose_phase_ticks,
@@ -115,8 +118,10 @@ class ReplayInput:
     def from_log(cls, frames: FrameArrays) -> ReplayInput:
         """Check the log's frames; ``ReplayError`` without an encoder frame to feed."""
         decoder = BulkDecoder(contract.database())
-        _, accepted = check_frames(frames)
-        encoders = EncoderTrack.of(frames, accepted, decoder)
+        _, accepted = check_frames(frames)  # a rebooted firmware's receiver fresh: replay_boots
+        starts = [start for start, _ in boot_starts(frames, decoder)]
+        accepted = fresh_accepted(frames, accepted, starts, decoder)
+        encoders = fresh_ticks(EncoderTrack.of(frames, accepted, decoder), starts)
         total = len(decoder.select(frames, "WHEEL_ENCODERS"))
         if total == 0:
             raise ReplayError("no WHEEL_ENCODERS frame (ID 0x100, 8 bytes) in the log: "

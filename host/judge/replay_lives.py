@@ -7,8 +7,9 @@ SIGSTOP, a debugger halt: TIME_LOST, MAILBOX_OVERFLOW, a re-prime) then departed
 although the firmware was right, and the replay FAILed it (issue #11: 2660 mrad on a live log).
 What the log tells, the replay now lives too:
 
-* **a power-up or reboot**: where the judges find each firmware life (``reboots.split_lives``,
-  and for the log's first life a summary at UPTIME 0, ``first_power_up``) the replayed firmware
+* **a power-up or reboot**: where the judges find each firmware life (``reboots.split_lives``
+  as ``replay_boots.boot_starts`` reads it for a receiver fresh at the reboot, and for the
+  log's first life a summary at UPTIME 0, ``first_power_up``) the replayed firmware
   is reset (``FirmwareBoard.reboot``, its receive FIFO cleared) on the frame that life primed
   on, so each life runs from its own power-up; before the first power-up the board is off;
 * **a stall**: where the firmware sent nothing for ``LOST_TIME_PERIODS`` ticks or more while the
@@ -42,9 +43,9 @@ from odocan.host.judge.powerup import holds_first_cycle
 from odocan.host.judge.reboots import (
     encoder_count_pages,
     page_counted_start,
-    split_lives,
     summary_start,
 )
+from odocan.host.judge.replay_boots import boot_starts
 from odocan.host.judge.replay_compare import departures, versus_log
 from odocan.host.judge.replay_events import replayed_positions
 from odocan.host.judge.replay_jumps import JumpModel
@@ -105,12 +106,8 @@ def plan_lives(frames: FrameArrays, accepted: npt.NDArray[np.bool_],
                track: EncoderTrack) -> LifePlan:
     """The log's firmware lives and stalls (module docstring)."""
     decoder = BulkDecoder(contract.database())
-    lives = split_lives(frames, decoder)
-    said = [(life.index[0], life.t_s) for life in lives[1:]
-            if len(life.index) and life.set_pose is None and life.config is None]
     first = first_power_up(frames, decoder, track)
-    boots = ([] if first is None else [first]) + [
-        (int(p), int(np.flatnonzero(frames.timestamp_s == t_s)[0])) for p, t_s in said]
+    boots = ([] if first is None else [first]) + boot_starts(frames, decoder)
     resets: dict[int, bool] = {}
     starts = [0]
     for start, summary in boots:
