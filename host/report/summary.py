@@ -26,6 +26,7 @@ from odocan.host.judge.finalstate import final_text
 from odocan.host.judge.samples import POSITION_LSB_M
 from odocan.host.outputs import OutputError, check_writable, replaced
 from odocan.host.protocol.e2e_silence import lost_text, silence_caption
+from odocan.host.report.failedchecks import first_pose_failures, twist_failures
 from odocan.host.report.judgedfacts import judged_fact, placed_fact
 from odocan.host.report.logtime import origin_s, start_text
 from odocan.host.stopped import mark_stopped, partial_verdict, stopped_text
@@ -197,7 +198,7 @@ def _criteria_line(report: dict[str, Any], tolerance: Tolerance, pose_met: bool,
         + (f" (plus {twins * 1e3:.4g} mm for encoder frames with a twin)"
            if (twins := (report.get("reference_breaks") or {}).get("twin_allowance_m")) else "")
     )
-    failed = _twist_failures(twist, distance)
+    failed = twist_failures(twist, distance) + first_pose_failures(report)
     if pose_met and failed:  # name what failed first: the pose did not
         line = "; ".join(failed) + f" (the pose criterion is met: {pose})"
     else:
@@ -280,19 +281,6 @@ def kept_failures(report: dict[str, Any]) -> list[str]:
             for event in report.get("events") or []
             if event.get("kind") == "set_pose" and isinstance(event.get("kept"), dict)
             and not event["kept"]["passed"]]
-
-
-def _twist_failures(twist: dict[str, Any], distance: dict[str, Any]) -> list[str]:
-    """The ODOM_TWIST criteria not met (speeds, DISTANCE), in words."""
-    failed = []
-    if not twist["passed"]:  # 0.18 mm/s was 0.000 m/s
-        failed.append("ODOM_TWIST outside the reference's speeds by up to "
-                      f"{twist['max_linear_excess_mps'] * 1e3:.3g} mm/s, "
-                      f"{twist['max_angular_excess_rad_s'] * 1e3:.3g} mrad/s")
-    if not distance["passed"]:
-        failed.append("ODOM_TWIST DISTANCE off the reference's path length by "
-                      f"{distance['max_excess_m'] * 1e3:.3f} mm beyond its tolerance")
-    return failed
 
 
 def _pose_within(report: dict[str, Any], tolerance: Tolerance) -> bool:
