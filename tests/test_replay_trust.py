@@ -72,16 +72,10 @@ def test_every_encoder_frame_reaches_the_replayed_firmware(tmp_path: Path) -> No
 
 
 @pytest.mark.parametrize(("robot", "seed", "faults"), [
-    pytest.param("pmir", 1, "delay=0.3:50,busoff=5:1,reboot=12,dup=0.1", marks=pytest.mark.xfail(
-        strict=True, reason="issue #11: frames a bus-off held back reach the bus at the recovery "
-        "(tests/test_busoff_release.py): WHEEL_ENCODERS COUNTER 3, sent at 4.99 s, is on the bus "
-        "at 6.0028 s, with the on-time COUNTER 9 at 6.01 s, and the recording firmware took both "
-        "in its tick of 6.01 s (3, the window open after the silence; 9 refused, held at 3 to "
-        "6.08 s); the replay feeds one frame a tick at the sender's sequence "
-        "(replay_track.encoder_ticks: 3 at tick 2 + 97, 9 six ticks on), so the replayed "
-        "firmware takes 9 and the frames after it, another drive: the judge of the replayed bus "
-        "FAILs it 984 mm, 518 mrad (it PASSed while the log stamped COUNTER 3 at its due time, "
-        "before the bus-off, where the replay fed it)")),
+    # the frames a bus-off held back (tests/test_busoff_release.py) and the reboot's priming
+    # frame: on main 71f6fdbf run FAILed it (DISTANCE 22.6 mm beyond its tolerance) and replay
+    # did; PASS since the twenty-ninth pass named a new life's priming frame among every frame
+    ("pmir", 1, "delay=0.3:50,busoff=5:1,reboot=12,dup=0.1"),
     ("pmir", 5, "delay=0.3:50,busoff=5:1,reboot=12,dup=0.1"),
     ("kobuki", 4, "delay=0.2:30,dup=0.1"),
 ])
