@@ -16,7 +16,6 @@ it follows a late one in its sender's sequence and ``sent_times`` reads it in or
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -26,6 +25,7 @@ from odocan.host.cli.app import main
 from odocan.host.judge.latenames import late_sends
 from odocan.host.protocol.busfacts import POSE_PERIOD_S
 from tests.fw_watch import Watch, watched
+from tests.judges_cli import both_analyses, fails_by_position
 from tests.log_edit import raise_raw
 
 TAMPER_LSB = 100  # 10 mm in ODOM_POSE_X's 0.1 mm LSBs
@@ -75,14 +75,9 @@ def drive(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFacto
     return _drive(tmp_path_factory.mktemp(request.param), robot, seed, faults)
 
 
-def _analyze(log: Path, stream: str, report: Path | None = None) -> int:
-    extra = [] if report is None else ["--report", str(report)]
-    return main(["analyze", str(log), "--stream", stream, *extra])
-
-
 def _run_and_judges(drive: Drive, capsys: pytest.CaptureFixture[str]) -> list[int]:
     log, _, code = drive
-    codes = [code, *(_analyze(log, s) for s in ("never", "always"))]
+    codes = [code, *both_analyses(log)]
     capsys.readouterr()
     return codes
 
@@ -104,12 +99,9 @@ def test_a_pose_10_mm_off_fails_by_its_position(
     log, _, _ = _drive(tmp_path, robot, seed, faults)
     tampered = tmp_path / "t.log"
     assert raise_raw(log, tampered, "ODOM_POSE_X", (2, 4), TAMPER_LSB, 5.0) > 100
-    codes = [_analyze(tampered, s, tmp_path / f"{s}.json") for s in ("never", "always")]
+    wrong = fails_by_position(tampered, tmp_path)
     capsys.readouterr()
-    assert codes == [1, 1]
-    for s in ("never", "always"):
-        report = json.loads((tmp_path / f"{s}.json").read_text())
-        assert report["onboard_vs_reference"]["max_position_error_beyond_allowance_m"] > 5e-3
+    assert wrong == []
 
 
 @pytest.mark.parametrize(("seed", "reason"), [(3, SKIPPED_BY_PLAUSIBILITY), (2, RESUME_EDGE)])
@@ -161,6 +153,6 @@ def test_a_pose_10_mm_off_fails_across_refused_gaps(
     log, _, code = _drive(tmp_path, "pmir", 2, "delay=0.5:100")
     tampered = tmp_path / "t.log"
     assert raise_raw(log, tampered, "ODOM_POSE_X", (2, 4), TAMPER_LSB, 5.0) > 100
-    codes = [code, *(_analyze(tampered, s) for s in ("never", "always"))]
+    codes = [code, *both_analyses(tampered)]
     capsys.readouterr()
     assert codes == [0, 1, 1]

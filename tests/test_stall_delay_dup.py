@@ -25,6 +25,7 @@ import pytest
 from odocan.host.cli.app import main
 from odocan.host.judge.analysis import POSITION_LSB_M
 from tests.fw_watch import Watch, watched
+from tests.judges_cli import analyze, both_analyses, fails_by_position
 from tests.log_edit import raise_raw
 
 TAMPER_LSB = 100  # 10 mm in ODOM_POSE_X's 0.1 mm LSBs
@@ -74,11 +75,6 @@ def kobuki_two(tmp_path_factory: pytest.TempPathFactory) -> Drive:
     return _drive(tmp_path_factory.mktemp("ktwo"), "kobuki", FAULTS_2S)
 
 
-def _analyze(log: Path, stream: str, report: Path | None = None) -> int:
-    extra = [] if report is None else ["--report", str(report)]
-    return main(["analyze", str(log), "--stream", stream, *extra])
-
-
 @pytest.mark.parametrize("name", ["six", "two", "kobuki_two"])
 def test_the_firmware_integrates_the_frames_it_took(name: str,
                                                     request: pytest.FixtureRequest) -> None:
@@ -92,7 +88,7 @@ def test_the_six_second_halt_is_a_stall_the_firmware_re_primed_across(
     """The halt is told where it was (not only a false one at 2.79 s) and the reference
     re-primes with the firmware: the position within the tolerance (252.9 mm off before)."""
     log, _, _ = six
-    _analyze(log, "never", tmp_path / "r.json")
+    analyze(log, "never", tmp_path / "r.json")
     capsys.readouterr()
     report = json.loads((tmp_path / "r.json").read_text())
     stalls = [e["t_s"] for e in report["events"] if e["kind"] == "firmware_stall"]
@@ -106,7 +102,7 @@ def test_the_six_second_halt_is_a_stall_the_firmware_re_primed_across(
 def _run_and_judges(log: Path, _watch: Watch, code: int,
                     capsys: pytest.CaptureFixture[str]) -> list[int]:
     """run's exit code, then analyze's whole and streamed, on a drive's log."""
-    codes = [code, *(_analyze(log, s) for s in ("never", "always"))]
+    codes = [code, *both_analyses(log)]
     capsys.readouterr()
     return codes
 
@@ -135,7 +131,7 @@ def test_a_pose_10_mm_off_after_a_two_second_halt_fails(
     log, _, _ = two
     tampered = tmp_path / "t.log"
     assert raise_raw(log, tampered, "ODOM_POSE_X", (2, 4), TAMPER_LSB, from_s) > 100
-    codes = [_analyze(tampered, s) for s in ("never", "always")]
+    codes = both_analyses(tampered)
     capsys.readouterr()
     assert codes == [1, 1]
 
@@ -149,12 +145,9 @@ def test_a_pose_10_mm_off_after_a_six_second_halt_fails_by_its_position(
     log, _, _ = six
     tampered = tmp_path / "t.log"
     assert raise_raw(log, tampered, "ODOM_POSE_X", (2, 4), TAMPER_LSB, from_s) > 40
-    codes = [_analyze(tampered, s, tmp_path / f"{s}.json") for s in ("never", "always")]
+    wrong = fails_by_position(tampered, tmp_path)
     capsys.readouterr()
-    assert codes == [1, 1]
-    for s in ("never", "always"):
-        report = json.loads((tmp_path / f"{s}.json").read_text())
-        assert report["onboard_vs_reference"]["max_position_error_beyond_allowance_m"] > 5e-3
+    assert wrong == []
 
 
 def _live_worst(log: Path, robot: str) -> list[float]:
