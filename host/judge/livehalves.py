@@ -33,6 +33,7 @@ class HalfPairs:
         self._unsettled: dict[str, Half] = {}  # per message, the latest half heard
         self.unsettled_from_s = math.inf  # the earliest bus time among them (s)
         self._xs: dict[int, Half] = {}  # settled X halves by the encoder frame they name
+        self._xs_waiting: dict[int, Half] = {}  # those of them not sampled yet (``_lone_before``)
         self._ys: dict[int, tuple[Half, bool]] = {}  # settled Y halves (and queued) waiting
         self.sampled: set[int] = set()  # encoder frames an on-board sample was made of
 
@@ -60,6 +61,7 @@ class HalfPairs:
     def forget(self, before: int) -> None:
         """Drop what is kept of the encoder frames before ``before`` (seq): bounded state."""
         self._xs = {seq: half for seq, half in self._xs.items() if seq >= before}
+        self._xs_waiting = {seq: half for seq, half in self._xs_waiting.items() if seq >= before}
         self._ys = {seq: half for seq, half in self._ys.items() if seq >= before}
         self.sampled = {seq for seq in self.sampled if seq >= before}
 
@@ -76,7 +78,10 @@ class HalfPairs:
                 last is not None and last[0].seq == seq and judge_resend(name, seq, half, tracker)):
             return  # left out, as analyze leaves it out (unmatched); a resend judged
         if name == "x":
-            self._xs.setdefault(seq, half)
+            if seq not in self._xs:
+                self._xs[seq] = half
+                if seq not in self.sampled:
+                    self._xs_waiting[seq] = half
             waiting = self._ys.pop(seq, None)
             if waiting is not None:
                 self._pair(seq, half, *waiting)
@@ -92,13 +97,17 @@ class HalfPairs:
             return
         self._lone_before(seq)
         self.sampled.add(seq)
+        self._xs_waiting.pop(seq, None)
         self._tracker.on_pair(seq, x, y, queued)
 
     def _lone_before(self, seq: int) -> None:
         """The halves waiting for a partner naming frames before ``seq``, which is sampled
-        now: their partners were lost; each judged alone (``livelone``), in frame order."""
+        now: their partners were lost; each judged alone (``livelone``), in frame order. The X
+        halves looked at are those not sampled (``_xs_waiting``: a few, where ``_xs`` keeps up
+        to two encoder windows' worth, which a scan per pair made a tenth of a bridge's CPU)."""
         lone: list[tuple[int, str, Half]] = []
-        for s in [k for k in self._xs if k < seq and k not in self.sampled]:
+        for s in [k for k in self._xs_waiting if k < seq]:
+            self._xs_waiting.pop(s)
             lone.append((s, "x", self._xs.pop(s)))
         for s in [k for k in self._ys if k < seq]:
             lone.append((s, "y", self._ys.pop(s)[0]))
