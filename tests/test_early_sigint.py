@@ -132,6 +132,41 @@ def _the_interpreters(err: str) -> bool:
             and all('"<frozen ' in line for line in frames))
 
 
+def _without_ignored_interrupts(err: str) -> str:
+    """``err`` less the interpreter's "Exception ignored in: <function ...>" blocks whose frames
+    are all frozen: a Ctrl-C landing in a callback of importlib's (its module locks' weakref
+    callback), which CPython reports and drops whoever handles SIGINT (the full run of the
+    twenty-ninth pass met one at 10 ms under load: its one line and exit 130 were right)."""
+    kept: list[str] = []
+    lines = err.splitlines(keepends=True)
+    i = 0
+    while i < len(lines):
+        if lines[i].startswith("Exception ignored in: <function "):
+            j = i + 1
+            if j < len(lines) and lines[j].startswith("Traceback"):
+                j += 1
+            while j < len(lines) and lines[j].startswith('  File "<frozen '):
+                j += 1
+            if j < len(lines) and lines[j].startswith("KeyboardInterrupt"):
+                i = j + 1
+                continue
+        kept.append(lines[i])
+        i += 1
+    return "".join(kept)
+
+
+def test_an_ignored_interrupt_in_importlib_is_not_odocans() -> None:
+    """The filter drops only a frozen-frames block ending in KeyboardInterrupt."""
+    block = ("Exception ignored in: <function _get_module_lock.<locals>.cb at 0x7f>\n"
+             "Traceback (most recent call last):\n"
+             '  File "<frozen importlib._bootstrap>", line 442, in cb\n'
+             "KeyboardInterrupt: \n")
+    line = "interrupted (SIGINT): odocan run stopped before it finished\n"
+    assert _without_ignored_interrupts(block + line) == line
+    ours = block.replace('"<frozen importlib._bootstrap>"', '"/x/odocan/host/cli/app.py"')
+    assert _without_ignored_interrupts(ours + line) == ours + line
+
+
 @pytest.mark.parametrize("after_ms", [0, 5, 10, 20, 50, 100, 300, 600, 900, 1200])
 def test_ctrl_c_at_early_moments_of_a_real_run(tmp_path: Path, after_ms: int) -> None:
     """SIGINT ``after_ms`` after launch. The interpreter's own start-up is out of odocan's
@@ -150,6 +185,7 @@ def test_ctrl_c_at_early_moments_of_a_real_run(tmp_path: Path, after_ms: int) ->
     time.sleep(after_ms / 1000)
     proc.send_signal(signal.SIGINT)
     out, err = proc.communicate(timeout=120)
+    err = _without_ignored_interrupts(err)
     if proc.returncode == -signal.SIGINT or _the_interpreters(err):
         assert _the_interpreters(err), err
         assert proc.returncode in (-signal.SIGINT, 1), proc.returncode
