@@ -22,9 +22,20 @@ name, resolved 15 encoder frames on, named a frame 16 after its own (28.6 mm off
 heard in order whose predecessor was too keeps its place: a recorder that stamped a burst late
 keeps the bus order, and the encoder frames around it are as late.
 
+Not late, though ``sent_times`` reads it behind a later send (``LateScan``): a frame less than
+``LATE_CYCLES`` behind its send (two frames swapped on the bus: its name, a period old, is
+resolved unambiguously where it was heard), and a frame whose send was heard already, a frame
+of its COUNTER within half a period of it (a duplicate; a rebooted firmware's COUNTER starting
+again, the old life's frames in the slots its frames would be read late into), with the run
+that follows it at the sender's cadence (a reboot whose old frame of one slot was lost). The
+first cut read the reboot of ``tests/test_stream_facts.py``'s rig log (no delay) as a run of
+frames held back 100 ms to its end, and named every pose and twist frame after it from there
+(its twist check FAILed 0.30 rad/s where the streamed judge PASSed).
+
 A late frame's name is resolved at its send time: against the encoder frames heard before it
 (their bus position), as a frame heard in order is. Frames heard in order keep their place
-(nothing changes on a log without late frames).
+(nothing changes on a log without late frames). The streamed judge scans alike, chunk by chunk
+(``stream_late``), and reads a life with a late frame taken whole.
 """
 
 from __future__ import annotations
@@ -41,6 +52,8 @@ from odocan.host.protocol.e2e_evidence import sent_times
 
 LATE_CYCLES = 1.5  # a frame heard this many send periods after its COUNTER's send: held back
 RUN_STEPS = 3  # a late run's next frame: at most this many sends on (the others lost)
+STAMP_S = 1e-6  # a log's stamp resolution (candump's): lateness read to it
+SLOT_FRAMES = 4 * ENC_COUNTER_LAP  # frames looked back for a send heard (a lap's lateness, x4)
 
 IntArray = npt.NDArray[np.int64]
 FloatArray = npt.NDArray[np.float64]
@@ -89,31 +102,95 @@ def sent_places(frames: FrameArrays, decoder: BulkDecoder, name: str, index: Int
 
 def late_sends(timestamp_s: FloatArray, counter: IntArray,
                period_s: float) -> tuple[npt.NDArray[np.bool_], FloatArray]:
+    """Per frame of one periodic sender (bus order), whether it was late and when it was sent
+    (its stamp when not late): ``LateScan`` over them all at once."""
+    late, times = LateScan(period_s).feed(timestamp_s.tolist(), counter.tolist())
+    return np.asarray(late, dtype=bool), np.asarray(times, dtype=np.float64)
+
+
+class LateScan:
     """``sent_times`` of one periodic sender's frames (bus order), with a frame it reads in
     order taken late when the frame heard just before it was late and its send, one of
-    (module docstring) ``_run_send`` and ``_top_send``, lies ``LATE_CYCLES`` or more before its
-    stamp. Per frame, whether it was late and when it was sent."""
-    ordered, sent = sent_times(timestamp_s, counter, period_s)
-    late = ~np.asarray(ordered, dtype=bool)
-    times = np.asarray(sent, dtype=np.float64)
-    t, c = timestamp_s.tolist(), counter.tolist()
-    top = -1  # the latest frame heard in order (-1: none yet)
-    for k in range(len(late)):
-        if late[k]:
-            continue
-        if k > 0 and late[k - 1]:
-            sent_s = _run_send(t, c, times, k, period_s)
-            if sent_s is None and top >= 0:
-                sent_s = _top_send(t[k] - t[top], (c[k] - c[top]) & ENC_COUNTER_MASK,
-                                   t[top], period_s)
-            if sent_s is not None and t[k] - sent_s >= LATE_CYCLES * period_s:
-                late[k], times[k] = True, sent_s
-                continue
-        top = k
-    return late, times
+    (module docstring) ``_run_send`` and ``_top_send``, lies before its stamp. A frame is late
+    only when its send lies ``LATE_CYCLES`` or more before its stamp (a frame a period late
+    names its encoder frame unambiguously where it was heard) and no frame of its COUNTER was
+    heard at that send (``_send_heard``: a repeat of a send, a duplicate or a rebooted
+    sender's COUNTER starting again, is not a late one), nor a frame read late that follows
+    such a repeat at the sender's cadence (a rebooted sender's run of COUNTERs heard before,
+    one of whose old sends was lost).
+
+    Fed the frames in pieces (the streamed judge's chunks), it reads each as fed all at once:
+    every reading looks back only, at ``sent_times``' latest-sent frame (carried: fed first
+    again, it gives ``sent_times`` its state), the latest frame heard in order and the last
+    ``SLOT_FRAMES`` frames (carried)."""
+
+    def __init__(self, period_s: float) -> None:
+        self.period_s = period_s
+        self.sent_top: tuple[float, int] | None = None  # sent_times' latest-sent frame (t, c)
+        self.top: tuple[float, int] | None = None  # the latest frame heard in order (t, c)
+        self.tail: tuple[list[float], list[int], list[bool], list[float]] = ([], [], [], [])
+        self.repeat = False  # the last frame fed repeated a send heard (``_send_heard``)
+
+    def feed(self, t_new: list[float], c_new: list[int]) -> tuple[list[bool], list[float]]:
+        """The next frames' stamps and COUNTERs: per frame, late and its send time."""
+        ordered, sent = self._sent_times(t_new, c_new)
+        t, c, late, times = (list(self.tail[0]), list(self.tail[1]), list(self.tail[2]),
+                             list(self.tail[3]))
+        first = len(t)
+        t += t_new
+        c += c_new
+        for k in range(first, len(t)):
+            sent_s: float | None = None if ordered[k - first] else sent[k - first]
+            if ordered[k - first] and k > 0 and late[k - 1]:
+                sent_s = _run_send(t, c, times, k, self.period_s)
+                if sent_s is None and self.top is not None:
+                    top_s, top_c = self.top
+                    sent_s = _top_send(t[k] - top_s, (c[k] - top_c) & ENC_COUNTER_MASK,
+                                       top_s, self.period_s)
+            heard = sent_s is not None and (
+                _send_heard(t, c, late, k, sent_s, self.period_s)
+                or (self.repeat and _run_send(t, c, t, k, self.period_s) is not None))
+            self.repeat = heard
+            is_late = (sent_s is not None and not heard
+                       and t[k] - sent_s >= LATE_CYCLES * self.period_s - STAMP_S)
+            late.append(is_late)
+            times.append(sent_s if is_late and sent_s is not None else t[k])
+            if sent_s is None or heard or (ordered[k - first] and not is_late):
+                self.top = (t[k], c[k])  # heard in order, or a repeat of a send heard
+        keep = max(len(t) - SLOT_FRAMES, 0)
+        self.tail = (t[keep:], c[keep:], late[keep:], times[keep:])
+        return late[first:], times[first:]
+
+    def _sent_times(self, t_new: list[float], c_new: list[int]) -> tuple[list[bool], list[float]]:
+        """``sent_times`` of the next frames, from the latest-sent frame fed before."""
+        head = [self.sent_top] if self.sent_top is not None else []
+        t = np.asarray([h[0] for h in head] + t_new, dtype=np.float64)
+        c = np.asarray([h[1] for h in head] + c_new, dtype=np.int64)
+        ordered, sent = sent_times(t, c, self.period_s)
+        ordered, sent = ordered[len(head):], sent[len(head):]
+        for k in range(len(ordered) - 1, -1, -1):
+            if ordered[k]:
+                self.sent_top = (t_new[k], c_new[k])
+                break
+        return ordered, sent
 
 
-def _run_send(t: list[float], c: list[int], times: FloatArray, k: int,
+def _send_heard(t: list[float], c: list[int], late: list[bool], k: int,
+                sent_s: float, period_s: float) -> bool:
+    """Whether a frame of frame ``k``'s COUNTER was heard, not late, within half a period of
+    the send ``sent_s`` read for it: then ``k`` repeats that send (a duplicate on the bus) or
+    its sender started its COUNTER again (a reboot: the old life's frames hold the slots the
+    new one's would be read late into), and it was not held back: a held-back frame's send
+    was never heard before it."""
+    j = k - 1
+    while j >= 0 and k - j <= SLOT_FRAMES and t[j] >= sent_s - period_s:
+        if c[j] == c[k] and not late[j] and abs(t[j] - sent_s) <= 0.5 * period_s:
+            return True
+        j -= 1
+    return False
+
+
+def _run_send(t: list[float], c: list[int], times: list[float], k: int,
               period_s: float) -> float | None:
     """Frame ``k``'s send when it continues the late frame ``k - 1``'s run: heard at the
     sender's cadence after it (its COUNTER step, 1 to ``RUN_STEPS``, within half a period of
