@@ -11,7 +11,11 @@ an on-time half naming that one (X of 3.52 s with Y of 3.67 s: 47.2 mm, 195 mrad
 or twist frame known late is resolved where it was sent (``host.judge.latenames``), also when
 it follows a late one in its sender's sequence and ``sent_times`` reads it in order (pmir seed
 2: 0.57 mm FAILed on main, 26.2 mm with the first rule alone). Seeds 1-6 x {pmir, kobuki} x
-{0.5:100, 0.3:150, 0.5:150}: 22 of 36 FAILed the correct firmware, now 2 (strict xfails below).
+{0.5:100, 0.3:150, 0.5:150}, 10 s, every firmware within 1/1000 LSB (``tests.fw_watch``): 22 of
+36 FAILed the correct firmware on main 20d0d696 (both judges), now 5, by both judges alike: the
+2 pinned below, and at 0.5:150 pmir seed 5 (0.75 mm on main; now 86 mm: a lone ODOM_POSE_Y of
+4.941 s, heard in order and named where heard, 87 mm off the reference at its frame: not the
+naming), kobuki seeds 5 and 6 (128 and 61 mm on main; 75 and 82 mm now; not traced).
 """
 
 from __future__ import annotations
