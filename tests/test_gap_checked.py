@@ -158,3 +158,22 @@ def test_what_it_proves_the_firmware_took_is_the_log_s(events: list[Frame | str]
     for first, last in seen.counted:
         inside = [f for f, before in bus.frames if first < before <= last]
         assert all(f.logged and not f.dropped for f in inside), (first, last)
+
+
+def test_refusals_of_other_receivers_past_255_do_not_block_it() -> None:
+    """REJECTED_FRAMES grew by 270 between the pages (220 refusals of other receivers, 50 of
+    the encoder's E2E check), the u8 counts by 50: 256 more in any of them would make 306 >
+    270, so none wrapped and the proof holds (it asked REJECTED to grow by at most 255: the
+    bus-off of pmir straight seed 411 kept gapbound's 1886 mm, r = 274, g = 185)."""
+    middle = [*refusing(4), *[OTHER] * 220, *refusing(146)]
+    seen, bus = run([*BEFORE, *middle, *AFTER])
+    grew = bus.totals[-1][1] - bus.totals[0][1]
+    assert grew > 255, grew
+    assert proven(seen, 8, 100)
+
+
+def test_a_wrap_hidden_among_other_refusals_blocks_it() -> None:
+    """256 bad-CRC frames the log lacks with 10 other refusals: the u8 counts show 0, REJECTED
+    266 - 0 >= 256, so a wrap cannot be ruled out."""
+    middle = [*refusing(4), *[OTHER] * 10, *[Frame(CRC, logged=False)] * 256, *refusing(5)]
+    assert not proven(run([*BEFORE, *middle, *AFTER])[0], 8, 14)
