@@ -33,7 +33,8 @@ from tests.log_edit import raise_raw
 
 POSE_X = (2, 4)  # ODOM_POSE_X's X: bytes 2..5, signed, 0.1 mm
 UNPROVEN = ("no page proves what the firmware took in the gap: gapbound's allowance (the worst "
-            "split of the gap's travel within the plausibility bound, pmir 4 m/s) absorbs the 10 mm; ")
+            "split of the gap's travel within the plausibility bound, pmir 4 m/s) absorbs the "
+            "10 mm; ")
 # name: (robot, scenario, seed, duration s, faults, tamper from s, None or the xfail's reason)
 DRIVES = {
     "busoff_delay": ("pmir", "straight", 411, 9, "delay=0.4:70,busoff=3:0.4", 3.403, None),
@@ -63,8 +64,8 @@ def drive(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFacto
                      "--duration", str(duration), "--faults", faults, "--firmware", "python",
                      "--log", str(log)])
     assert code == 0
-    assert watch.steps > 100 and watch.within_a_thousandth_lsb(), (watch.worst_m,
-                                                                   watch.worst_rad)
+    assert watch.steps > 100
+    assert watch.within_a_thousandth_lsb(), (watch.worst_m, watch.worst_rad)
     return name, log
 
 
@@ -95,4 +96,5 @@ def test_plus_10_mm_from_the_gap_s_end_fails_every_judge(
     wrong = fails_by_position(out, tmp_path)  # the robot its PROFILE page names
     replayed = _replay(out, robot, tmp_path / "replay.json")
     capsys.readouterr()
-    assert wrong == [] and replayed == 1, (wrong, replayed)
+    assert wrong == []
+    assert replayed == 1
