@@ -180,7 +180,7 @@ def test_a_wrap_hidden_among_other_refusals_blocks_it() -> None:
     assert not proven(run([*BEFORE, *middle, *AFTER])[0], 8, 14)
 
 
-CALM = [*[Frame()] * 6, TICK, *[Frame()] * 6, TICK]  # pages with nothing refused
+CALM: list[Frame | str] = [*[Frame()] * 6, TICK, *[Frame()] * 6, TICK]  # nothing refused
 
 
 def test_a_frame_the_host_took_and_the_firmware_refused_is_counted_skipped() -> None:
