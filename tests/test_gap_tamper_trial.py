@@ -45,11 +45,16 @@ DRIVES = {
         "frames where the host accepted 148, one late frame taken the host refused)"),
     "stalls_delay": (
         "pmir", "random", 431, 12, "stall=4:0.2,stall=8:0.2,delay=0.3:55", 6.0,
-        UNPROVEN + "3756 mm summed since the last free placement"),
+        UNPROVEN + "3756 mm summed since the last free placement, from gaps of 3 to 11 periods "
+        "at 4.2 to 5.6 s (100 to 198 mm each) after the 4 s stall: the pages there (3.70 s, "
+        "5.16 s, 5.70 s) count fewer frames accepted than the host's (317 at frame 331) and the "
+        "log holds late frames the host refused, so no proof applies"),
     "kobuki_delay_dup_stall": (
         "kobuki", "random", 422, 14, "delay=0.3:55,dup=0.1,stall=10:0.6", 10.601,
-        UNPROVEN + "17.3 mm summed (0.7 m/s), 14.4 mm asked by the tamper, 6.6 mm untampered; "
-        "replay's jump allowance 499 mm"),
+        "not a gap's bound: the 0.6 s stall's merge allowance (17.03 mm, breaks.merge_allowance_m"
+        ": the pages count 41 frames fewer accepted than the host over it, which the log cannot "
+        "name) holds the 14.4 mm the tamper asks (6.6 mm untampered); replay's jump allowance "
+        "499 mm"),
 }
 
 
