@@ -47,6 +47,10 @@ them, W the sender's frames in (S_p, S_q], F those the firmware accepted, L thos
   (accepted and refused) grew by exactly the log's encoder frames between the pages, nothing
   dropped and nothing refused but by the encoder's E2E check: on W it received exactly the
   log's frames (a delay's reordering refuses a frame every few: no window is quiet).
+* By skips (``host.judge.gapskips``): as by checked, the firmware received exactly the log's
+  frames, all of them the host's, but accepted m fewer than the host (a REPEATED after a
+  bus-off): no frame a gap there lacks was taken, at most m of the log's were skipped
+  (``Seen.skips``; not joined, each pair's m its own).
 * Windows proven any way whose pages overlap or meet join (their W's are contiguous): on
   the union the firmware accepted exactly the log's frames, surely for the log's frames from
   hi of the first page to lo of the last (``Seen.same``); the gaps into frames lo(p) + 1 ..
@@ -81,7 +85,13 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
-from odocan.host.judge.gapchecked import REFUSED, UNKNOWN, by_checked, packed_rows
+from odocan.host.judge.gapchecked import (
+    REFUSED,
+    UNKNOWN,
+    by_checked,
+    packed_rows,
+    skipped_frames,
+)
 from odocan.host.judge.gapfill import (
     NO_ANCHORS,
     Anchors,
@@ -159,6 +169,17 @@ class Seen:
     through: dict[int, int] = field(default_factory=dict)  # per long gap (its frame after) the
     # pages prove frames taken in: the firmware's longest step there (``host.judge.holetaken``)
     resets: Resets = field(default_factory=Resets)  # its COUNTER_RESET word (nearthreshold)
+    skips: list[tuple[int, int, int]] = field(default_factory=list)  # (first, last, m): runs
+    # of the log's frames over which it received exactly them and refused m (``gapchecked``)
+
+    def skipped(self, frame: int, reprimed: frozenset[int] = frozenset()) -> int | None:
+        """The fewest frames the firmware refused over a run of ``skips`` holding the gap into
+        encoder ``frame`` and the ``m`` frames either side of it (lo <= frame - 1 - m, frame + m
+        <= hi; no counter restart re-primed in it): it took no frame the gap lacks, and of
+        the log's frames it missed at most ``m``; None where no such run holds it."""
+        fits = [m for lo, hi, m in self.skips
+                if lo <= frame - 1 - m and frame + m <= hi and _clear(lo, hi, reprimed)]
+        return min(fits, default=None)
 
     def took_across(self, frame: int) -> bool:
         """Whether ENC_E2E_OK alone proves the firmware took exactly the log's frames from
@@ -214,7 +235,11 @@ def seen_by_pages(pages: LostPages, totals: TotalsPages, gap_frames: IntArray,
     missed = list(zip(lo[by_lost].tolist(), hi[by_lost].tolist(), strict=True))
     windows = list(zip(i[by_lost | by_ok].tolist(), j[by_lost | by_ok].tolist(), strict=True))
     counted = list(zip(i[by_ok].tolist(), j[by_ok].tolist(), strict=True))
-    return Seen(_runs(windows, pages), missed, counted=_runs(counted, pages))
+    m = np.where(exact, skipped_frames(pages, totals, i, j), -1)
+    skips = [(int(pages.hi[a]), int(pages.lo[b]), int(k))
+             for a, b, k in zip(i[m > 0].tolist(), j[m > 0].tolist(), m[m > 0].tolist(),
+                                strict=True)]
+    return Seen(_runs(windows, pages), missed, counted=_runs(counted, pages), skips=skips)
 
 
 def _runs(windows: list[tuple[int, int]], pages: LostPages) -> list[Span]:

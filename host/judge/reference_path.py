@@ -28,6 +28,7 @@ from odocan.host.judge.cutreprime import Backlog, cut_reprime
 from odocan.host.judge.fitsegments import fit_segments
 from odocan.host.judge.gapfill import gap_allowance_at
 from odocan.host.judge.gapseen import NOTHING, Seen
+from odocan.host.judge.gapskips import skipped_at
 from odocan.host.judge.lossgate import beyond_width
 from odocan.host.judge.nearthreshold import Resets, ambiguity_rule, least_of, near_candidates
 from odocan.host.judge.newstartfit import refit_new_starts
@@ -163,8 +164,9 @@ def build_reference(
             return 0.0  # an ambiguous step, a stall's re-prime: nothing integrated across it
         if seen.gap_missed(b, reprimed):
             return 0.0  # the firmware took the gap as the reference's one step
-        return gap_allowance_at(enc, b, seen.filled(b, reprimed), geometry, bits, integrator,
-                                max_wheel_speed_mm_s)  # gapbound's, or gapfill's known counts
+        return min(gap_allowance_at(enc, b, seen.filled(b, reprimed), geometry, bits, integrator,
+                                    max_wheel_speed_mm_s),  # gapbound's, or gapfill's known counts
+                   skipped_at(enc, b, seen.skipped(b, reprimed), geometry, bits, integrator))
 
     off_x, off_y, placed = placed_offsets(
         raw_segment_offsets(segment, at, onboard.x_m - x_m[at]),

@@ -40,6 +40,7 @@ from odocan.host.judge.breaks import placed_offsets
 from odocan.host.judge.configs import ConfigPages, in_force
 from odocan.host.judge.distance import DistanceJudge
 from odocan.host.judge.gapfill import gap_or_fill_allowance
+from odocan.host.judge.gapskips import SkipCounts
 from odocan.host.judge.judgedfloor import mark_floor
 from odocan.host.judge.keptmark import mark_kept
 from odocan.host.judge.nearthreshold import least_of
@@ -361,9 +362,12 @@ def _judged(
     across = StreamBreakCounts(breaks[breaks > e0].tolist(), geometry, bits, integrator,
                                max_wheel_speed_mm_s)
 
+    skips = SkipCounts(seen_all.skips)  # gapskips: the frames around a gap it received
+
     def on_encoders(enc: Encoders) -> None:
         drops.feed(enc)
         across.feed(enc)
+        skips.feed(enc)
 
     def placed(info: LifeInfo | None = None, losses: bool = False) -> Iterator[PlacedChunk]:
         for chunk, _ in life_chunks(frames(), db, robot, integrator, e0=e0, breaks=breaks,
@@ -386,8 +390,9 @@ def _judged(
         *raw, info.openings, lambda b: stalled.allowance_m[b] if b in stalled.allowance_m
         else across.allowance(b, seen, reprimed),
         lambda b: 0.0 if b in info.by_uptime or seen.gap_missed(b, reprimed)  # reference_path's
-        else gap_or_fill_allowance(seen.filled(b, reprimed),  # gapfill: the log's late frames
+        else min(gap_or_fill_allowance(seen.filled(b, reprimed),  # gapfill: late frames
             *info.gap_steps[b], geometry, bits, integrator, max_wheel_speed_mm_s),
+            skips.allowance_m(b, seen.skipped(b, reprimed), geometry, bits, integrator)),
         tolerance.position_m)
     offsets = (off_x, off_y)
     truth = TruthCompare((x0, y0, h0), offsets, rebase=rebase, e0=e0)
