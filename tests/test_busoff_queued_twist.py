@@ -63,13 +63,14 @@ def _twists_and_encoders(log: Path) -> list[tuple[float, str, dict[str, Any]]]:
     db = cantools.database.load_file(str(DBC_PATH))
     assert isinstance(db, Database)
     wanted = {db.get_message_by_name(n).frame_id: n for n in ("WHEEL_ENCODERS", "ODOM_TWIST")}
-    out = []
+    out: list[tuple[float, str, dict[str, Any]]] = []
     with can.LogReader(str(log)) as reader:
         for msg in reader:
             if msg.arbitration_id in wanted:
                 name = wanted[msg.arbitration_id]
                 signals = db.get_message_by_name(name).decode(bytes(msg.data), scaling=False)
-                out.append((msg.timestamp, name, dict(signals)))
+                assert isinstance(signals, dict)
+                out.append((msg.timestamp, name, signals))
     return out
 
 
