@@ -56,7 +56,7 @@ def _status_and_twists(log: Path) -> list[tuple[float, str, dict[str, float]]]:
                 signals = db.get_message_by_name(name).decode(bytes(msg.data), scaling=False,
                                                               decode_choices=False)
                 assert isinstance(signals, dict)
-                out.append((msg.timestamp, name, {k: float(v) for k, v in signals.items()}))
+                out.append((msg.timestamp, name, {k: float(str(v)) for k, v in signals.items()}))
     return out
 
 
@@ -83,14 +83,19 @@ def test_the_boot_summary_was_held_behind_its_page(drive: Drive) -> None:
     assert first[0] < frames[k][0]
     assert first[2]["COUNTER"] == 0
     assert first[2]["DISTANCE"] == 0
-    assert held_tick_s(0, frames[k][0], (page[0], 1)) == page[0]
+    prior = next(f for f in reversed(frames[:k]) if f[1] == "ODOM_STATUS" and f[0] < page[0])
+    assert held_tick_s(0, frames[k][0], ((page[0], 1), (prior[0], int(prior[2]["COUNTER"])))
+                       ) == page[0]
 
 
 def test_held_tick_needs_the_tick_page_just_before() -> None:
-    assert held_tick_s(0, 3.556, (3.501, 1)) == 3.501
-    assert held_tick_s(0, 3.556, (3.456, 1)) is None  # 100 ms: not its tick
-    assert held_tick_s(0, 3.556, (3.501, 3)) is None  # not the page of its tick
-    assert held_tick_s(2, 3.556, (3.501, 1)) is None  # no power-up tick's summary
+    old = (2.95, 7)  # the old firmware's last ODOM_STATUS before the page
+    assert held_tick_s(0, 3.556, ((3.501, 1), old)) == 3.501
+    assert held_tick_s(0, 3.556, ((3.456, 1), old)) is None  # 100 ms: not its tick
+    assert held_tick_s(0, 3.556, ((3.501, 3), old)) is None  # not the page of its tick
+    assert held_tick_s(2, 3.556, ((3.501, 1), old)) is None  # no power-up tick's summary
+    assert held_tick_s(0, 3.556, ((3.501, 1), (3.5, 0))) is None  # an old tick's summary, page
+    assert held_tick_s(0, 3.556, ((3.501, 1), (3.401, 0))) is None  # an old page in sequence
 
 
 def test_run_and_both_analyzes_pass_the_correct_firmware(

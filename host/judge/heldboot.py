@@ -14,9 +14,12 @@ frame heard before it, names a frame late alike, so it does not override this ru
 
 Told when the ODOM_STATUS frame heard right before the summary (its CRC holding) reads
 COUNTER 1, the summary COUNTER 0, and it came less than ``BOOT_WINDOW_S`` before the summary:
-the tick was heard at that frame. Known limit: an old firmware's last ODOM_STATUS of COUNTER 1
-heard less than 80 ms before the new firmware's boot summary (a reset with no boot time) reads
-alike; its life would start up to 8 frames early.
+the tick was heard at that frame; unless the frame heard before that page reads COUNTER 0 less
+than two status cycles (``OLD_SEQUENCE_S``) before it: the page may then be an old firmware's,
+continuing its sequence (a reset right after it: ``tests/test_analysis_reboot.py``'s campaign,
+an old page of COUNTER 1 74 ms before an INIT summary, 100 ms after its COUNTER 0, started the
+life 8 frames early, and its start was fitted); the summary's own rule stands then. A new
+firmware whose old one's last ODOM_STATUS read COUNTER 0 that soon before is not told so.
 """
 
 from __future__ import annotations
@@ -27,11 +30,12 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
-from odocan.host.judge.bootticks import BOOT_WINDOW_S, status_before
-from odocan.host.protocol.busfacts import ENC_COUNTER_MASK
+from odocan.host.judge.bootticks import BOOT_WINDOW_S, status_rows
+from odocan.host.protocol.busfacts import ENC_COUNTER_MASK, STATUS_CYCLE_S
 from odocan.host.protocol.decode import BulkDecoder
 
 TICK_PAGE_COUNTER = 1  # the power-up tick's rotating page: sent right after its summary
+OLD_SEQUENCE_S = 2 * STATUS_CYCLE_S  # a page this soon after a COUNTER 0 continues its sequence
 
 
 def summary_start(position: int, uptime_s: int, state: str, encoders: npt.NDArray[np.intp]) -> int:
@@ -44,15 +48,35 @@ def summary_start(position: int, uptime_s: int, state: str, encoders: npt.NDArra
     return position
 
 
-def held_tick_s(counter: int, t_s: float, status_before: tuple[float, int]) -> float | None:
+def held_tick_s(counter: int, t_s: float, before: tuple[tuple[float, int], tuple[float, int]]
+                ) -> float | None:
     """The bus time the power-up tick of a boot summary (E2E ``counter``, heard at ``t_s``) was
-    heard at, when the bus held the summary back behind that tick's page (``status_before``:
-    the bus time and COUNTER of the ODOM_STATUS frame heard right before it, NaN and -1 where
-    none; module docstring); None otherwise."""
-    status_t, status_counter = status_before
-    if counter != 0 or status_counter != TICK_PAGE_COUNTER or math.isnan(status_t):
+    heard at, when the bus held the summary back behind that tick's page (``before``: the bus
+    time and COUNTER of the last two ODOM_STATUS frames heard before it, the latest first; NaN
+    and -1 where none; module docstring); None otherwise."""
+    (page_t, page_counter), (prior_t, prior_counter) = before
+    if counter != 0 or page_counter != TICK_PAGE_COUNTER or math.isnan(page_t):
         return None
-    return status_t if 0.0 <= t_s - status_t < BOOT_WINDOW_S else None
+    if prior_counter == 0 and 0.0 <= page_t - prior_t < OLD_SEQUENCE_S:  # the old one's page
+        return None
+    return page_t if 0.0 <= t_s - page_t < BOOT_WINDOW_S else None
+
+
+Before = tuple[tuple[float, int], tuple[float, int]]  # ``held_tick_s``' ``before``
+NONE_BEFORE: Before = ((math.nan, -1), (math.nan, -1))
+
+
+def statuses_before(frames: FrameArrays, decoder: BulkDecoder, positions: npt.NDArray[np.int64],
+                    carried: Before = NONE_BEFORE) -> tuple[list[Before], Before]:
+    """For the frames at ``positions`` (in order) the last two ODOM_STATUS frames before each
+    whose CRC holds (``held_tick_s``' ``before``; ``carried``: those before ``frames``, a
+    stream's earlier chunks), and those after them all (the next chunk's ``carried``)."""
+    where, times, counters = status_rows(frames, decoder)
+    t = [carried[1][0], carried[0][0], *times.tolist()]
+    c = [carried[1][1], carried[0][1], *counters.tolist()]
+    k = (np.searchsorted(where, positions) + 1).tolist()  # the latest before each, in t and c
+    out: list[Before] = [((t[i], c[i]), (t[i - 1], c[i - 1])) for i in k]
+    return out, ((t[-1], c[-1]), (t[-2], c[-2]))
 
 
 def held_start(position: int, uptime_s: int, state: str,
@@ -74,6 +98,6 @@ def held_start(position: int, uptime_s: int, state: str,
 def held_ticks(frames: FrameArrays, decoder: BulkDecoder, positions: list[int]
                ) -> list[float | None]:
     """Per boot summary of the whole log at ``positions``: ``held_tick_s`` (None: not held)."""
-    statuses = status_before(frames, decoder, np.array(positions, dtype=np.int64))[0]
+    befores = statuses_before(frames, decoder, np.array(positions, dtype=np.int64))[0]
     return [held_tick_s(int(frames.data[p, 1]) & ENC_COUNTER_MASK, float(frames.timestamp_s[p]),
-                        (float(t), int(c))) for p, t, c in zip(positions, *statuses, strict=True)]
+                        before) for p, before in zip(positions, befores, strict=True)]

@@ -27,6 +27,7 @@ import numpy.typing as npt
 
 from odocan.host.io.frames import concat_frames, empty_frames
 from odocan.host.io.logs import FrameArrays
+from odocan.host.judge import heldboot
 from odocan.host.judge.bootnamed import (
     PowerUpPoses,
     carried_on,
@@ -50,7 +51,7 @@ from odocan.host.judge.bootticks import (
 )
 from odocan.host.judge.distfall import Falls, joined, no_falls
 from odocan.host.judge.gapseen import crc_holds
-from odocan.host.judge.heldboot import held_start, held_tick_s, summary_start
+from odocan.host.judge.heldboot import summary_start
 from odocan.host.judge.heldsummaries import held_back_heard
 from odocan.host.judge.latefall import continues_twice, fell_late
 from odocan.host.judge.livestreams import pose_told_first
@@ -133,6 +134,7 @@ class StreamLives:
     _pose: tuple[float, int, bool, float] | None = None  # the pose run so far, its latest's
     # bus time (``bootticks.poses_before``)
     _status: tuple[float, int] | None = None  # the latest ODOM_STATUS (``status_before``)
+    _held_before: heldboot.Before = heldboot.NONE_BEFORE  # the latest two (``statuses_before``)
     _powerups: PowerUpPoses = field(default_factory=no_powerup_poses)  # the latest
     # power-up poses heard (``bootnamed``), their positions in the log
     _ahead: tuple[_Boot, bool, bool] | None = None  # the last summary, the first pose after it
@@ -364,6 +366,8 @@ class StreamLives:
             self._ahead_posed(pose_rows(chunk, self.decoder), self._pose, -1, None)
             self._pose = poses_before(chunk, self.decoder, page["index"], self._pose)[1]
             self._status = status_before(chunk, self.decoder, page["index"], self._status)[1]
+            self._held_before = heldboot.statuses_before(chunk, self.decoder, page["index"],
+                                                         self._held_before)[1]
             return []
         if "UPTIME" not in page or "STATE" not in page:
             self._summaries = False
@@ -381,13 +385,15 @@ class StreamLives:
         events: list[tuple[int, _Boot | tuple[int, int]]] = []
         (status_t, status_counter), self._status = status_before(
             chunk, self.decoder, index[good], self._status)
+        befores, self._held_before = heldboot.statuses_before(
+            chunk, self.decoder, index[good], self._held_before)
         following = [*index[good].tolist()[1:], None]
-        for position, t_s, uptime_s, state, counter, after, pose, status, held in zip(
+        for position, t_s, uptime_s, state, counter, after, pose, status, held, two in zip(
             index[good].tolist(), page["timestamp_s"][good].tolist(),
             page["UPTIME"][good].tolist(), page["STATE"][good].tolist(),
             page["COUNTER"][good].tolist(), following,
             zip(pose_t.tolist(), pose_counter.tolist(), pose_new.tolist(), strict=True),
-            zip(status_t.tolist(), status_counter.tolist(), strict=True), late.tolist(),
+            zip(status_t.tolist(), status_counter.tolist(), strict=True), late.tolist(), befores,
             strict=True,
         ):
             name = str(choices.get(int(state), int(state)))
@@ -405,7 +411,7 @@ class StreamLives:
                 self.conflict = self._changed
             if kind == "reboot":
                 events.append((at, self._boot(at, int(uptime_s), float(t_s), name, int(before),
-                                              held_tick_s(int(counter), float(t_s), status))))
+                                              heldboot.held_tick_s(int(counter), float(t_s), two))))
             elif self._watch.ahead is not None:  # the first pose after it may tell it
                 self._ahead = (self._boot(at, int(uptime_s), float(t_s), name, int(before)),
                                self._watch.ahead[4], False)
@@ -420,8 +426,8 @@ class StreamLives:
         earlier = self._encoders[self._encoders < at]
         start = int(earlier[-1]) if uptime_s == 0 and name != "INIT" and len(earlier) else at
         if tick_s is not None:  # held back behind its tick's page
-            start = held_start(at, uptime_s, name, (self._every[1], self._every[0].timestamp_s),
-                               tick_s)
+            start = heldboot.held_start(at, uptime_s, name, (
+                self._every[1], self._every[0].timestamp_s), tick_s)
         heard = heard_encoders(self._every, self.decoder) if uptime_s == 0 else None
         named = None if heard is None else named_start(
             self._powerups, (self._encoders, self._counters), at, t_s, heard=heard)
