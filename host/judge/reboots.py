@@ -73,6 +73,8 @@ from odocan.host.judge.bootticks import (
 )
 from odocan.host.judge.breaks import merged_breaks
 from odocan.host.judge.gapseen import crc_holds
+from odocan.host.judge.heldboot import held_start, held_ticks
+from odocan.host.judge.heldboot import summary_start as summary_start
 from odocan.host.judge.heldsummaries import summaries_held_back
 from odocan.host.judge.liveconfig import config_text
 from odocan.host.judge.navrestart import second_evidence
@@ -120,8 +122,11 @@ def split_lives(frames: FrameArrays, decoder: BulkDecoder) -> list[Life]:
     counted_boots: list[bool] = []  # the start named by the new firmware's first count page
     silent: list[bool] = []  # primed in a silence on a frame nothing names (``silentboot``)
     limits = [b[0] for b in boots[1:]] + [len(frames)]
-    for (position, uptime_s, state, _), limit in zip(boots, limits, strict=True):
-        start = summary_start(position, uptime_s, state, encoders)
+    for (position, uptime_s, state, _), limit, tick_s in zip(
+            boots, limits, held_ticks(frames, decoder, [b[0] for b in boots]), strict=True):
+        start = (summary_start(position, uptime_s, state, encoders) if tick_s is None else
+                 held_start(position, uptime_s, state, (every[1], frames.timestamp_s[every[1]]),
+                            tick_s))
         counted = (None if stalled_first(frames, decoder, encoders, position, limit)
                    else page_counted_start(position, limit, (encoders, counters), pages, (
                        every, decoder, (starts[-1] if starts else 0,
@@ -130,7 +135,7 @@ def split_lives(frames: FrameArrays, decoder: BulkDecoder) -> list[Life]:
                             float(frames.timestamp_s[position]), after, heard)
                 if uptime_s == 0 else None)
         named = None if said is None else said[0]
-        for found in (counted, named):  # the power-up pose's word last: not stamp-bound
+        for found in (counted if tick_s is None else None, named):  # the pose's word last
             if found is not None and found > (starts[-1] if starts else 0):
                 start = found
         quiet = (None if counted is not None or named is not None else silent_start(
@@ -180,16 +185,6 @@ def told_by(position: int, limit: int, pages: npt.NDArray[np.int64],
     if not len(paged) or not len(ys):
         return limit
     return max(int(paged[0]), int(ys[0]))
-
-
-def summary_start(position: int, uptime_s: int, state: str, encoders: npt.NDArray[np.intp]) -> int:
-    """Where the life whose boot summary is at ``position`` starts: at the encoder frame it
-    primed on in its first tick (UPTIME 0, not INIT: the latest before the summary, which its
-    first pose frames precede too), else at the summary."""
-    earlier = encoders[encoders < position]
-    if uptime_s == 0 and state != "INIT" and len(earlier):
-        return int(earlier[-1])
-    return position
 
 
 def page_counted_start(

@@ -27,6 +27,7 @@ import numpy.typing as npt
 
 from odocan.host.io.frames import concat_frames, empty_frames
 from odocan.host.io.logs import FrameArrays
+from odocan.host.judge import heldboot
 from odocan.host.judge.bootnamed import (
     PowerUpPoses,
     carried_on,
@@ -47,15 +48,16 @@ from odocan.host.judge.bootticks import (
     pose_rows,
     poses_before,
     status_before,
-    status_rows,
 )
 from odocan.host.judge.distfall import Falls, joined, no_falls
 from odocan.host.judge.gapseen import crc_holds
+from odocan.host.judge.heldboot import summary_start
+from odocan.host.judge.heldsummaries import held_back_heard
 from odocan.host.judge.latefall import continues_twice, fell_late
 from odocan.host.judge.livestreams import pose_told_first
 from odocan.host.judge.navrestart import Carried, second_evidence
 from odocan.host.judge.primed import counted_start
-from odocan.host.judge.reboots import SUMMARY_PAGE, mark_two_sources, summary_start
+from odocan.host.judge.reboots import SUMMARY_PAGE, mark_two_sources
 from odocan.host.judge.samples import ENC_E2E_PAGE, AnalysisError, contract_cycle_s
 from odocan.host.judge.silentboot import fresh_counted_start, quiet_start
 from odocan.host.judge.sources import SourceWatch, two_sources_text
@@ -98,6 +100,7 @@ class _Boot:
     page_at: int | None = None  # its first count page's position in the log
     by_count: bool = False  # its start is the one its first count page named (a power-up)
     silent: bool = False  # primed in a silence on a frame nothing names (``silentboot``)
+    held: bool = False  # held back behind its tick's page: no count overrides (``heldboot``)
 
 
 @dataclass
@@ -131,6 +134,7 @@ class StreamLives:
     _pose: tuple[float, int, bool, float] | None = None  # the pose run so far, its latest's
     # bus time (``bootticks.poses_before``)
     _status: tuple[float, int] | None = None  # the latest ODOM_STATUS (``status_before``)
+    _held_before: heldboot.Before = heldboot.NONE_BEFORE  # the latest two (``statuses_before``)
     _powerups: PowerUpPoses = field(default_factory=no_powerup_poses)  # the latest
     # power-up poses heard (``bootnamed``), their positions in the log
     _ahead: tuple[_Boot, bool, bool] | None = None  # the last summary, the first pose after it
@@ -278,7 +282,7 @@ class StreamLives:
         previous = self._boots[-1][1] if self._boots else 0
         start = boot.start
         counting = boot.counted is not None and not self._stalled(boot, limit)
-        if counting and boot.counted is not None and boot.counted > previous:
+        if counting and not boot.held and boot.counted is not None and boot.counted > previous:
             start, boot.by_count = boot.counted, True
         if boot.named is not None and boot.named > previous:
             start = boot.named  # the power-up pose's word last (``reboots.split_lives``)
@@ -358,10 +362,12 @@ class StreamLives:
             self._summaries = False
             return []
         if len(page["index"]) == 0:  # the chunk's latest pose and status frame still count
-            self._held_back(chunk, page["index"], [])  # every status frame heard in order
+            held_back_heard(self._watch.order, chunk, self.decoder, page["index"], [])  # in order
             self._ahead_posed(pose_rows(chunk, self.decoder), self._pose, -1, None)
             self._pose = poses_before(chunk, self.decoder, page["index"], self._pose)[1]
             self._status = status_before(chunk, self.decoder, page["index"], self._status)[1]
+            self._held_before = heldboot.statuses_before(chunk, self.decoder, page["index"],
+                                                         self._held_before)[1]
             return []
         if "UPTIME" not in page or "STATE" not in page:
             self._summaries = False
@@ -370,8 +376,8 @@ class StreamLives:
         good = crc_holds(chunk, self.decoder, index)
         choices = dict(message.get_signal_by_name("STATE").choices or {})
         names = [str(choices.get(int(state), int(state))) for state in page["STATE"].tolist()]
-        late = self._held_back(chunk, index, list(zip(page["UPTIME"].tolist(), names,
-                                                      strict=True)))[good]
+        late = held_back_heard(self._watch.order, chunk, self.decoder, index, list(
+            zip(page["UPTIME"].tolist(), names, strict=True)))[good]
         carried, rows = self._pose, pose_rows(chunk, self.decoder)
         (pose_t, pose_counter, pose_new), self._pose = poses_before(
             chunk, self.decoder, index[good], self._pose)
@@ -379,13 +385,15 @@ class StreamLives:
         events: list[tuple[int, _Boot | tuple[int, int]]] = []
         (status_t, status_counter), self._status = status_before(
             chunk, self.decoder, index[good], self._status)
+        befores, self._held_before = heldboot.statuses_before(
+            chunk, self.decoder, index[good], self._held_before)
         following = [*index[good].tolist()[1:], None]
-        for position, t_s, uptime_s, state, counter, after, pose, status, held in zip(
+        for position, t_s, uptime_s, state, counter, after, pose, status, held, two in zip(
             index[good].tolist(), page["timestamp_s"][good].tolist(),
             page["UPTIME"][good].tolist(), page["STATE"][good].tolist(),
             page["COUNTER"][good].tolist(), following,
             zip(pose_t.tolist(), pose_counter.tolist(), pose_new.tolist(), strict=True),
-            zip(status_t.tolist(), status_counter.tolist(), strict=True), late.tolist(),
+            zip(status_t.tolist(), status_counter.tolist(), strict=True), late.tolist(), befores,
             strict=True,
         ):
             name = str(choices.get(int(state), int(state)))
@@ -402,38 +410,29 @@ class StreamLives:
             if kind == "two sources" and self.conflict is None:
                 self.conflict = self._changed
             if kind == "reboot":
-                events.append((at, self._boot(at, int(uptime_s), float(t_s), name, int(before))))
+                events.append((at, self._boot(at, int(uptime_s), float(t_s), name, int(before),
+                                              heldboot.held_tick_s(int(counter), float(t_s), two))))
             elif self._watch.ahead is not None:  # the first pose after it may tell it
                 self._ahead = (self._boot(at, int(uptime_s), float(t_s), name, int(before)),
                                self._watch.ahead[4], False)
                 self._ahead_posed(rows, carried, int(position), after)
         return events
 
-    def _held_back(self, chunk: FrameArrays, positions: npt.NDArray[np.int64],
-                   said: list[tuple[int, str]]) -> npt.NDArray[np.bool_]:
-        """Which summaries at chunk ``positions`` (``said``: their UPTIME and STATE) the bus held
-        back behind later ODOM_STATUS frames and say no reboot (``livelatestatus``), every
-        status frame of the chunk whose CRC holds heard on the watch's order."""
-        where, _, counters = status_rows(chunk, self.decoder)
-        at = np.searchsorted(where, positions)
-        found = at < len(where)
-        found[found] = where[at[found]] == positions[found]
-        summaries: list[tuple[int, str] | None] = [None] * len(where)
-        for k, summary in zip(at[found].tolist(), np.array(said, dtype=object)[found].tolist()
-                              if said else [], strict=True):
-            summaries[k] = (int(summary[0]), str(summary[1]))
-        over = np.array(self._watch.order.hear_all(counters.tolist(), summaries), dtype=bool)
-        return found & over[np.minimum(at, max(len(where) - 1, 0))] if len(where) else found
-
-    def _boot(self, at: int, uptime_s: int, t_s: float, name: str, before: int) -> _Boot:
+    def _boot(self, at: int, uptime_s: int, t_s: float, name: str, before: int,
+              tick_s: float | None = None) -> _Boot:
         """The reboot of the summary at log position ``at`` (bus time ``t_s``, UPTIME, STATE
-        ``name``; ``before``: the UPTIME before it): where its life starts."""
+        ``name``; ``before``: the UPTIME before it; ``tick_s``: ``heldboot.held_tick_s``): where
+        its life starts."""
         earlier = self._encoders[self._encoders < at]
         start = int(earlier[-1]) if uptime_s == 0 and name != "INIT" and len(earlier) else at
+        if tick_s is not None:  # held back behind its tick's page
+            start = heldboot.held_start(at, uptime_s, name, (
+                self._every[1], self._every[0].timestamp_s), tick_s)
         heard = heard_encoders(self._every, self.decoder) if uptime_s == 0 else None
         named = None if heard is None else named_start(
             self._powerups, (self._encoders, self._counters), at, t_s, heard=heard)
-        boot = _Boot(at, uptime_s, t_s, before, start, name, naming=named)
+        boot = _Boot(at, uptime_s, t_s, before, start, name, naming=named,
+                     held=tick_s is not None)
         self._tracking.append(boot)
         self._naming += [boot] if named is not None else []
         return boot

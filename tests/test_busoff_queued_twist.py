@@ -1,0 +1,145 @@
+"""False FAILs after a firmware bus-off under a delay, from the outside trial of the twenty-ninth
+pass (issue #11: a FAIL must never blame a correct firmware), each with the Python firmware's
+every step watched (``tests.fw_watch``: within 1/1000 LSB on every drive here).
+
+* kobuki random 414, 10 s, ``stall=2:0.5,busoff=6:0.3,delay=0.2:35`` and kobuki figure8 446,
+  8 s, ``busoff=2:0.3,delay=0.3:55``: the judges were wrong (ODOM_TWIST DISTANCE 25.2 mm and
+  127.0 mm off a right firmware, whole and streamed alike). The twist the firmware queued in the
+  tick before the bus-off went out at the recovery (its E2E COUNTER the next after the last one
+  heard, its DISTANCE that one's): it names the last encoder frame before the silence, COUNTER 7,
+  whose COUNTER the first frame after the 0.3 s silence repeats (two laps on). Read from the
+  latest frame heard, it named that later frame and its path. Now the first twist after a
+  silence of the whole bus that names a frame heard since the silence began is left out
+  (``distance._named_across``), as a first twist after a stall is. 414 PASSes; 446's DISTANCE
+  passes, its pose still FAILs (strict xfail below).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import can
+import cantools
+import pytest
+from cantools.database.can import Database
+
+from odocan.host.cli.app import main
+from odocan.sim.contract import DBC_PATH
+from tests.fw_watch import Watch, watched
+from tests.judges_cli import STREAMS, analyze
+from tests.log_edit import raise_raw
+
+TAMPER_DISTANCE_LSB = -10  # 10 mm short, in ODOM_TWIST DISTANCE's 1 mm LSBs
+DISTANCE_SPAN = (6, 2)  # ODOM_TWIST DISTANCE: bytes 6..7, little-endian
+DRIVES = {  # name: robot, scenario, seed, duration s, faults, the bus-off's start s
+    "stall_busoff": ("kobuki", "random", "414", "10", "stall=2:0.5,busoff=6:0.3,delay=0.2:35",
+                     6.0),
+    "busoff": ("kobuki", "figure8", "446", "8", "busoff=2:0.3,delay=0.3:55", 2.0),
+}
+POSE_446 = (
+    "issue #11: kobuki figure8 446 busoff=2:0.3,delay=0.3:55: the pose 121.6 mm and 169.9 mrad "
+    "off the reference across the bus-off (85 gap placements, 127.8 mm absorbed within 121.9 mm "
+    "allowed); the pose frames queued through the bus-off likely name a frame a lap or two "
+    "back as the twist did; not traced")
+# the log, the firmware's watch, run's exit code
+Drive = tuple[Path, Watch, int]
+
+
+@pytest.fixture(scope="module", params=sorted(DRIVES))
+def drive(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory) -> Drive:
+    robot, scenario, seed, duration, faults, _ = DRIVES[request.param]
+    log = tmp_path_factory.mktemp(request.param) / "d.log"
+    with watched(robot) as watch:
+        code = main(["run", "--robot", robot, "--scenario", scenario, "--seed", seed,
+                     "--duration", duration, "--faults", faults, "--firmware", "python",
+                     "--log", str(log)])
+    return log, watch, code
+
+
+def _twists_and_encoders(log: Path) -> list[tuple[float, str, dict[str, Any]]]:
+    """(time s, message, raw signals) of the WHEEL_ENCODERS and ODOM_TWIST frames, in order."""
+    db = cantools.database.load_file(str(DBC_PATH))
+    assert isinstance(db, Database)
+    wanted = {db.get_message_by_name(n).frame_id: n for n in ("WHEEL_ENCODERS", "ODOM_TWIST")}
+    out: list[tuple[float, str, dict[str, Any]]] = []
+    with can.LogReader(str(log)) as reader:
+        for msg in reader:
+            if msg.arbitration_id in wanted:
+                name = wanted[msg.arbitration_id]
+                signals = db.get_message_by_name(name).decode(bytes(msg.data), scaling=False)
+                assert isinstance(signals, dict)
+                out.append((msg.timestamp, name, signals))
+    return out
+
+
+def test_the_firmware_integrates_the_frames_it_took(drive: Drive) -> None:
+    _, watch, _ = drive
+    assert watch.steps > 400, watch.steps
+    assert watch.within_a_thousandth_lsb(), (watch.worst_m, watch.worst_rad)
+
+
+def test_the_first_twist_after_the_bus_off_was_queued_before_it(drive: Drive) -> None:
+    """The premise, from the log alone: the first twist after the silence follows one of the
+    last heard before it in its E2E sequence, carries its DISTANCE (or that one's and one
+    frame's more: the firmware took a frame between them) and names the COUNTER of the last
+    encoder frame before the silence, which the first encoder frame after it repeats."""
+    log, _, _ = drive
+    frames = _twists_and_encoders(log)
+    t0 = frames[0][0]
+    silence = max(range(1, len(frames)), key=lambda k: frames[k][0] - frames[k - 1][0])
+    assert frames[silence][0] - frames[silence - 1][0] > 0.25
+    last_enc = [f for f in frames[:silence] if f[1] == "WHEEL_ENCODERS"][-1][2]
+    first_enc = next(f for f in frames[silence:] if f[1] == "WHEEL_ENCODERS")[2]
+    after = next(f for f in frames[silence:] if f[1] == "ODOM_TWIST")
+    assert frames[silence][0] - t0 > 1.0
+    before = [f[2] for f in frames[:silence] if f[1] == "ODOM_TWIST"][-4:]  # a delay reorders
+    sent_before = [f for f in before if (f["COUNTER"] + 1) % 16 == after[2]["COUNTER"]]
+    assert len(sent_before) == 1, (before, after)
+    assert 0 <= after[2]["DISTANCE"] - sent_before[0]["DISTANCE"] < 10  # mm: a frame or none
+    assert after[2]["ENC_COUNTER"] == last_enc["COUNTER"] == first_enc["COUNTER"]
+
+
+@pytest.mark.parametrize("stream", STREAMS)
+def test_distance_passes_the_correct_firmware(drive: Drive, stream: str, tmp_path: Path,
+                                              capsys: pytest.CaptureFixture[str]) -> None:
+    """ODOM_TWIST DISTANCE within its bound, whole and streamed (25.2 mm and 127.0 mm off
+    before)."""
+    log, _, _ = drive
+    analyze(log, stream, tmp_path / "r.json")
+    capsys.readouterr()
+    distance = json.loads((tmp_path / "r.json").read_text())["onboard_distance_vs_reference"]
+    assert distance["passed"], distance
+    assert distance["samples"] > 100, distance
+
+
+@pytest.mark.parametrize("drive", [
+    "stall_busoff",
+    pytest.param("busoff", marks=pytest.mark.xfail(strict=True, reason=POSE_446)),
+], indirect=True)
+def test_run_and_both_analyzes_pass_the_correct_firmware(
+        drive: Drive, capsys: pytest.CaptureFixture[str]) -> None:
+    log, _, code = drive
+    codes = [code, *(analyze(log, s) for s in STREAMS)]
+    out = capsys.readouterr().out
+    assert codes == [0, 0, 0], out[-2000:]
+
+
+def test_a_distance_10_mm_short_after_the_bus_off_fails(
+        drive: Drive, request: pytest.FixtureRequest, tmp_path: Path,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """ODOM_TWIST DISTANCE lowered 10 mm from 0.7 s after the recovery on: whole and streamed
+    FAIL, by DISTANCE. (Raised 10 mm it PASSes, before this change as after: every gap the
+    delay leaves in the frames taken allows the path up to ~10 mm more, a robot that reversed
+    inside it, ``distance.gap_extra_m``: the gap allowances' work, left to it.)"""
+    log, _, _ = drive
+    busoff_s = DRIVES[request.node.callspec.params["drive"]][5]
+    tampered = tmp_path / "t.log"
+    assert raise_raw(log, tampered, "ODOM_TWIST", DISTANCE_SPAN, TAMPER_DISTANCE_LSB,
+                     busoff_s + 1.0) > 10
+    for stream in STREAMS:
+        assert analyze(tampered, stream, tmp_path / f"{stream}.json") == 1
+        report = json.loads((tmp_path / f"{stream}.json").read_text())
+        assert not report["onboard_distance_vs_reference"]["passed"], stream
+    capsys.readouterr()
