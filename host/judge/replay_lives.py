@@ -49,10 +49,12 @@ from odocan.host.judge.replay_boots import boot_starts
 from odocan.host.judge.replay_compare import departures, versus_log
 from odocan.host.judge.replay_events import replayed_positions
 from odocan.host.judge.replay_jumps import JumpModel
+from odocan.host.judge.replay_sent import sent_times_s
 from odocan.host.judge.replay_track import EncoderTrack
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.protocol.e2e import check_frames
 from odocan.sim import contract
+from odocan.sim.board import TX_LATENCY_S
 
 IntArray = npt.NDArray[np.int64]
 FIRMWARE_NODE = "ODOM_MCU"  # the DBC's sender name of the firmware's frames
@@ -167,7 +169,7 @@ def firmware_silences(frames: FrameArrays, decoder: BulkDecoder,
     frames 108.5 ms apart; taken only over 11 periods, the replay ran every tick, departed by
     0.14 mm and FAILed the correct firmware (issue #11)."""
     ids = [m.frame_id for m in contract.database().messages if m.senders == [FIRMWARE_NODE]]
-    sent_s = np.sort(frames.timestamp_s[np.isin(frames.can_id, ids)])
+    sent_s = sent_times_s(frames, decoder, ids)  # a tick's frames delayed: its first's time
     period_s = contract.cycle_time_s("WHEEL_ENCODERS")
     halts = []
     for at in np.flatnonzero(np.diff(sent_s) > (LOST_TIME_PERIODS - 1) * period_s).tolist():
@@ -175,10 +177,23 @@ def firmware_silences(frames: FrameArrays, decoder: BulkDecoder,
         resumed = int(np.searchsorted(track.timestamp_s, sent_s[at + 1], "right")) - 1
         if last < 0 or resumed <= last:
             continue
-        first, end = int(track.tick[last]) + 1, int(track.tick[resumed])
+        # each side counted on by bus time from the encoder frame before the firmware's frame:
+        # the frames between may be refused (late, delayed: the host took none of them)
+        first = int(track.tick[last]) + 1 + _periods_after(track, last, sent_s[at], period_s)
+        end = int(track.tick[resumed]) + _periods_after(track, resumed, sent_s[at + 1], period_s)
         if end - first >= LOST_TIME_PERIODS:
             halts.append((first, end))
     return halts
+
+
+def _periods_after(track: EncoderTrack, frame: int, sent_s: float, period_s: float) -> int:
+    """Whole periods from the track's ``frame`` to the tick that sent the firmware's frame at
+    ``sent_s`` (it leaves ``TX_LATENCY_S`` after its tick): kobuki random 404, 14 s,
+    ``delay=0.25:30,reboot=6:0.3,stall=9:0.5``, the rebooted firmware's first frames came 3
+    ticks after the last encoder frame the host took (those between were late), its boot was
+    replayed 3 ticks short and the new firmware took frames the recording one never had."""
+    behind_s = sent_s - TX_LATENCY_S - float(track.timestamp_s[frame])
+    return max(0, int(np.floor(np.round(behind_s / period_s, 6))))
 
 
 def judge_lives(log: FrameArrays, accepted: npt.NDArray[np.bool_], replayed: FrameArrays,
