@@ -182,6 +182,7 @@ class LockstepReplay:
         self.fed = 0  # encoder frames fed to the firmware (the host's E2E check refused
         self.late_fed = 0  # ``late_fed`` of them: ``replay_track.late_frames``)
         self.halted: set[int] = set()  # ticks the board runs none (``replay_lives``)
+        self.deaf: set[int] = set()  # ticks its controller is bus-off: it hears nothing
         self.resets: dict[int, bool] = {}  # encoder frame number -> reset after it is sent
         self.held: dict[int, int] = {}  # log position -> tick: fed once the ticks before ran
 
@@ -193,6 +194,11 @@ class LockstepReplay:
     def _work(self, k: int) -> None:
         """The nodes' work in a tick: the firmware's board alone (the log is the rest), none
         while the log shows its firmware halted or not yet powered up (``replay_lives``)."""
+        if k in self.deaf:  # bus-off: every frame lost to it, the status interrupt first
+            while self.board.bus.recv(0) is not None:
+                pass
+            if k - 1 not in self.deaf:
+                self.board.ecu.isr_bus_state(True)
         if k not in self.halted:
             self.board.run_tick()
 
@@ -405,8 +411,9 @@ def _first_change(plan: LifePlan, encoders: EncoderTrack) -> int | None:
 
 def _apply(replay: LockstepReplay, plan: LifePlan, arrival: FedTicks, phase: int) -> None:
     """Set ``replay`` to live ``plan`` (its ticks ``phase`` later): halts, resets, held frames."""
-    halted, replay.held = fed_plan(plan, arrival)
+    halted, replay.held, deaf = fed_plan(plan, arrival)
     replay.halted = {t + phase for t in halted}
+    replay.deaf = {t + phase for t in deaf}
     replay.resets = plan.resets
 
 

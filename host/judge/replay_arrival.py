@@ -72,27 +72,35 @@ class FedTicks:
 
 def fed_ticks(frames: FrameArrays, track: EncoderTrack, late_positions: IntArray) -> FedTicks:
     """The arrival ticks of ``track``'s frames and of the refused ones at ``late_positions``
-    (module docstring)."""
+    (module docstring). A recorder's clock set back (``replay_events.clock_steps_s``) starts
+    a grid of its own: the frames after it are placed again by their periods."""
     if len(track.index) == 0:
         return FedTicks(track, track.tick, np.zeros(len(late_positions), np.int64), 0.0)
     times = np.asarray(frames.timestamp_s, dtype=np.float64)
-    times = times + clock_steps_s(times)
-    period_s = contract.cycle_time_s("WHEEL_ENCODERS")
-    accepted_s = times[track.index]
-    grid_s = _on_time_origin_s(accepted_s, period_s)
+    steps = clock_steps_s(times)
     positions = np.concatenate((track.index, late_positions)).astype(np.int64)
+    raw = np.zeros(len(positions), dtype=np.int64)
+    segment = np.searchsorted(np.flatnonzero(np.diff(steps) != 0) + 1, positions, "right")
+    accepted_segment = segment[:len(track.index)]
+    start_s = None
+    for k in np.unique(accepted_segment).tolist():
+        mine = np.flatnonzero(accepted_segment == k)
+        grid_s = _on_time_origin_s(times[track.index[mine]],
+                                   contract.cycle_time_s("WHEEL_ENCODERS"))
+        at = np.flatnonzero(segment == k)
+        raw[at] = np.ceil(np.round((times[positions[at]] - grid_s - TX_LATENCY_S) / TICK_S, 6))
+        align = mine[:ALIGN_FRAMES]
+        shift = _mode(track.tick[align] - raw[align])
+        raw[at] += shift
+        start_s = grid_s - shift * TICK_S if start_s is None else start_s
     order = np.argsort(positions, kind="stable")
-    raw = np.ceil(np.round((times[positions] - grid_s - TX_LATENCY_S) / TICK_S, 6))
-    raw = raw.astype(np.int64)
-    align = min(len(track.index), ALIGN_FRAMES)
-    shift = _mode(track.tick[:align] - raw[:align])
-    ordered = np.maximum.accumulate(raw[order] + shift)
-    steps = np.minimum(np.diff(ordered), MAX_GAP_TICKS)
-    ordered = np.concatenate((ordered[:1], ordered[0] + np.cumsum(steps))).astype(np.int64)
+    ordered = np.maximum.accumulate(raw[order])
+    gaps = np.minimum(np.diff(ordered), MAX_GAP_TICKS)
+    ordered = np.concatenate((ordered[:1], ordered[0] + np.cumsum(gaps))).astype(np.int64)
     ticks = np.empty(len(positions), dtype=np.int64)
     ticks[order] = ordered
-    start_s = grid_s - shift * TICK_S
-    return FedTicks(track, ticks[:len(track.index)], ticks[len(track.index):], start_s)
+    return FedTicks(track, ticks[:len(track.index)], ticks[len(track.index):],
+                    float(times[track.index[0]]) if start_s is None else start_s)
 
 
 def _on_time_origin_s(times_s: npt.NDArray[np.float64], period_s: float) -> float:
@@ -115,12 +123,15 @@ def _mode(values: IntArray) -> int:
     return int(found[int(counts.argmax())])
 
 
-def fed_plan(plan: LifePlan, fed: FedTicks) -> tuple[set[int], dict[int, int]]:
-    """``plan``'s halted ticks (``LifePlan.halted_ticks``) and held frames (log position ->
-    first halted tick), in arrival ticks (``fed``)."""
+def fed_plan(plan: LifePlan, fed: FedTicks) -> tuple[set[int], dict[int, int], set[int]]:
+    """``plan``'s halted ticks (``LifePlan.halted_ticks``), held frames (log position -> first
+    halted tick) and bus-off ticks (``LifePlan.deaf``), in arrival ticks (``fed``)."""
     halted: set[int] = set()
     if plan.powered:
         halted.update(range(int(fed.tick[min(plan.resets, default=0)])))
     for first, end in plan.halts:
         halted.update(fed.span(first, end))
-    return halted, {position: fed.of_period(tick) for position, tick in plan.held}
+    # the silence's first tick still heard: its frames failed to leave, which took the
+    # controller bus-off (pmir circle 5: the frame of 4.99 s taken, its poses never logged)
+    deaf = {t for first, end in plan.deaf for t in fed.span(first + 1, end)}
+    return halted, {position: fed.of_period(tick) for position, tick in plan.held}, deaf

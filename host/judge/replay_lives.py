@@ -49,7 +49,7 @@ from odocan.host.judge.replay_boots import boot_starts
 from odocan.host.judge.replay_compare import departures, versus_log
 from odocan.host.judge.replay_events import replayed_positions
 from odocan.host.judge.replay_jumps import JumpModel
-from odocan.host.judge.replay_sent import sent_times_s
+from odocan.host.judge.replay_sent import bus_off_silences, sent_times_s
 from odocan.host.judge.replay_track import EncoderTrack
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.protocol.e2e import check_frames
@@ -79,6 +79,8 @@ class LifePlan:
     # (log position, first halted tick): a frame of another node the halted board's receive
     # FIFO held (``replay_halts``), fed once the tick before that halt has run
     held: tuple[tuple[int, int], ...] = ()
+    # [first, end) ticks of a bus-off (``bus_off_silences``): the board runs, hears nothing
+    deaf: list[tuple[int, int]] = field(default_factory=list)
 
     @property
     def trivial(self) -> bool:
@@ -93,7 +95,7 @@ class LifePlan:
         resets = {k: v for k, v in self.resets.items() if k != first}
         resets[frame - 1 if after else frame] = after
         return LifePlan([frame, *self.starts[1:]], self.powered, self.halts, resets, True,
-                        self.held)
+                        self.held, self.deaf)
 
     def halted_ticks(self, track: EncoderTrack) -> set[int]:
         """The ticks the board runs none (before the first power-up, and each stall)."""
@@ -120,7 +122,10 @@ def plan_lives(frames: FrameArrays, accepted: npt.NDArray[np.bool_],
         after = summary < int(track.index[k]) and k > 0  # booted before the frame: INIT
         resets[k - 1 if after else k] = after
     starts = sorted(set(starts[1:] if first is not None else starts))
-    return LifePlan(starts, first is not None, firmware_silences(frames, decoder, track), resets)
+    silences = firmware_silences(frames, decoder, track)
+    deaf = bus_off_silences(frames, decoder, track, silences)
+    return LifePlan(starts, first is not None, [s for s in silences if s not in deaf], resets,
+                    deaf=deaf)
 
 
 def first_power_up(frames: FrameArrays, decoder: BulkDecoder,
