@@ -2,15 +2,15 @@
 
 **Lockstep** (the default). The log's WHEEL_ENCODERS frames that pass the host's E2E check
 (``host.e2e.check_frames``) are fed, byte for byte, to a ``sim.board.FirmwareBoard`` on python-can
-``virtual`` buses, one firmware tick per 10 ms encoder period: the frames' ticks come from the
-sender's sequence (the E2E COUNTER unwrapped, widened by 16 where the timestamps say so, as
-``host.analysis`` does; after a reboot, the frames a receiver fresh there takes, the step into
-its priming frame by bus time: ``replay_boots``), so a gap in the log is a run of ticks without a
-frame, exactly as the firmware would have lived it (its E2E window widens, its watchdog may
-fire). Gaps longer than
-``MAX_GAP_TICKS`` are shortened to it. The firmware's clock is the first encoder frame's
-timestamp plus 10 ms per tick; the log's own SIM_TRUTH frames are put back on the bus where the
-log had them. Everything on the replayed bus is analysed as ``odocan run`` does
+``virtual`` buses, one firmware tick per 10 ms encoder period (after a reboot, the frames a
+receiver fresh there takes: ``replay_boots``): each frame at the tick its bus time reached the
+firmware, on the on-time frames' grid numbered by the sender's periods (``replay_arrival``: a
+delayed frame is taken late), so a gap in the log is a run of ticks without a frame, exactly as
+the firmware lived it (its E2E window widens, its watchdog may fire); a bus-off's ticks run
+hearing nothing (``replay_sent.bus_off_silences``). Gaps longer than ``MAX_GAP_TICKS`` are
+shortened to it. The firmware's clock is that grid's, 10 ms per tick; the log's own SIM_TRUTH
+frames are put back on the bus where the log had them. Everything on the replayed bus is
+analysed as ``odocan run`` does
 (``host.analysis.analyze``, ``host.summary.finish``: same report keys, ``--report``, ``--plot``,
 ``--tolerance``, summary, exit 0/1/2), plus a ``replay`` section comparing the replayed on-board
 poses with the ones in the log at the same encoder frames (identical for the same firmware).
