@@ -11,7 +11,13 @@ Found by the outside trial, run and analyze PASSing each drive, replay not:
   stall's silence began at a pose frame logged 30 ms late, its tick's first frame on time
   (``replay_sent``).
 * pmir random 409, 10 s, ``delay=0.3:55,stall=4:0.3,dup=0.05``: UNJUDGED (departs after the
-  stall at 4.04 s), the same late start of the halt.
+  stall at 4.04 s), the same late start of the halt. Replayed right, its +10 mm from 4.5 s then
+  PASSed within the stall's 1.49 m jump allowance: a life identical before its stall and off the
+  log as it is after is UNJUDGED (``replay_lives._raw_departs``).
+* kobuki random 1, 8 s, ``delay=0.3:55,busoff=3:0.5`` (a bus-off under a delay, one of four
+  tried; the others PASSed before and after): UNJUDGED after the "stall" at 2.99 s. A bus-off
+  was replayed as a halt, the MCU frozen, where the recording one ticked on hearing nothing
+  (``replay_sent.bus_off_silences``).
 
 Still wrong (strict xfail, figures in the reason): kobuki circle 420 and kobuki random 430.
 A bus-off under a delay (pmir circle 5, ``delay=0.3:50,busoff=5:1,reboot=12,dup=0.1``) is
@@ -42,6 +48,7 @@ DRIVES = {
     "pmir-409": ("pmir", "random", 409, 10, "delay=0.3:55,stall=4:0.3,dup=0.05", 4.5),
     "kobuki-420": ("kobuki", "circle", 420, 12, "delay=0.5:90,busoff=5:0.5", 6.0),
     "kobuki-430": ("kobuki", "random", 430, 8, "delay=0.3:110,reboot=3:0.5,dup=0.1", 5.0),
+    "kobuki-busoff-1": ("kobuki", "random", 1, 8, "delay=0.3:55,busoff=3:0.5", 3.6),
 }
 LEFT = {
     "kobuki-420": "a 90 ms delay, past half the 4-bit ENC_COUNTER's lap: the replayed firmware "
