@@ -255,9 +255,12 @@ def _raw_departs(vs: dict[str, Any], tolerance: Tolerance) -> bool:
     recording firmware's merge there is unknown): pmir random 409, 10 s,
     ``delay=0.3:55,stall=4:0.3,dup=0.05``, replayed identical, with ODOM_POSE_X raised 10 mm
     from 4.5 s (the first common pose after the stall later) PASSed within a 1.49 m allowance.
-    A life identical before its stall and 10 mm off after it is not judged PASS."""
+    A life identical before its stall and 10 mm off after it is not judged PASS. Not across a
+    hole of the log (``replay_compare.recorder_holes``): its firmware took frames the replay is
+    not fed there, so its positions are off the replay's as they are (a correct firmware's, a
+    recorder's 0.2 s lost: ``tests/test_replay_gap_drift.py``)."""
     raw = vs.get("max_position_diff_raw_m")
-    return raw is not None and raw > tolerance.position_m
+    return raw is not None and raw > tolerance.position_m and not vs.get("holes")
 
 
 def _stalled_reason(k: int, life: dict[str, Any]) -> str:
