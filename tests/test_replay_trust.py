@@ -154,13 +154,12 @@ def test_a_burst_drive_replays_pass(tmp_path: Path) -> None:
         assert section["onboard_vs_log"]["max_position_diff_m"] > TEN_MM_LSB * LSB_M / 2
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "issue #11, found by an outside trial (Dec 5): kobuki circle seed 5536, 20 s, "
-    "delay=0.1:15,reboot=13.68:0.3,stall=12.85:0.05 (run PASSes; any two of the faults replay "
-    "PASS): replay exits 1 UNJUDGED, 'life 1 (from t=14.08 s): none of the log's 296 on-board "
-    "poses could be paired with the replayed firmware's', and does not name the delay it could "
-    "not reproduce (test_replay_unreplayable asks that); not looked into"))
 def test_a_stall_then_a_reboot_under_a_mild_delay_replays_pass(tmp_path: Path) -> None:
+    """Found by an outside trial (Dec 5): kobuki circle seed 5536, 20 s, the run PASSing, replay
+    was UNJUDGED ("life 1 (from t=14.08 s): none of the log's 296 on-board poses could be
+    paired"). It passes since the replay feeds each encoder frame at the tick its bus time
+    reached the firmware and reads a silence's ends by bus time (``replay_arrival``,
+    ``replay_lives._periods_after``)."""
     log = tmp_path / "s.log"
     _run(log, "kobuki", 5536, 20, "delay=0.1:15,reboot=13.68:0.3,stall=12.85:0.05")
     code, out, _ = _replay(log, tmp_path / "r.json")

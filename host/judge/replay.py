@@ -2,15 +2,15 @@
 
 **Lockstep** (the default). The log's WHEEL_ENCODERS frames that pass the host's E2E check
 (``host.e2e.check_frames``) are fed, byte for byte, to a ``sim.board.FirmwareBoard`` on python-can
-``virtual`` buses, one firmware tick per 10 ms encoder period: the frames' ticks come from the
-sender's sequence (the E2E COUNTER unwrapped, widened by 16 where the timestamps say so, as
-``host.analysis`` does; after a reboot, the frames a receiver fresh there takes, the step into
-its priming frame by bus time: ``replay_boots``), so a gap in the log is a run of ticks without a
-frame, exactly as the firmware would have lived it (its E2E window widens, its watchdog may
-fire). Gaps longer than
-``MAX_GAP_TICKS`` are shortened to it. The firmware's clock is the first encoder frame's
-timestamp plus 10 ms per tick; the log's own SIM_TRUTH frames are put back on the bus where the
-log had them. Everything on the replayed bus is analysed as ``odocan run`` does
+``virtual`` buses, one firmware tick per 10 ms encoder period (after a reboot, the frames a
+receiver fresh there takes: ``replay_boots``): each frame at the tick its bus time reached the
+firmware, on the on-time frames' grid numbered by the sender's periods (``replay_arrival``: a
+delayed frame is taken late), so a gap in the log is a run of ticks without a frame, exactly as
+the firmware lived it (its E2E window widens, its watchdog may fire); a bus-off's ticks run
+hearing nothing (``replay_sent.bus_off_silences``). Gaps longer than ``MAX_GAP_TICKS`` are
+shortened to it. The firmware's clock is that grid's, 10 ms per tick; the log's own SIM_TRUTH
+frames are put back on the bus where the log had them. Everything on the replayed bus is
+analysed as ``odocan run`` does
 (``host.analysis.analyze``, ``host.summary.finish``: same report keys, ``--report``, ``--plot``,
 ``--tolerance``, summary, exit 0/1/2), plus a ``replay`` section comparing the replayed on-board
 poses with the ones in the log at the same encoder frames (identical for the same firmware).
@@ -59,6 +59,7 @@ from odocan.host.io.logs import (
 from odocan.host.io.recording import Recording
 from odocan.host.judge.analysis import Analysis, Tolerance, analyze
 from odocan.host.judge.diagnosis import fitting_profiles
+from odocan.host.judge.replay_arrival import FedTicks, fed_plan, fed_ticks
 from odocan.host.judge.replay_boots import boot_starts, fresh_accepted, fresh_ticks
 from odocan.host.judge.replay_compare import (
     onboard_by_tick,
@@ -113,6 +114,7 @@ class ReplayInput:
     rejected_encoders: int  # WHEEL_ENCODERS frames the E2E check dropped
     late: IntArray = field(default_factory=lambda: np.zeros(0, np.int64))  # fed anyway,
     late_tick: IntArray = field(default_factory=lambda: np.zeros(0, np.int64))  # ``late_frames``
+    fed: FedTicks | None = None  # the tick each reached the firmware (``replay_arrival``)
 
     @classmethod
     def from_log(cls, frames: FrameArrays) -> ReplayInput:
@@ -129,8 +131,15 @@ class ReplayInput:
         if len(encoders.index) == 0:
             raise ReplayError(f"none of the {total} WHEEL_ENCODERS frames passes its E2E check")
         truth = decoder.select(frames, "SIM_TRUTH").astype(np.int64)
-        late, late_tick = late_frames(frames, accepted, encoders)
-        return cls(accepted, encoders, truth, total - len(encoders.index), late, late_tick)
+        late, _ = late_frames(frames, accepted, encoders)
+        fed = fed_ticks(frames, encoders, late)
+        return cls(accepted, encoders, truth, total - len(encoders.index), late, fed.late, fed)
+
+    @property
+    def arrival(self) -> FedTicks:
+        """``fed``, or the sender's periods as they are (a feed built by hand)."""
+        return self.fed or FedTicks(self.encoders, self.encoders.tick, self.late_tick,
+                                    float(self.encoders.timestamp_s[0]))
 
 
 def logged_integrator(frames: FrameArrays, accepted: npt.NDArray[np.bool_]) -> str | None:
@@ -173,6 +182,7 @@ class LockstepReplay:
         self.fed = 0  # encoder frames fed to the firmware (the host's E2E check refused
         self.late_fed = 0  # ``late_fed`` of them: ``replay_track.late_frames``)
         self.halted: set[int] = set()  # ticks the board runs none (``replay_lives``)
+        self.deaf: set[int] = set()  # ticks its controller is bus-off: it hears nothing
         self.resets: dict[int, bool] = {}  # encoder frame number -> reset after it is sent
         self.held: dict[int, int] = {}  # log position -> tick: fed once the ticks before ran
 
@@ -184,6 +194,11 @@ class LockstepReplay:
     def _work(self, k: int) -> None:
         """The nodes' work in a tick: the firmware's board alone (the log is the rest), none
         while the log shows its firmware halted or not yet powered up (``replay_lives``)."""
+        if k in self.deaf:  # bus-off: every frame lost to it, the status interrupt first
+            while self.board.bus.recv(0) is not None:
+                pass
+            if k - 1 not in self.deaf:
+                self.board.ecu.isr_bus_state(True)
         if k not in self.halted:
             self.board.run_tick()
 
@@ -202,9 +217,8 @@ class LockstepReplay:
         SIGTERM stops it between two encoder frames, a second one at once (``stopped``: how
         far it got; ``fed``: the encoder frames fed). ``stop``: the request the caller's
         ``stop_on_signals`` already sets (else the run installs its own)."""
-        enc = feed.encoders
-        t0 = float(frames.timestamp_s[enc.index[0]])
-        self.loop.start_s = t0 - phase_ticks * TICK_S
+        enc, arrival = feed.encoders, feed.arrival
+        self.loop.start_s = arrival.start_s - phase_ticks * TICK_S
         self.loop.run_to(phase_ticks)
         held = self._held_fed(frames, feed, phase_ticks)
         hidden = unfed_truth(frames, feed.truth, held)
@@ -225,7 +239,7 @@ class LockstepReplay:
                     if which >= 0:  # an encoder frame: first run the ticks before its own
                         if stop.stop_requested:
                             break
-                        due = self._to_tick(int(enc.tick[which]) + phase_ticks, due)
+                        due = self._to_tick(int(arrival.tick[which]) + phase_ticks, due)
                         self._reset(which, False)
                     message = to_message(frames, position)
                     message.timestamp += float(shift_s[position])
@@ -238,7 +252,7 @@ class LockstepReplay:
         except KeyboardInterrupt as exc:
             interrupt = exc
         if stop.stop_requested or interrupt is not None:
-            asked_s = (int(enc.tick[-1]) + 1 + phase_ticks) * TICK_S
+            asked_s = (int(arrival.tick[-1]) + 1 + phase_ticks) * TICK_S
             self.stopped = Stopped(stop.signum or signum_of(interrupt),
                                    round(self.ticks * TICK_S, 6), round(asked_s, 6))
             if self.fed:  # none: the caller's one line says so
@@ -379,7 +393,7 @@ def _replayed_head(frames: FrameArrays, profile: RobotProfile, integrator: str,
     replay = LockstepReplay(firmware_params(profile, integrator), [collector],
                             f"odocan-replay-{next(_REPLAY_CHANNELS)}")
     try:
-        _apply(replay, plan, feed.encoders, phase)
+        _apply(replay, plan, feed.arrival, phase)
         replay.run(frames, feed if truth else replace(feed, truth=feed.truth[:0]), phase)
     finally:
         replay.close()
@@ -395,11 +409,12 @@ def _first_change(plan: LifePlan, encoders: EncoderTrack) -> int | None:
     return min(ticks, default=None)
 
 
-def _apply(replay: LockstepReplay, plan: LifePlan, encoders: EncoderTrack, phase: int) -> None:
+def _apply(replay: LockstepReplay, plan: LifePlan, arrival: FedTicks, phase: int) -> None:
     """Set ``replay`` to live ``plan`` (its ticks ``phase`` later): halts, resets, held frames."""
-    replay.halted = {t + phase for t in plan.halted_ticks(encoders)}
+    halted, replay.held, deaf = fed_plan(plan, arrival)
+    replay.halted = {t + phase for t in halted}
+    replay.deaf = {t + phase for t in deaf}
     replay.resets = plan.resets
-    replay.held = dict(plan.held)
 
 
 def replay_and_analyze(
@@ -437,7 +452,7 @@ def replay_and_analyze(
             plan = fit_halts(frames, feed.accepted, feed.encoders, plan, tolerance,
                              lambda head, tried: _replayed_head(
                                  head, profile, integrator, tried, phase, truth_compared))
-            _apply(replay, plan, feed.encoders, phase)
+            _apply(replay, plan, feed.arrival, phase)
             if not stop.stop_requested:
                 replay.run(frames, feed if truth_compared else replace(feed, truth=feed.truth[:0]),
                            phase, stop)
