@@ -107,10 +107,19 @@ def check_within(spec: FaultSpec | None, run_s: float) -> None:
     is refused in one line: a stall never resumed, or a reset the run never reaches, would be
     judged as no such fault (a CI job believing it tested a hang it never ran; an outside trial:
     ``reboot=9.991`` and ``stall=9.5:0.499`` of a 10 s run PASSed with no reboot or stall);
-    so are episodes that meet on the ticks (``_check_apart``)."""
+    so are a bus-off and a babble window that start after the last tick (``busoff=99:0.3`` of
+    an 8 s run PASSed with no bus-off), and episodes that meet on the ticks
+    (``_check_apart``)."""
     if spec is None:
         return
     ticks = tick_at(run_s)  # the run's ticks: 0 .. ticks - 1
+    for key, window in (("busoff", spec.busoff), ("babble", spec.babble_window)):
+        if window is not None and tick_at(window.at_s) >= ticks:  # never begins
+            said = (mcu_text(key, window) if key == "busoff"  # babble=RATE:ID:T:DUR's end
+                    else f"babble=...:{window.at_s:g}:{window.duration_s:g}")
+            raise ConfigurationError(
+                f"faults: {said}: T must fall on a tick of the run, the last at "
+                f"{(ticks - 1) * TICK_S:.2f} s (--duration {run_s:g})")
     for key, episode in mcu_episodes(spec):
         if tick_at(episode.at_s + episode.duration_s) >= ticks:  # never reached or resumed
             shape = "T + DUR" if episode.duration_s else "T"

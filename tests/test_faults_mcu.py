@@ -103,6 +103,9 @@ def test_the_keys_parse_print_back_and_go_to_the_firmwares_handle() -> None:
     ("reboot=8", f"T must fall on a tick of the run, the last at {RUN_S - 0.01:.2f} s"),
     ("reboot=7:1.5", "T + DUR must fall on a tick of the run"),
     ("stall=1e6:1", "at most 86400"),
+    ("busoff=99:0.3", "busoff=99:0.3: T must fall on a tick of the run"),  # trial: PASSed
+    ("busoff=8:0.3", f"T must fall on a tick of the run, the last at {RUN_S - 0.01:.2f} s"),
+    ("babble=100:0x50:9:1", "babble=...:9:1: T must fall on a tick of the run"),
 ])
 def test_bad_episodes_are_one_line_exit_2(
     faults: str, words: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
