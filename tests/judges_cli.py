@@ -1,13 +1,21 @@
-"""The CLI's judges on a log, as the fault tests call them: ``analyze`` whole and streamed, and
-a tamper's FAIL by the position (a FAIL by the heading alone says nothing: a correct firmware
-can FAIL by it too)."""
+"""The CLI's judges on a log, as the fault tests call them: a drive recorded by the Python
+firmware under the tests' watch, ``analyze`` whole and streamed, a tamper's FAIL by the position
+(a FAIL by the heading alone says nothing: a correct firmware can FAIL by it too), and a log's
+raw signals decoded by cantools (not the host's decoder)."""
 
 from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
+
+import can
+import cantools
+from cantools.database.can import Database
 
 from odocan.host.cli.app import main
+from odocan.sim.contract import DBC_PATH
+from tests.fw_watch import Watch, watched
 
 STREAMS = ("never", "always")
 
@@ -34,3 +42,32 @@ def fails_by_position(tampered: Path, work: Path, beyond_m: float = 5e-3) -> lis
         if code != 1 or beyond <= beyond_m:
             wrong.append(f"--stream {s}: exit {code}, position {beyond * 1e3:.4g} mm beyond")
     return wrong
+
+
+def watched_run(log: Path, robot: str, scenario: str, seed: object, duration: object,
+                faults: str) -> tuple[Watch, int]:
+    """``odocan run`` of the drive with the Python firmware, every step watched
+    (``tests.fw_watch``), into ``log``: the watch and run's exit code."""
+    with watched(robot) as watch:
+        code = main(["run", "--robot", robot, "--scenario", scenario, "--seed", str(seed),
+                     "--duration", str(duration), "--faults", faults, "--firmware", "python",
+                     "--log", str(log)])
+    return watch, code
+
+
+def raw_signals(log: Path, names: tuple[str, ...]) -> list[tuple[float, str, dict[str, Any]]]:
+    """(time s, message, raw signal values, choices as numbers) of the frames of the messages
+    ``names`` in ``log``, in order, decoded by cantools."""
+    db = cantools.database.load_file(str(DBC_PATH))
+    assert isinstance(db, Database)
+    wanted = {db.get_message_by_name(n).frame_id: n for n in names}
+    out: list[tuple[float, str, dict[str, Any]]] = []
+    with can.LogReader(str(log)) as reader:
+        for msg in reader:
+            if msg.arbitration_id in wanted:
+                name = wanted[msg.arbitration_id]
+                signals = db.get_message_by_name(name).decode(bytes(msg.data), scaling=False,
+                                                              decode_choices=False)
+                assert isinstance(signals, dict)
+                out.append((msg.timestamp, name, signals))
+    return out

@@ -20,15 +20,10 @@ import json
 from pathlib import Path
 from typing import Any
 
-import can
-import cantools
 import pytest
-from cantools.database.can import Database
 
-from odocan.host.cli.app import main
-from odocan.sim.contract import DBC_PATH
-from tests.fw_watch import Watch, watched
-from tests.judges_cli import STREAMS, analyze
+from tests.fw_watch import Watch
+from tests.judges_cli import STREAMS, analyze, raw_signals, watched_run
 from tests.log_edit import raise_raw
 
 TAMPER_DISTANCE_LSB = -10  # 10 mm short, in ODOM_TWIST DISTANCE's 1 mm LSBs
@@ -51,27 +46,13 @@ Drive = tuple[Path, Watch, int]
 def drive(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory) -> Drive:
     robot, scenario, seed, duration, faults, _ = DRIVES[request.param]
     log = tmp_path_factory.mktemp(request.param) / "d.log"
-    with watched(robot) as watch:
-        code = main(["run", "--robot", robot, "--scenario", scenario, "--seed", seed,
-                     "--duration", duration, "--faults", faults, "--firmware", "python",
-                     "--log", str(log)])
+    watch, code = watched_run(log, robot, scenario, seed, duration, faults)
     return log, watch, code
 
 
 def _twists_and_encoders(log: Path) -> list[tuple[float, str, dict[str, Any]]]:
     """(time s, message, raw signals) of the WHEEL_ENCODERS and ODOM_TWIST frames, in order."""
-    db = cantools.database.load_file(str(DBC_PATH))
-    assert isinstance(db, Database)
-    wanted = {db.get_message_by_name(n).frame_id: n for n in ("WHEEL_ENCODERS", "ODOM_TWIST")}
-    out: list[tuple[float, str, dict[str, Any]]] = []
-    with can.LogReader(str(log)) as reader:
-        for msg in reader:
-            if msg.arbitration_id in wanted:
-                name = wanted[msg.arbitration_id]
-                signals = db.get_message_by_name(name).decode(bytes(msg.data), scaling=False)
-                assert isinstance(signals, dict)
-                out.append((msg.timestamp, name, signals))
-    return out
+    return raw_signals(log, ("WHEEL_ENCODERS", "ODOM_TWIST"))
 
 
 def test_the_firmware_integrates_the_frames_it_took(drive: Drive) -> None:

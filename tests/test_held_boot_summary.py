@@ -16,16 +16,11 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-import can
-import cantools
 import pytest
-from cantools.database.can import Database
 
-from odocan.host.cli.app import main
 from odocan.host.judge.heldboot import held_tick_s
-from odocan.sim.contract import DBC_PATH
-from tests.fw_watch import Watch, watched
-from tests.judges_cli import STREAMS, analyze, both_analyses
+from tests.fw_watch import Watch
+from tests.judges_cli import STREAMS, analyze, both_analyses, raw_signals, watched_run
 from tests.log_edit import raise_raw
 
 TAMPER_X_LSB = 100  # 10 mm in ODOM_POSE_X's 0.1 mm LSBs
@@ -36,28 +31,15 @@ Drive = tuple[Path, Watch, int]  # the log, the firmware's watch, run's exit cod
 @pytest.fixture(scope="module")
 def drive(tmp_path_factory: pytest.TempPathFactory) -> Drive:
     log = tmp_path_factory.mktemp("held") / "d.log"
-    with watched("kobuki") as watch:
-        code = main(["run", "--robot", "kobuki", "--scenario", "figure8", "--seed", "410",
-                     "--duration", "14", "--faults", "reboot=3:0.5,stall=8:0.4,delay=0.3:55",
-                     "--firmware", "python", "--log", str(log)])
+    watch, code = watched_run(log, "kobuki", "figure8", 410, 14,
+                              "reboot=3:0.5,stall=8:0.4,delay=0.3:55")
     return log, watch, code
 
 
 def _status_and_twists(log: Path) -> list[tuple[float, str, dict[str, float]]]:
     """(time s, message, raw signals) of the ODOM_STATUS and ODOM_TWIST frames, in order."""
-    db = cantools.database.load_file(str(DBC_PATH))
-    assert isinstance(db, Database)
-    wanted = {db.get_message_by_name(n).frame_id: n for n in ("ODOM_STATUS", "ODOM_TWIST")}
-    out: list[tuple[float, str, dict[str, float]]] = []
-    with can.LogReader(str(log)) as reader:
-        for msg in reader:
-            if msg.arbitration_id in wanted:
-                name = wanted[msg.arbitration_id]
-                signals = db.get_message_by_name(name).decode(bytes(msg.data), scaling=False,
-                                                              decode_choices=False)
-                assert isinstance(signals, dict)
-                out.append((msg.timestamp, name, {k: float(str(v)) for k, v in signals.items()}))
-    return out
+    return [(t, name, {k: float(v) for k, v in signals.items()})
+            for t, name, signals in raw_signals(log, ("ODOM_STATUS", "ODOM_TWIST"))]
 
 
 def test_the_firmware_integrates_the_frames_it_took(drive: Drive) -> None:

@@ -36,8 +36,7 @@ from pathlib import Path
 
 import pytest
 
-from odocan.host.cli.app import main
-from tests.fw_watch import watched
+from tests.judges_cli import watched_run
 from tests.log_edit import raise_raw
 
 POSE_X = (2, 4)  # ODOM_POSE_X's X: bytes 2..5, signed, 0.1 mm
@@ -81,10 +80,7 @@ def drive(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFacto
     name = request.param
     robot, scenario, seed, duration, faults, _ = DRIVES[name]
     log = tmp_path_factory.mktemp(name) / "drive.log"
-    with watched(robot) as watch:
-        code = main(["run", "--robot", robot, "--scenario", scenario, "--seed", str(seed),
-                     "--duration", str(duration), "--faults", faults, "--firmware", "python",
-                     "--log", str(log)])
+    watch, code = watched_run(log, robot, scenario, seed, duration, faults)
     assert code == 0
     assert watch.steps > 300
     assert watch.within_a_thousandth_lsb(), (watch.worst_m, watch.worst_rad)

@@ -12,9 +12,8 @@ from pathlib import Path
 
 import pytest
 
-from odocan.host.cli.app import main
-from tests.fw_watch import Watch, watched
-from tests.judges_cli import both_analyses
+from tests.fw_watch import Watch
+from tests.judges_cli import both_analyses, watched_run
 
 DRIVES = {  # name: (robot, scenario, seed, duration s, faults), why the judges FAIL it
     "reprime_after_busoff": (
@@ -48,10 +47,7 @@ Drive = tuple[Path, Watch, int]  # the log, the firmware's watch, run's exit cod
 def drive(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory) -> Drive:
     robot, scenario, seed, duration, faults = DRIVES[request.param][0]
     log = tmp_path_factory.mktemp(request.param) / "d.log"
-    with watched(robot) as watch:
-        code = main(["run", "--robot", robot, "--scenario", scenario, "--seed", seed,
-                     "--duration", duration, "--faults", faults, "--firmware", "python",
-                     "--log", str(log)])
+    watch, code = watched_run(log, robot, scenario, seed, duration, faults)
     return log, watch, code
 
 
