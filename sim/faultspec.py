@@ -265,23 +265,26 @@ def _check_int(key: str, value: object, lo: int | None, hi: int | None, what: st
         raise _fail(key, repr(value), f"{what} must be an integer{bounds}")
 
 
-def _number(key: str, text: str, what: str) -> float:
+def _number(key: str, text: str, what: str, whole: str = "") -> float:
+    """Field ``what`` of ``key=whole`` (``text``: the field; the whole value said back in an
+    error, ``delay=0.1:abc``, not ``delay=abc``)."""
     try:
         if "_" in text or text != text.strip():  # float() reads "1_0" as 10, " 2" as 2
             raise ValueError(text)
         value = float(text)
     except ValueError:
-        raise _fail(key, text, f"{what} is not a number") from None
+        raise _fail(key, whole or text, f"{what} is not a number") from None
     if not math.isfinite(value):
-        raise _fail(key, text, f"{what} must be finite")
+        raise _fail(key, whole or text, f"{what} must be finite")
     return value
 
 
-def _integer(key: str, text: str, what: str) -> int:
+def _integer(key: str, text: str, what: str, whole: str = "") -> int:
+    """As ``_number``, an integer."""
     try:
         return int(text)
     except ValueError:
-        raise _fail(key, text, f"{what} is not an integer") from None
+        raise _fail(key, whole or text, f"{what} is not an integer") from None
 
 
 def _fields(key: str, value: str, shape: str, optional_second: bool = False) -> list[str]:
@@ -301,20 +304,23 @@ def _parse_value(key: str, value: str) -> dict[str, Any]:
         return {key: _integer(key, value, "N")}
     if key == "burst":
         p, n = _fields(key, value, "P:LEN")
-        return {"burst": _number(key, p, "P"), "burst_len": _integer(key, n, "LEN")}
+        return {"burst": _number(key, p, "P", value),
+                "burst_len": _integer(key, n, "LEN", value)}
     if key == "delay":
         p, ms = _fields(key, value, "P:MS")
-        return {"delay": _number(key, p, "P"), "delay_ms": _number(key, ms, "MS")}
+        return {"delay": _number(key, p, "P", value),
+                "delay_ms": _number(key, ms, "MS", value)}
     if key == "flip":
         parts = _fields(key, value, "P[:BITS]", optional_second=True)
-        bits = _integer(key, parts[1], "BITS") if len(parts) == 2 else 1
-        return {"flip": _number(key, parts[0], "P"), "flip_bits": bits}
+        bits = _integer(key, parts[1], "BITS", value) if len(parts) == 2 else 1
+        return {"flip": _number(key, parts[0], "P", value), "flip_bits": bits}
     if key == "reboot":
         parts = _fields(key, value, "T[:DUR]", optional_second=True)
-        boot_s = _number(key, parts[1], "DUR") if len(parts) == 2 else 0.0
-        return {key: _episode(key, value, _number(key, parts[0], "T"), boot_s)}
+        boot_s = _number(key, parts[1], "DUR", value) if len(parts) == 2 else 0.0
+        return {key: _episode(key, value, _number(key, parts[0], "T", value), boot_s)}
     at, duration = _fields(key, value, "T:DUR")  # busoff, stall
-    return {key: _episode(key, value, _number(key, at, "T"), _number(key, duration, "DUR"))}
+    return {key: _episode(key, value, _number(key, at, "T", value),
+                          _number(key, duration, "DUR", value))}
 
 
 def _episode(key: str, value: str, at_s: float, duration_s: float) -> BusOff:
@@ -353,7 +359,7 @@ def _parse_babble(value: str) -> dict[str, Any]:
     parts = value.split(":")
     if len(parts) not in (1, 2, 4):
         raise _fail("babble", value, "expected babble=RATE[:ID[:T:DUR]]")
-    fields: dict[str, Any] = {"babble": _number("babble", parts[0], "RATE")}
+    fields: dict[str, Any] = {"babble": _number("babble", parts[0], "RATE", value)}
     if len(parts) >= 2:
         try:
             fields["babble_id"] = int(parts[1], 0)
@@ -361,8 +367,8 @@ def _parse_babble(value: str) -> dict[str, Any]:
             raise _fail("babble", value, "ID is not an integer (0x050 or 80)") from None
         _check_id_width(value, parts[1].strip(), fields["babble_id"])
     if len(parts) == 4:
-        at_s = _number("babble", parts[2], "T")
-        fields["babble_window"] = BusOff(at_s, _number("babble", parts[3], "DUR"))
+        at_s = _number("babble", parts[2], "T", value)
+        fields["babble_window"] = BusOff(at_s, _number("babble", parts[3], "DUR", value))
     return fields
 
 

@@ -76,6 +76,8 @@ def test_spec_parses_every_key_and_prints_back() -> None:
         ("drop=1.5", "drop=1.5: P must be a probability in [0, 1]"),
         ("drop=-0.1", "P must be a probability"),
         ("drop=abc", "drop=abc: P is not a number"),
+        ("delay=0.1:abc", "delay=0.1:abc: MS is not a number"),  # the whole value (a trial)
+        ("burst=0.1:x", "burst=0.1:x: LEN is not an integer"),
         ("drop=nan", "P must be finite"),
         ("drop=0.1,drop=0.2", "drop given twice"),
         ("burst=0.1", "expected burst=P:LEN"),
