@@ -14,6 +14,7 @@ import numpy.typing as npt
 
 from odocan.firmware.encoders import RESYNC_FRAMES
 from odocan.host.judge.ambiguity import least_ambiguous_periods
+from odocan.host.judge.blockdot import block_dot, centred
 from odocan.host.judge.breaks import BreakSummary, placed_offsets
 from odocan.host.judge.breakspan import break_allowance as break_allowance
 from odocan.host.judge.breakspan import seen_whole
@@ -457,33 +458,12 @@ def _rotation_fit(
     bx = onboard.x_m - onboard.x_m[0] - qx
     by = onboard.y_m - onboard.y_m[0] - qy
     # normal equations of [1 0 -qy; 0 1 qx] (x_s, y_s, d) = (bx, by): offsets eliminated
-    qx_c, qy_c, bx_c, by_c = (_centred(v, rel.segment) for v in (qx, qy, bx, by))
+    qx_c, qy_c, bx_c, by_c = (centred(v, rel.segment) for v in (qx, qy, bx, by))
     spread = block_dot(qx_c, qx_c) + block_dot(qy_c, qy_c)
     if spread <= (POSITION_LSB_M * POSITION_LSB_M) * len(qx):  # no lever arm: nothing to learn
         return 0.0
     d = (block_dot(qx_c, by_c) - block_dot(qy_c, bx_c)) / spread
     return min(max(d, bounds[0]), bounds[1])
-
-
-DOT_BLOCK = 1 << 16  # samples per block of the rotation fit's sums (22 min at 50 Hz)
-
-
-def block_dot(a: FloatArray, b: FloatArray) -> float:
-    """``np.dot(a, b)`` taken in blocks of ``DOT_BLOCK`` elements aligned on element 0, the
-    blocks' dots added in order: what a log read in chunks can sum too, whatever the chunking
-    (``host.judge.stream_fit.BlockDot``). One block (up to 22 min of samples): ``np.dot``."""
-    total = float(np.dot(a[:DOT_BLOCK], b[:DOT_BLOCK]))
-    for start in range(DOT_BLOCK, len(a), DOT_BLOCK):
-        total += float(np.dot(a[start : start + DOT_BLOCK], b[start : start + DOT_BLOCK]))
-    return total
-
-
-def _centred(values: FloatArray, segment: IntArray) -> FloatArray:
-    """``values`` less the mean of their segment."""
-    sums = np.bincount(segment, weights=values)
-    counts = np.maximum(np.bincount(segment), 1)
-    centred: FloatArray = values - (sums / counts)[segment]
-    return centred
 
 
 def _overlap_mid(offsets: FloatArray, lsb: float, *, base: bool = False) -> float:
