@@ -18,6 +18,8 @@ every step watched (``tests.fw_watch``: within 1/1000 LSB on every drive here).
   paired the poses naming COUNTER 7 with it; the firmware, which heard the same silent bus,
   refused it as a repeat (its ENC_E2E_REPEATED 0 -> 1 between its pages at 1.9 and 2.5 s) and
   named the COUNTER 7 of 1.99 s. Now the pages' repeats refuse it (``e2e_repeats``): 0.056 mm.
+  The live judge took it too (127.6 mm off): it now holds such a frame for the page
+  (``e2e_held.new_cycle_pending``, ``host.judge.livesettle``): 0.079 mm.
 """
 
 from __future__ import annotations
@@ -26,8 +28,14 @@ import json
 from pathlib import Path
 from typing import Any
 
+import can
 import pytest
 
+from odocan.host.io.logs import read_log
+from odocan.host.judge.analysis import HEADING_LSB_RAD, POSITION_LSB_M
+from odocan.host.judge.monitor import BusMonitor
+from odocan.host.protocol.e2e import check_frames
+from odocan.sim.robot import load
 from tests.fw_watch import Watch
 from tests.judges_cli import STREAMS, analyze, fails_by_position, raw_signals, watched_run
 from tests.log_edit import raise_raw
@@ -135,3 +143,21 @@ def test_a_pose_10_mm_off_from_the_bus_off_s_end_fails(
     assert raise_raw(log, tampered, "ODOM_POSE_X", POSE_X, 100, busoff_s) > 100
     assert fails_by_position(tampered, tmp_path) == []
     capsys.readouterr()
+
+
+def test_the_live_judge_takes_the_whole_logs_frames_and_passes(drive: Drive) -> None:
+    """The monitor model fed the log at its stamps takes the whole log's encoder frames (the
+    repeat after the bus-off included, held for the firmware's page) and stays within the
+    tolerance of its reference (446: 127.6 mm, 169.9 mrad off before)."""
+    log, _, _ = drive
+    monitor = BusMonitor(load("kobuki"))
+    with can.LogReader(str(log)) as reader:
+        for msg in reader:
+            monitor.feed(msg, now_s=msg.timestamp)
+    monitor.release_held()
+    whole = check_frames(read_log(log))[0]["WHEEL_ENCODERS"]
+    assert monitor.e2e.counts()["WHEEL_ENCODERS"] == whole
+    vs_ref = monitor.tracker.vs_reference
+    assert vs_ref.samples > 100, vs_ref.samples
+    assert vs_ref.max_dpos_m <= POSITION_LSB_M, vs_ref.max_dpos_m
+    assert vs_ref.max_dheading_rad <= HEADING_LSB_RAD, vs_ref.max_dheading_rad
