@@ -11,7 +11,15 @@ every step watched (``tests.fw_watch``: within 1/1000 LSB on every drive here).
   latest frame heard, it named that later frame and its path. Now the first twist after a
   silence of the whole bus that names a frame heard since the silence began is left out
   (``distance._named_across``), as a first twist after a stall is. 414 PASSes; 446's DISTANCE
-  passes, its pose still FAILs (strict xfail below).
+  passes.
+* 446's pose (121.6 mm and 169.9 mrad off the reference across the bus-off): the host's E2E took
+  the COUNTER 7 of 2.31 s, two COUNTER cycles after the last one heard before the silence, as
+  the sender's frame 32 periods on (the rule for a recorder that lost the frames between), and
+  paired the poses naming COUNTER 7 with it; the firmware, which heard the same silent bus,
+  refused it as a repeat (its ENC_E2E_REPEATED 0 -> 1 between its pages at 1.9 and 2.5 s) and
+  named the COUNTER 7 of 1.99 s. Now the pages' repeats refuse it (``e2e_repeats``): 0.056 mm.
+  The live judge took it too (127.6 mm off): it now holds such a frame for the page
+  (``e2e_held.new_cycle_pending``, ``host.judge.livesettle``): 0.079 mm.
 """
 
 from __future__ import annotations
@@ -20,10 +28,16 @@ import json
 from pathlib import Path
 from typing import Any
 
+import can
 import pytest
 
+from odocan.host.io.logs import read_log
+from odocan.host.judge.analysis import HEADING_LSB_RAD, POSITION_LSB_M
+from odocan.host.judge.monitor import BusMonitor
+from odocan.host.protocol.e2e import check_frames
+from odocan.sim.robot import load
 from tests.fw_watch import Watch
-from tests.judges_cli import STREAMS, analyze, raw_signals, watched_run
+from tests.judges_cli import STREAMS, analyze, fails_by_position, raw_signals, watched_run
 from tests.log_edit import raise_raw
 
 TAMPER_DISTANCE_LSB = -10  # 10 mm short, in ODOM_TWIST DISTANCE's 1 mm LSBs
@@ -33,11 +47,7 @@ DRIVES = {  # name: robot, scenario, seed, duration s, faults, the bus-off's sta
                      6.0),
     "busoff": ("kobuki", "figure8", "446", "8", "busoff=2:0.3,delay=0.3:55", 2.0),
 }
-POSE_446 = (
-    "issue #11: kobuki figure8 446 busoff=2:0.3,delay=0.3:55: the pose 121.6 mm and 169.9 mrad "
-    "off the reference across the bus-off (85 gap placements, 127.8 mm absorbed within 121.9 mm "
-    "allowed); the pose frames queued through the bus-off likely name a frame a lap or two "
-    "back as the twist did; not traced")
+POSE_X = (2, 4)  # ODOM_POSE_X's X: bytes 2..5, signed, 0.1 mm
 # the log, the firmware's watch, run's exit code
 Drive = tuple[Path, Watch, int]
 
@@ -95,10 +105,6 @@ def test_distance_passes_the_correct_firmware(drive: Drive, stream: str, tmp_pat
     assert distance["samples"] > 100, distance
 
 
-@pytest.mark.parametrize("drive", [
-    "stall_busoff",
-    pytest.param("busoff", marks=pytest.mark.xfail(strict=True, reason=POSE_446)),
-], indirect=True)
 def test_run_and_both_analyzes_pass_the_correct_firmware(
         drive: Drive, capsys: pytest.CaptureFixture[str]) -> None:
     log, _, code = drive
@@ -124,3 +130,34 @@ def test_a_distance_10_mm_short_after_the_bus_off_fails(
         report = json.loads((tmp_path / f"{stream}.json").read_text())
         assert not report["onboard_distance_vs_reference"]["passed"], stream
     capsys.readouterr()
+
+
+def test_a_pose_10_mm_off_from_the_bus_off_s_end_fails(
+        drive: Drive, request: pytest.FixtureRequest, tmp_path: Path,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """+10 mm on ODOM_POSE_X's X from the bus-off on (the poses queued through it included):
+    whole and streamed FAIL by the position."""
+    log, _, _ = drive
+    busoff_s = DRIVES[request.node.callspec.params["drive"]][5]
+    tampered = tmp_path / "raised.log"
+    assert raise_raw(log, tampered, "ODOM_POSE_X", POSE_X, 100, busoff_s) > 100
+    assert fails_by_position(tampered, tmp_path) == []
+    capsys.readouterr()
+
+
+def test_the_live_judge_takes_the_whole_logs_frames_and_passes(drive: Drive) -> None:
+    """The monitor model fed the log at its stamps takes the whole log's encoder frames (the
+    repeat after the bus-off included, held for the firmware's page) and stays within the
+    tolerance of its reference (446: 127.6 mm, 169.9 mrad off before)."""
+    log, _, _ = drive
+    monitor = BusMonitor(load("kobuki"))
+    with can.LogReader(str(log)) as reader:
+        for msg in reader:
+            monitor.feed(msg, now_s=msg.timestamp)
+    monitor.release_held()
+    whole = check_frames(read_log(log))[0]["WHEEL_ENCODERS"]
+    assert monitor.e2e.counts()["WHEEL_ENCODERS"] == whole
+    vs_ref = monitor.tracker.vs_reference
+    assert vs_ref.samples > 100, vs_ref.samples
+    assert vs_ref.max_dpos_m <= POSITION_LSB_M, vs_ref.max_dpos_m
+    assert vs_ref.max_dheading_rad <= HEADING_LSB_RAD, vs_ref.max_dheading_rad

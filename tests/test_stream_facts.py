@@ -15,10 +15,10 @@ import numpy as np
 import pytest
 
 from odocan.host.io.logs import FrameArrays, FrameCollector, iter_log, read_log, to_message
+from odocan.host.judge.blockdot import DOT_BLOCK, block_dot
 from odocan.host.judge.compare import _outside_band, check_twist
 from odocan.host.judge.powerup import saw_only_the_log, starts_at_power_up
 from odocan.host.judge.reboots import split_lives
-from odocan.host.judge.reference_path import DOT_BLOCK, block_dot
 from odocan.host.judge.reportfacts import covered_s, frame_counts
 from odocan.host.judge.samples import (
     Poses,

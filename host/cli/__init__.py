@@ -15,7 +15,7 @@ __all__ = ["main"]
 # numpy's OpenBLAS starts a thread per core when numpy loads; they spin-wait for work no odocan
 # command gives them (no large matrix product anywhere: 0.08 s of CPU per process for nothing),
 # and a dot product split across them sums in another order, so np.dot of more than ~10^4
-# elements (the start fit's sums, ``reference_path.block_dot``) differs in its last bits from
+# elements (the start fit's sums, ``blockdot.block_dot``) differs in its last bits from
 # one machine's core count to another's. One thread: the same bits on every machine, and less
 # CPU. A user's own setting is kept; set before numpy is imported (nothing here imports it).
 BLAS_THREADS = ("OPENBLAS_NUM_THREADS", "1")

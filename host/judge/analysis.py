@@ -491,10 +491,10 @@ def _distance(frames: FrameArrays, accepted: np.ndarray, decoder: BulkDecoder, e
               alive_s: np.ndarray) -> dict[str, Any]:
     """``distance.check_distance`` over the firmware's steps from the reference's start
     (``seen``: its evidence, ``holetaken``, ``nearthreshold``; those a re-prime after a set-pose
-    left out zeroed: ``cutreprime``)."""
-    e0 = ref.start
-    steps = firmware_steps(enc, e0, Geometry.of(robot), min(robot.counter_bits, WIRE_COUNTER_BITS),
-                           judge.max_wheel_speed_mm_s, through=seen.through, resets=seen.resets)
+    left out zeroed: ``cutreprime``; its stalls' windows)."""
+    steps = firmware_steps(enc, e0 := ref.start, Geometry.of(robot), min(
+        robot.counter_bits, WIRE_COUNTER_BITS), judge.max_wheel_speed_mm_s, through=seen.through,
+        resets=seen.resets, stalled=ref.stalled)  # stallrestart: the stalls' restarts
     cutreprime.cut_left_out(steps.d_left, steps.d_right, ref.stall_reprimes)
     return check_distance(frames, accepted, decoder, enc, (steps.d_left, steps.d_right), e0,
                           judge, alive_s)

@@ -14,6 +14,7 @@ import numpy.typing as npt
 
 from odocan.firmware.encoders import RESYNC_FRAMES
 from odocan.host.judge.ambiguity import least_ambiguous_periods
+from odocan.host.judge.blockdot import block_dot, centred
 from odocan.host.judge.breaks import BreakSummary, placed_offsets
 from odocan.host.judge.breakspan import break_allowance as break_allowance
 from odocan.host.judge.breakspan import seen_whole
@@ -51,6 +52,7 @@ from odocan.host.judge.stallreprime import (
     left_out_at,
     stall_reprimes,
 )
+from odocan.host.judge.stallrestart import Window, stall_windows, told_otherwise
 from odocan.host.judge.step_periods import DOUBTED, step_bound_periods
 from odocan.host.judge.unseenrestart import heading_offsets, restarted_path, unseen_restarts
 from odocan.host.judge.unseenrestart import restart_detail as restart_detail
@@ -76,6 +78,7 @@ class Reference:
     unseen_restarts: frozenset[int] = frozenset()  # of them, new starts (``unseenrestart``)
     ambiguous: frozenset[int] = frozenset()  # counter restarts on an ambiguous step (``ambiguity``)
     stall_reprimes: dict[int, Reprime] = field(default_factory=dict)  # ``stallreprime``
+    stalled: tuple[Window, ...] = ()  # the stalls' windows (``stallrestart.stall_windows``)
 
     def at(self, enc: IntArray) -> Reference:
         """The reference at the encoder frames ``enc`` (all >= start)."""
@@ -84,7 +87,7 @@ class Reference:
             self.start, self.x_m[k], self.y_m[k], self.heading_rad[k], self.distance_m[k],
             self.restarts, self.exact_start, self.counter_restarts, self.implausible_frames,
             self.placements, self.ctrl_restarts, self.unseen_restarts, self.ambiguous,
-            self.stall_reprimes,
+            self.stall_reprimes, self.stalled,
         )
 
 
@@ -114,8 +117,9 @@ def build_reference(
     exact_at_first = power_up or start_pose is not None
     e0 = 0 if exact_at_first else int(onboard.enc[0])  # at power-up: pose 0 at the first frame
     geometry = Geometry.of(robot)
+    windows = stall_windows(breaks, onboard.enc)  # stallrestart
     steps = firmware_steps(enc, e0, geometry, bits, max_wheel_speed_mm_s, through=seen.through,
-                           resets=seen.resets)
+                           resets=seen.resets, stalled=windows)
     d_left, d_right = steps.d_left, steps.d_right
     rel = integrate(d_left, d_right, geometry, integrator)
     zero = np.zeros(1)
@@ -196,6 +200,7 @@ def build_reference(
         unseen_restarts=frozenset(e0 + k for k in unseen),
         stall_reprimes=reprimes,
         ambiguous=frozenset(e0 + k for k in steps.ambiguous),
+        stalled=windows,
     )
 
 
@@ -216,6 +221,7 @@ class Steps:
 def firmware_steps(
     enc: Encoders, e0: int, geometry: Geometry, bits: int, max_wheel_speed_mm_s: SpeedBound,
     *, through: dict[int, int] | None = None, resets: Resets | None = None,
+    stalled: tuple[Window, ...] = (),
 ) -> Steps:
     """The steps as firmware/ecu.py takes them: a frame whose step from the last accepted one
     exceeds the robot's maximum wheel speed (``max_wheel_speed_mm_s``; ``PROFILE_SPEED``: the
@@ -233,7 +239,8 @@ def firmware_steps(
     firmware's Q48 integer bound may differ by a count at the limit). ``through``: per gap (its
     encoder frame after) the firmware's longest step there, its pages' (``holetaken``): shorter
     than an ambiguous step, the gap is no ambiguous step (the firmware took frames in it).
-    ``resets``: the firmware's COUNTER_RESET word, followed within a period of the threshold."""
+    ``resets``: the firmware's COUNTER_RESET word, followed within a period of the threshold,
+    and where a stall (``stalled``: ``stallrestart.stall_windows``) leaves a restart unproven."""
     left, right = enc.left[e0:], enc.right[e0:]
     seq = enc.seq[e0:]
     steps = Steps(wrap_delta(np.diff(left), bits), wrap_delta(np.diff(right), bits))
@@ -244,12 +251,14 @@ def firmware_steps(
     if speed_mm_s is None:
         ones = np.ones(len(left), dtype=np.bool_)
         held = confirmed_holds((left, right, uptime, counter), ones, ~ones, bits, None)
-        return _reprime_all(steps, ctrl_restarts(uptime, ones, np.diff(stamps), enc.cycle_s,
-                                                 counter) & held[1:])
+        return _reprime_all(steps, told_otherwise(ctrl_restarts(
+            uptime, ones, np.diff(stamps), enc.cycle_s, counter), uptime, stamps, e0, stalled,
+            resets) & held[1:])
     bound = geometry.period_counts(speed_mm_s)
     foreign = beyond_width(left, right, bits)  # refused outright (IMPLAUSIBLE_STEP)
     young = young_counts(left, right, uptime, bits, bound) & ~foreign
-    restart = ctrl_restarts(uptime, young, np.diff(stamps), enc.cycle_s, counter)
+    restart = told_otherwise(ctrl_restarts(uptime, young, np.diff(stamps), enc.cycle_s, counter),
+                             uptime, stamps, e0, stalled, resets)  # stallrestart
     confirmed = confirmed_holds((left, right, uptime, counter), young, foreign, bits, bound)
     unconfirmed = restart & ~confirmed[1:]  # held, then refused: the state machine from it
     restart &= confirmed[1:]
@@ -457,33 +466,12 @@ def _rotation_fit(
     bx = onboard.x_m - onboard.x_m[0] - qx
     by = onboard.y_m - onboard.y_m[0] - qy
     # normal equations of [1 0 -qy; 0 1 qx] (x_s, y_s, d) = (bx, by): offsets eliminated
-    qx_c, qy_c, bx_c, by_c = (_centred(v, rel.segment) for v in (qx, qy, bx, by))
+    qx_c, qy_c, bx_c, by_c = (centred(v, rel.segment) for v in (qx, qy, bx, by))
     spread = block_dot(qx_c, qx_c) + block_dot(qy_c, qy_c)
     if spread <= (POSITION_LSB_M * POSITION_LSB_M) * len(qx):  # no lever arm: nothing to learn
         return 0.0
     d = (block_dot(qx_c, by_c) - block_dot(qy_c, bx_c)) / spread
     return min(max(d, bounds[0]), bounds[1])
-
-
-DOT_BLOCK = 1 << 16  # samples per block of the rotation fit's sums (22 min at 50 Hz)
-
-
-def block_dot(a: FloatArray, b: FloatArray) -> float:
-    """``np.dot(a, b)`` taken in blocks of ``DOT_BLOCK`` elements aligned on element 0, the
-    blocks' dots added in order: what a log read in chunks can sum too, whatever the chunking
-    (``host.judge.stream_fit.BlockDot``). One block (up to 22 min of samples): ``np.dot``."""
-    total = float(np.dot(a[:DOT_BLOCK], b[:DOT_BLOCK]))
-    for start in range(DOT_BLOCK, len(a), DOT_BLOCK):
-        total += float(np.dot(a[start : start + DOT_BLOCK], b[start : start + DOT_BLOCK]))
-    return total
-
-
-def _centred(values: FloatArray, segment: IntArray) -> FloatArray:
-    """``values`` less the mean of their segment."""
-    sums = np.bincount(segment, weights=values)
-    counts = np.maximum(np.bincount(segment), 1)
-    centred: FloatArray = values - (sums / counts)[segment]
-    return centred
 
 
 def _overlap_mid(offsets: FloatArray, lsb: float, *, base: bool = False) -> float:

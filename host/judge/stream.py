@@ -37,7 +37,7 @@ on a log cut at every frame and on a faulted rig run with a stall and a reboot):
 (``losses.firmware_losses`` and ``loss_allowance``), ``stream_facts.StreamFacts`` (frame
 counts, covered seconds, the integrator, the power-up rule's inputs), ``stream_fit.SegmentSums``
 and ``BlockDot`` (the rotation fit's segment means and its dot products,
-``reference_path.block_dot``).
+``blockdot.block_dot``).
 
 Chained (``stream_analysis.analyze_file``, what ``odocan analyze`` runs on one log): a pass
 over the whole log for the lives (``StreamLives``, with the whole log's E2E) and the facts, then

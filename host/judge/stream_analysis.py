@@ -34,7 +34,7 @@ import numpy as np
 
 from odocan.host.io.frames import concat_frames
 from odocan.host.io.logs import CHUNK_FRAMES, FrameArrays, iter_log, warn_on_stderr
-from odocan.host.judge import acrosscut
+from odocan.host.judge import acrosscut, stallrestart
 from odocan.host.judge.analysis import Tolerance
 from odocan.host.judge.breaks import placed_offsets
 from odocan.host.judge.configs import ConfigPages, in_force
@@ -412,6 +412,8 @@ def _judged(
             yield chunk
 
     vs_ref = reference_errors(with_truth, (x0, y0, h0), offsets, drops.allowance)
+    if stallrestart.word_denies(info.by_uptime, final.times_s, breaks, seen_all.resets):
+        raise NotStreamable(stallrestart.STREAM)  # the stalls' windows: judged whole
     vs_truth = truth.summary()
     vs_truth["distance_travelled_m"] = float(last[0].rel_distance_m[-1])
     twist = first.twist.finish()

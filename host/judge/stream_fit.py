@@ -5,8 +5,8 @@ whole log's only if its additions are the same, in the same order:
 * ``SegmentSums``: the per-segment sums of ``np.bincount(segment, weights=values)`` (one
   addition after the other from 0.0, in sample order: the carried sum of the open segment is
   continued with ``np.cumsum``, which adds in the same order), and the counts: the segment
-  means of ``reference_path._centred``;
-* ``BlockDot``: ``reference_path.block_dot``, the dot product in fixed blocks of
+  means of ``blockdot.centred``;
+* ``BlockDot``: ``blockdot.block_dot``, the dot product in fixed blocks of
   ``DOT_BLOCK`` samples aligned on the first sample: a block's dot is taken when its last
   sample arrives (the block waits, at most ``DOT_BLOCK`` values per operand), the blocks' dots
   added in order.
@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
-from odocan.host.judge.reference_path import DOT_BLOCK
+from odocan.host.judge.blockdot import DOT_BLOCK
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -53,14 +53,14 @@ class SegmentSums:
             self.counts[first + 1 : first + len(part)] = np.bincount(segment[rest] - first)[1:]
 
     def means(self) -> FloatArray:
-        """``sums / max(counts, 1)``, as ``reference_path._centred`` takes them."""
+        """``sums / max(counts, 1)``, as ``blockdot.centred`` takes them."""
         means: FloatArray = self.sums / np.maximum(self.counts, 1)
         return means
 
 
 @dataclass
 class BlockDot:
-    """``reference_path.block_dot`` of two operands given chunk by chunk."""
+    """``blockdot.block_dot`` of two operands given chunk by chunk."""
 
     total: float | None = None
     _a: list[FloatArray] = field(default_factory=list)  # the open block's values

@@ -94,6 +94,7 @@ from odocan.host.protocol.e2e_periods import (
 from odocan.host.protocol.e2e_periods import (
     periods_between as periods_between,
 )
+from odocan.host.protocol.e2e_repeats import repeats_by_pages
 from odocan.host.protocol.e2e_silence import add_silence, is_silence, silences
 from odocan.sim.exceptions import OdocanError
 
@@ -423,6 +424,10 @@ def _check_message(
     if config.name in PER_PERIOD_WINDOW and config.cycle_s is not None and poses is not None:
         status = _settled(frames, index, counter, crc_ok[index], periods, status, config, poses,
                           pages, touched)
+        counted = repeats_by_pages(status, counter, index, pages)  # e2e_repeats
+        if touched is not None and counted is not status:
+            touched.append(index[counted != status])
+        status = counted
     good = (status == _S_OK) | (status == _S_LOST)
     if good.all():  # the usual case: no gathers
         accepted[index] = True

@@ -57,6 +57,7 @@ import numpy.typing as npt
 from odocan.host.io.logs import FrameArrays
 from odocan.host.protocol.busfacts import ENC_COUNTER_MASK, POSE_PERIOD_S
 from odocan.host.protocol.e2e_cycles import new_cycles
+from odocan.host.protocol.e2e_implausible import Readings, by_stamps
 from odocan.host.protocol.e2e_periods import (
     COUNTER_MODULO,
     RECEIVE_LAG_CYCLES,
@@ -268,6 +269,9 @@ def settle(crc_ok: npt.NDArray[np.bool_], counter: IntArray,
             if j in evidence.taken and delta > max(windows):  # the host's last is not its
                 code = _taken_back(j, taken, counters, ok, cums, max_delta_init, evidence,
                                    status)
+                if code < 0:  # no frame it took leads there: a skip was the bound's
+                    code = _retaken(j, taken, evidence, status, Readings(
+                        ok, counters, columns, chosen, late, max_delta_init))
         status[j] = code
         if code != S_WRONG:
             taken.append(j)
@@ -283,14 +287,32 @@ def _taken_back(j: int, taken: list[int], counters: list[int], ok: list[bool],
                 status: npt.NDArray[np.int8]) -> int:
     """The status of frame ``j``, proven taken though every window refuses it: the frames
     ``taken`` after the firmware's last (``e2e_retract.firmware_last``) are refused
-    (``status`` and ``taken`` edited in place); OKSOMELOST (or OK one COUNTER on)."""
+    (``status`` and ``taken`` edited in place); OKSOMELOST (or OK one COUNTER on); -1 when
+    no frame the host took can have been the firmware's last (``e2e_implausible``)."""
     place = firmware_last(j, taken, counters, ok, cums, max_delta_init, evidence.taken)
     if place is None:
-        return S_LOST
+        return -1
     for q in taken[place + 1 :]:
         status[q] = S_WRONG
     del taken[place + 1 :]
     return S_OK if (counters[j] - counters[taken[-1]]) & ENC_COUNTER_MASK == 1 else S_LOST
+
+
+def _retaken(j: int, taken: list[int], evidence: Evidence, status: npt.NDArray[np.int8],
+             frames: Readings) -> int:
+    """The status of frame ``j``, proven taken, where no frame the host took can have led to
+    it: the frames from the last one proven taken judged by the stamps alone where that leads
+    to it (``e2e_implausible.by_stamps``: ``status`` and ``taken`` edited in place), else left
+    as they were; OKSOMELOST (or OK one COUNTER on)."""
+    retaken = by_stamps(j, taken, evidence.taken, evidence.skipped, frames)
+    if retaken is None:
+        return S_LOST
+    for q, code in retaken.codes.items():
+        status[q] = code
+    del taken[retaken.place + 1 :]
+    taken.extend(retaken.taken)
+    step = (frames.counters[j] - frames.counters[taken[-1]]) & ENC_COUNTER_MASK
+    return S_OK if step == 1 else S_LOST
 
 
 def _by_window_or_evidence(j: int, delta: int, window: int, evidence: Evidence) -> int:

@@ -23,9 +23,11 @@ from odocan.host.protocol.e2e import (
     MAX_DELTA_COUNTER,
     OK,
     OKSOMELOST,
+    REPEATED,
     WRONG_SEQUENCE,
     SequenceState,
 )
+from odocan.host.protocol.e2e_cycles import new_cycles
 from odocan.host.protocol.e2e_evidence import CAPTURE_HOLD_CYCLES
 from odocan.host.protocol.e2e_periods import (
     CAPTURE_TOLERANCE_CYCLES,
@@ -67,6 +69,17 @@ def readings_differ(state: SequenceState, dt_s: float, step: int, counter: int,
     return len(verdicts) > 1
 
 
+def new_cycle_pending(state: SequenceState, counter: int, timestamp_s: float) -> bool:
+    """Whether the frame (COUNTER ``counter``, bus time ``timestamp_s``) is one the stamps
+    take as the sender's frame a COUNTER cycle or more on (``SequenceState``'s new-cycle
+    rule), which the firmware may have counted a repeat: its ENC_E2E page after it says
+    (``e2e_repeats``; kobuki figure8 446 after a bus-off): held for it."""
+    last_s, cycle_s = state.last_valid_s, state.cycle_s
+    return (not state.waiting and (counter - state.last_valid) & COUNTER_MASK == 0
+            and last_s is not None and cycle_s is not None
+            and new_cycles(timestamp_s - last_s, cycle_s) > 0)
+
+
 def forced(state: SequenceState, before: Before, checked: tuple[str, int], counter: int,
            t_s: float, accepted: bool) -> str:
     """The status of a frame held, ``checked`` (status, receive periods) by the stamps against
@@ -81,8 +94,9 @@ def forced(state: SequenceState, before: Before, checked: tuple[str, int], count
         state.window = min(window + periods, MAX_DELTA_COUNTER)
         state.last_valid, state.waiting, state.last_ok_s = last_valid, waiting, last_ok_s
         state.last_valid_s = None  # a frame between: no new COUNTER cycle till the next taken
-        counts["wrong_sequence"] += 1
-        return WRONG_SEQUENCE
+        repeat = (counter - last_valid) & COUNTER_MASK == 0  # a new cycle counted a repeat
+        counts["repeated" if repeat else "wrong_sequence"] += 1
+        return REPEATED if repeat else WRONG_SEQUENCE
     delta = (counter - last_valid) & COUNTER_MASK or COUNTER_MODULO
     counts["ok"] += 1
     counts["lost"] += 0 if waiting else delta - 1

@@ -37,7 +37,7 @@ from odocan.host.protocol.e2e_crc import (
 )
 from odocan.host.protocol.e2e_cycles import new_cycle_s
 from odocan.host.protocol.e2e_evidence import CAPTURE_HOLD_CYCLES, ReleaseWatch
-from odocan.host.protocol.e2e_held import HELD, forced, readings_differ
+from odocan.host.protocol.e2e_held import HELD, forced, new_cycle_pending, readings_differ
 from odocan.host.protocol.e2e_periods import (
     CAPTURE_TOLERANCE_CYCLES,
     receive_period_count,
@@ -145,9 +145,10 @@ class E2EMonitor:
                     and (live.min_periods or (counter - live.last) & COUNTER_MASK == 1)):
                 periods = self._periods(live, timestamp_s - last, last, crc_ok, counter)
                 if (self.holds and crc_ok and live.last >= 0 and live.min_periods == 0
-                        and readings_differ(live.state, timestamp_s - last,
-                                            (counter - live.last) & COUNTER_MASK, counter,
-                                            live.cycle_s)):
+                        and (readings_differ(live.state, timestamp_s - last,
+                                             (counter - live.last) & COUNTER_MASK, counter,
+                                             live.cycle_s)
+                             or new_cycle_pending(live.state, counter, timestamp_s))):
                     live.last_s = last  # not heard yet: given back by ``check_as``
                     self._held_s = timestamp_s  # (its ``ReleaseWatch.seen`` was: once)
                     return HELD

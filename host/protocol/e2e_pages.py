@@ -37,9 +37,10 @@ from odocan.host.protocol.decode import frame_key, frame_keys
 from odocan.host.protocol.e2e_evidence import RACE_FRAMES, S_LOST, S_OK
 
 if TYPE_CHECKING:
-    from odocan.host.protocol.dbcplan import DatabaseSpec
+    from odocan.host.protocol.dbcplan import DatabaseSpec, MessageSpec
 
 PAGE_MESSAGE, PAGE_SIGNAL, OK_SIGNAL = "ODOM_STATUS", "PAGE", "ENC_E2E_OK"
+REPEATED_SIGNAL = "ENC_E2E_REPEATED"  # u8 on the same page (``e2e_repeats``)
 U16_MASK = 0xFFFF
 NARROW = 2  # ``e2e_evidence.settle``'s reading numbers: 0 strict, 1 wide, 2 narrow; -1 none
 IntArray = npt.NDArray[np.int64]
@@ -48,10 +49,12 @@ Settle = Callable[[npt.NDArray[np.int8] | None], npt.NDArray[np.int8]]
 
 @dataclass(frozen=True)
 class OkPages:
-    """The ENC_E2E pages with a right CRC: their bus positions and ENC_E2E_OK (u16)."""
+    """The ENC_E2E pages with a right CRC: their bus positions, ENC_E2E_OK (u16) and
+    ENC_E2E_REPEATED (u8; None where the DBC lays it out otherwise)."""
 
     at: npt.NDArray[np.intp]
     ok: IntArray
+    repeated: IntArray | None = None
 
 
 def ok_pages(frames: FrameArrays, crc_ok: npt.NDArray[np.bool_],
@@ -74,7 +77,23 @@ def ok_pages(frames: FrameArrays, crc_ok: npt.NDArray[np.bool_],
     page_no = (word >> np.uint64(page.start)) & np.uint64((1 << page.length) - 1)
     mine = page_no == np.uint64(ok.multiplexer_ids[0])
     count = (word[mine] >> np.uint64(ok.start)) & np.uint64((1 << ok.length) - 1)
-    return OkPages(at[mine], count.astype(np.int64))
+    return OkPages(at[mine], count.astype(np.int64),
+                   _repeated(message, word[mine], ok.multiplexer_ids[0]))
+
+
+def _repeated(message: MessageSpec, word: npt.NDArray[np.uint64], page_id: int
+              ) -> IntArray | None:
+    """ENC_E2E_REPEATED of the pages' words (page ``page_id``), where the DBC lays it out as
+    ENC_E2E_OK, on that page."""
+    try:
+        signal = message.get_signal_by_name(REPEATED_SIGNAL)
+    except KeyError:
+        return None
+    if (signal.byte_order != "little_endian" or signal.is_signed
+            or not signal.multiplexer_ids or signal.multiplexer_ids[0] != page_id):
+        return None
+    count = (word >> np.uint64(signal.start)) & np.uint64((1 << signal.length) - 1)
+    return count.astype(np.int64)
 
 
 def surplus(enc_pos: npt.NDArray[np.intp], status: npt.NDArray[np.int8],
