@@ -14,6 +14,7 @@ import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge import floodnames
+from odocan.host.judge.latenames import sent_places
 from odocan.host.judge.queuednames import queued_names
 from odocan.host.judge.reference import INTEGRATORS, Geometry
 from odocan.host.judge.resendalias import may_alias
@@ -355,12 +356,15 @@ class PoseHalves:
 def pose_halves(
     frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder, enc: Encoders
 ) -> PoseHalves:
-    """The accepted pose frames and the encoder frame each names."""
+    """The accepted pose frames and the encoder frame each names (a frame held back on the
+    bus: from where it was sent, ``latenames``)."""
     px = accepted_rows(frames, accepted, decoder, "ODOM_POSE_X")
     py = accepted_rows(frames, accepted, decoder, "ODOM_POSE_Y")
-    ex = match_encoder(enc, px["index"], px["ENC_COUNTER"], px["timestamp_s"],
+    ex = match_encoder(enc, *sent_places(frames, decoder, "ODOM_POSE_X", px["index"],
+                                         px["timestamp_s"], px["ENC_COUNTER"]),
                        px["COUNTER"].astype(np.int64))
-    ey = match_encoder(enc, py["index"], py["ENC_COUNTER"], py["timestamp_s"],
+    ey = match_encoder(enc, *sent_places(frames, decoder, "ODOM_POSE_Y", py["index"],
+                                         py["timestamp_s"], py["ENC_COUNTER"]),
                        py["COUNTER"].astype(np.int64))
     return PoseHalves(px, py, ex, ey, may_alias(frames, decoder, enc, px["index"], ex),
                       may_alias(frames, decoder, enc, py["index"], ey))
