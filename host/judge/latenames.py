@@ -40,6 +40,8 @@ A late frame's name is resolved at its send time: against the encoder frames hea
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import numpy.typing as npt
 
@@ -48,11 +50,11 @@ from odocan.host.protocol.busfacts import ENC_COUNTER_LAP, ENC_COUNTER_MASK, POS
 from odocan.host.protocol.decode import BulkDecoder
 from odocan.host.protocol.e2e import e2e_messages
 from odocan.host.protocol.e2e_crc import crc8h2f_p02
-from odocan.host.protocol.e2e_evidence import sent_times
 
 LATE_CYCLES = 1.5  # a frame heard this many send periods after its COUNTER's send: held back
 RUN_STEPS = 3  # a late run's next frame: at most this many sends on (the others lost)
 STAMP_S = 1e-6  # a log's stamp resolution (candump's): lateness read to it
+HALF_PERIOD = 0.5  # a run's silence and a frame's lead agree within this (periods)
 SLOT_FRAMES = 4 * ENC_COUNTER_LAP  # frames looked back for a send heard (a lap's lateness, x4)
 
 IntArray = npt.NDArray[np.int64]
@@ -127,21 +129,27 @@ class LateScan:
     def __init__(self, period_s: float) -> None:
         self.period_s = period_s
         self.sent_top: tuple[float, int] | None = None  # sent_times' latest-sent frame (t, c)
+        self.silence = 0.0  # periods beyond its COUNTER step before sent_top's run (``lapped``)
         self.top: tuple[float, int] | None = None  # the latest frame heard in order (t, c)
         self.tail: tuple[list[float], list[int], list[bool], list[float]] = ([], [], [], [])
         self.repeat = False  # the last frame fed repeated a send heard (``_send_heard``)
 
     def feed(self, t_new: list[float], c_new: list[int]) -> tuple[list[bool], list[float]]:
         """The next frames' stamps and COUNTERs: per frame, late and its send time."""
-        ordered, sent = self._sent_times(t_new, c_new)
         t, c, late, times = (list(self.tail[0]), list(self.tail[1]), list(self.tail[2]),
                              list(self.tail[3]))
         first = len(t)
         t += t_new
         c += c_new
         for k in range(first, len(t)):
-            sent_s: float | None = None if ordered[k - first] else sent[k - first]
-            if ordered[k - first] and k > 0 and late[k - 1]:
+            ordered, sent, ambiguous = self._sent_time(t[k], c[k])
+            if ambiguous:  # held back a lap's half or more, or not: left where heard
+                late.append(False)
+                times.append(t[k])
+                self.repeat = False
+                continue
+            sent_s: float | None = None if ordered else sent
+            if ordered and k > 0 and late[k - 1]:
                 sent_s = _run_send(t, c, times, k, self.period_s)
                 if sent_s is None and self.top is not None:
                     top_s, top_c = self.top
@@ -155,24 +163,45 @@ class LateScan:
                        and t[k] - sent_s >= LATE_CYCLES * self.period_s - STAMP_S)
             late.append(is_late)
             times.append(sent_s if is_late and sent_s is not None else t[k])
-            if sent_s is None or heard or (ordered[k - first] and not is_late):
+            if sent_s is None or heard or (ordered and not is_late):
                 self.top = (t[k], c[k])  # heard in order, or a repeat of a send heard
         keep = max(len(t) - SLOT_FRAMES, 0)
         self.tail = (t[keep:], c[keep:], late[keep:], times[keep:])
         return late[first:], times[first:]
 
-    def _sent_times(self, t_new: list[float], c_new: list[int]) -> tuple[list[bool], list[float]]:
-        """``sent_times`` of the next frames, from the latest-sent frame fed before."""
-        head = [self.sent_top] if self.sent_top is not None else []
-        t = np.asarray([h[0] for h in head] + t_new, dtype=np.float64)
-        c = np.asarray([h[1] for h in head] + c_new, dtype=np.int64)
-        ordered, sent = sent_times(t, c, self.period_s)
-        ordered, sent = ordered[len(head):], sent[len(head):]
-        for k in range(len(ordered) - 1, -1, -1):
-            if ordered[k]:
-                self.sent_top = (t_new[k], c_new[k])
-                break
-        return ordered, sent
+    def _sent_time(self, t_s: float, c: int) -> tuple[bool, float, bool]:
+        """``sent_times``' reading of the next frame from the latest-sent frame fed before
+        (in order, its send), and whether its lateness cannot be told from a COUNTER lap
+        (``lapped``: then it is neither late nor taken as the latest sent)."""
+        if self.sent_top is None:
+            self.sent_top, self.silence = (t_s, c), 0.0
+            return True, t_s, False
+        top_s, top_c = self.sent_top
+        step = (c - top_c) & ENC_COUNTER_MASK
+        x = (t_s - top_s) / self.period_s
+        sends = step + ENC_COUNTER_LAP * math.floor((x - step + ENC_COUNTER_LAP // 2)
+                                                    / ENC_COUNTER_LAP)
+        if sends <= 0:
+            return False, min(t_s, top_s + sends * self.period_s), False
+        if lapped(sends - x, self.silence):
+            return True, t_s, True
+        gap = x - sends  # periods heard beyond its send's step: a run held back starts
+        if gap >= LATE_CYCLES or sends - x >= LATE_CYCLES:
+            self.silence = max(gap, 0.0)  # after a silence; or on time after a late run
+        self.sent_top = (t_s, c)
+        return True, t_s, False
+
+
+def lapped(ahead: float, silence: float) -> bool:
+    """Whether a frame read in order ``ahead`` periods sooner than its COUNTER step from the
+    latest-sent frame puts its send (those before it read ``ahead`` periods late, were it on
+    time) is rather held back half a COUNTER lap or more (lap - ``ahead`` periods): the
+    COUNTER cannot tell the two; the run of that latest-sent frame can. Held back ``ahead``
+    periods, it started after a silence that long beyond its COUNTER step (``silence``); at
+    the sender's cadence since a frame on time, it was on time (delay=0.1:200 read so: a
+    frame 10 periods late, 6 ahead of the on-time one before it, moved every on-time frame
+    after it 120 ms back, to the wrong encoder frames)."""
+    return ahead >= LATE_CYCLES and abs(silence - ahead) > HALF_PERIOD
 
 
 def _send_heard(t: list[float], c: list[int], late: list[bool], k: int,
