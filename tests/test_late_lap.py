@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from odocan.host.judge.latehalves import Half, halves_together
 from odocan.host.judge.latenames import late_sends
 from odocan.host.protocol.busfacts import POSE_PERIOD_S
 from tests.fw_watch import Watch
@@ -78,3 +79,26 @@ def test_an_on_time_frame_after_a_long_late_run_moves_the_run() -> None:
     late, sent = late_sends(np.array(heard), np.array(counter, dtype=np.int64), PERIOD)
     assert late.tolist() == [False, False, False, True, True, True, True, True, True, True]
     assert np.allclose(sent[3:], [1.001 + PERIOD * k for k in range(2, 9)])
+
+
+def _half(stamp_s: list[float], sent_s: list[float], counter: list[int],
+          enc_counter: list[int]) -> Half:
+    index = np.arange(len(stamp_s), dtype=np.int64) * 10
+    moved = np.array(stamp_s) != np.array(sent_s)
+    place = np.where(moved, index - 5, index).astype(np.int64)
+    return Half(index, np.array(stamp_s), place, np.array(sent_s, dtype=np.float64),
+                np.array(counter, dtype=np.int64), np.array(enc_counter, dtype=np.int64))
+
+
+def test_a_moved_half_is_named_with_its_partner_or_where_heard() -> None:
+    """X of COUNTER 3 read sent 100 ms before its stamp, its Y heard at that send: X is named at
+    Y's place. X of COUNTER 4 read sent 120 ms before its stamp, its Y heard at X's stamp (one
+    tick's two halves heard together, on time): the move is undone. X of COUNTER 5 moved, its
+    Y lost: the move stands."""
+    x = _half([1.2, 1.24, 1.26], [1.1, 1.12, 1.16], [3, 4, 5], [6, 8, 10])
+    y = _half([1.1, 1.24], [1.1, 1.24], [3, 4], [6, 8])
+    moved_place = int(x.place[2])
+    halves_together(x, y, PERIOD)
+    assert x.place.tolist() == [int(y.index[0]), int(x.index[1]), moved_place]
+    assert np.allclose(x.sent_s, [1.1, 1.24, 1.16])
+    assert y.place.tolist() == y.index.tolist()
