@@ -32,6 +32,13 @@ first cut read the reboot of ``tests/test_stream_facts.py``'s rig log (no delay)
 frames held back 100 ms to its end, and named every pose and twist frame after it from there
 (its twist check FAILed 0.30 rad/s where the streamed judge PASSed).
 
+Not read at all (``lapped``): a frame held back half a COUNTER lap (8 periods, 160 ms) or more
+reads as one sent after the latest-sent frame, ahead of the sender's cadence, and every on-time
+frame after it as late. Unless the run before it began after a silence as long as that lead (a
+run held back, then a frame on time), it is left where it was heard and moves nothing (the
+first cut FAILed every kobuki/pmir seed 500-504 at ``delay=0.1:200``: 48.3 mm where main
+PASSed 0.066 mm). The two halves of one pose are named together (``latehalves``).
+
 A late frame's name is resolved at its send time: against the encoder frames heard before it
 (their bus position), as a frame heard in order is. Frames heard in order keep their place
 (nothing changes on a log without late frames). The streamed judge scans alike, chunk by chunk
