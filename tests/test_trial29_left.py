@@ -39,9 +39,12 @@ DRIVES: dict[str, tuple[tuple[str, str, str, str, str], str | None]] = {
     "stall_delay_dup": (("pmir", "random", "12", "12", "delay=0.3:55,dup=0.1,stall=4:2"), None),
     "late_naming_100ms": (
         ("kobuki", "random", "23", "10", "delay=0.5:100,stall=4:1"),
-        "issue #11: twists held back 100 ms name a frame a COUNTER lap late (their DISTANCE is "
-        "the firmware's at the frame 16 before: delay150's late naming): DISTANCE 16.5 mm, the "
-        "pose 23.3 mm and 603 mrad off a right firmware"),
+        "issue #11: ODOM_TWIST DISTANCE 16.8 mm off a right firmware from 8.02 s (the twist "
+        "COUNTER 9 sent 7.921 s, heard 100 ms late, named where sent: the WHEEL_ENCODERS "
+        "ENC_COUNTER 13 of 7.91 s; the reference's path runs 16.5 mm past its DISTANCE there, "
+        "likely the firmware had the late frame of that ENC_COUNTER from 7.75 s: not traced). "
+        "The pose is met since the late naming (host.judge.latenames; 23.3 mm, 603 mrad "
+        "before)"),
 }
 Drive = tuple[Path, Watch, int]  # the log, the firmware's watch, run's exit code
 POSE_X = (2, 4)  # ODOM_POSE_X's X: bytes 2..5, signed, 0.1 mm

@@ -14,6 +14,8 @@ import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge import floodnames
+from odocan.host.judge.latehalves import Half, halves_together
+from odocan.host.judge.latenames import sent_places
 from odocan.host.judge.queuednames import queued_names
 from odocan.host.judge.reference import INTEGRATORS, Geometry
 from odocan.host.judge.resendalias import may_alias
@@ -355,15 +357,28 @@ class PoseHalves:
 def pose_halves(
     frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder, enc: Encoders
 ) -> PoseHalves:
-    """The accepted pose frames and the encoder frame each names."""
+    """The accepted pose frames and the encoder frame each names (a frame held back on the
+    bus: from where it was sent, ``latenames``)."""
     px = accepted_rows(frames, accepted, decoder, "ODOM_POSE_X")
     py = accepted_rows(frames, accepted, decoder, "ODOM_POSE_Y")
-    ex = match_encoder(enc, px["index"], px["ENC_COUNTER"], px["timestamp_s"],
-                       px["COUNTER"].astype(np.int64))
-    ey = match_encoder(enc, py["index"], py["ENC_COUNTER"], py["timestamp_s"],
-                       py["COUNTER"].astype(np.int64))
+    x, y = (_late_half(frames, decoder, name, rows)
+            for name, rows in (("ODOM_POSE_X", px), ("ODOM_POSE_Y", py)))
+    halves_together(x, y)  # one pose's halves named at one place
+    ex = match_encoder(enc, x.place, x.enc_counter, x.sent_s, x.counter)
+    ey = match_encoder(enc, y.place, y.enc_counter, y.sent_s, y.counter)
     return PoseHalves(px, py, ex, ey, may_alias(frames, decoder, enc, px["index"], ex),
                       may_alias(frames, decoder, enc, py["index"], ey))
+
+
+def _late_half(frames: FrameArrays, decoder: BulkDecoder, name: str,
+               rows: dict[str, np.ndarray]) -> Half:
+    """One pose message's accepted frames where ``latenames`` names each (``Half``)."""
+    index = rows["index"].astype(np.int64)
+    stamp_s = rows["timestamp_s"].astype(np.float64)
+    enc_counter = rows["ENC_COUNTER"].astype(np.int64)
+    place, _, sent_s = sent_places(frames, decoder, name, index, stamp_s, enc_counter)
+    return Half(index, stamp_s, place.astype(np.int64).copy(), sent_s.astype(np.float64).copy(),
+                rows["COUNTER"].astype(np.int64), enc_counter)
 
 
 def flood_named(

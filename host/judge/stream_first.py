@@ -25,6 +25,8 @@ from odocan.host.judge.samples import (
 from odocan.host.judge.stalls import silent
 from odocan.host.judge.stream import StreamE2E, StreamEncoders, StreamPoses
 from odocan.host.judge.stream_facts import StreamFacts
+from odocan.host.judge.stream_late import REFUSAL as LATE
+from odocan.host.judge.stream_late import StreamLate
 from odocan.host.judge.stream_losses import StreamLosses
 from odocan.host.judge.stream_primed import PowerUpPrefix
 from odocan.host.judge.stream_refusal import UNSETTLED, NotStreamable
@@ -82,6 +84,7 @@ class FirstPass:
         self.facts = StreamFacts(self.decoder)
         self.losses = StreamLosses(self.decoder)
         self.pages = PageEvidence(self.decoder)  # what the firmware took (gapseen)
+        self.late = StreamLate(self.decoder)  # a pose or twist frame named where sent
         self.queued = False  # frames of a periodic sender let out in a burst (queued_frames)
         self.twins = False  # an encoder frame with a twin (samples.twinned_encoder_frames)
         self.resent_kept = False  # a sample kept whose resend differs (StreamPoses.resent)
@@ -125,6 +128,7 @@ class FirstPass:
         self.facts.feed(chunk, accepted)
         self.losses.feed(chunk, accepted, enc)
         self.pages.feed(chunk, enc)
+        self.late.feed(chunk, accepted)
         if enc.cycle_s is not None:
             self._bursts(chunk, accepted, enc.cycle_s)
         self._twins(chunk, accepted)
@@ -194,6 +198,8 @@ class FirstPass:
             raise NotStreamable("a resent pose differs from the first naming its encoder frame")
         if self.poses.lone:  # judged on what it carries, by the whole log's judge (lonehalves)
             raise NotStreamable("a pose half whose partner was lost (a lone half)")
+        if self.late.found:  # the stream names it where heard (stream_late)
+            raise NotStreamable(LATE)
 
     @property
     def breaks(self) -> np.ndarray:

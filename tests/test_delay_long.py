@@ -1,0 +1,162 @@
+"""Pose frames held back 100-150 ms on the bus (issue #11: a FAIL must never blame a correct
+firmware).
+
+``odocan run --seed 1 --duration 10 --faults delay=0.5:150`` FAILed the correct firmware by
+47.0 mm (pmir) and 44.2 mm (kobuki): the Python firmware's every step, watched and integrated
+again in float64 (``tests.fw_watch``), is within 1/1000 LSB, and it integrated exactly the
+encoder frames the judge's reference steps through. The judge's fault was the pairing: a pose
+frame's ENC_COUNTER was resolved against the encoder frames heard before the frame *arrived*;
+held back 150 ms (15 encoder periods) it named the frame 16 after its own, and was paired with
+an on-time half naming that one (X of 3.52 s with Y of 3.67 s: 47.2 mm, 195 mrad). Now a pose
+or twist frame known late is resolved where it was sent (``host.judge.latenames``), also when
+it follows a late one in its sender's sequence and ``sent_times`` reads it in order (pmir seed
+2: 0.57 mm FAILed on main, 26.2 mm with the first rule alone). Seeds 1-6 x {pmir, kobuki} x
+{0.5:100, 0.3:150, 0.5:150}, 10 s, every firmware within 1/1000 LSB (``tests.fw_watch``): 22 of
+36 FAILed the correct firmware on main 20d0d696 (both judges), now 5, by both judges alike: the
+2 pinned below, and at 0.5:150 pmir seed 5 (0.75 mm on main; now 86 mm: a lone ODOM_POSE_Y of
+4.941 s, heard in order and named where heard, 87 mm off the reference at its frame: not the
+naming), kobuki seeds 5 and 6 (128 and 61 mm on main; 75 and 82 mm now; not traced).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from odocan.host.cli.app import main
+from odocan.host.judge.latenames import late_sends
+from odocan.host.protocol.busfacts import POSE_PERIOD_S
+from tests.fw_watch import Watch, watched
+from tests.judges_cli import both_analyses, fails_by_position
+from tests.log_edit import raise_raw
+
+TAMPER_LSB = 100  # 10 mm in ODOM_POSE_X's 0.1 mm LSBs
+
+Drive = tuple[Path, Watch, int]  # the log, the firmware's watch, run's exit code
+
+DRIVES = {  # name: (robot, seed, faults), each FAILed on main
+    "pmir_1": ("pmir", 1, "delay=0.5:150"),  # 46.96 mm beyond the allowance
+    "pmir_2": ("pmir", 2, "delay=0.5:150"),  # 0.57 mm (a late chain read in order)
+    "kobuki_1": ("kobuki", 1, "delay=0.5:150"),  # 44.2 mm
+    "kobuki_6": ("kobuki", 6, "delay=0.5:100"),  # 58.8 mm
+}
+SKIPPED_BY_PLAUSIBILITY = (
+    "issue #11: kobuki seed 3, delay=0.5:150: ODOM_TWIST DISTANCE 17.0 mm off (3.8 mm on main, "
+    "59 samples then, 181 now): the firmware's E2E took the late COUNTER 5 of 4.20 s (sent "
+    "4.05 s; OKSOMELOST), refused its step as implausible and then the on-time COUNTER 5 of "
+    "4.21 s as REPEATED. The host's E2E takes the same two frames' verdicts without the pose "
+    "evidence, but e2e_evidence's 'skipped' (the poses after 4.20 s name the frame before it) "
+    "refuses the late one, and the on-time one is then taken into the reference: the evidence "
+    "cannot tell an E2E refusal from a plausibility one")
+RESUME_EDGE = (
+    "issue #11: kobuki seed 2, delay=0.5:150: the first sample after a hold at 5.14 s is "
+    "0.097 mm beyond the resume rule's tolerance (stallfirst.resume_across; 7.4 mm beyond on "
+    "main, at 8.93 s); not traced")
+ABSORBED = (
+    "issue #11: pmir seed 2, delay=0.5:100 (the correct firmware FAILed on main by 69 mrad, "
+    "PASSes now): X raised 10 mm from 5.0 s PASSes: the log's encoder sequence has 109 gaps "
+    "(frames the host's E2E refused that the log holds) and each gap's placement may move the "
+    "position by its gap bound (2275 mm summed), which absorbs the 10 mm (10.05 mm absorbed); "
+    "the firmware's ENC_E2E pages do not prove it took exactly the log's frames there (gapseen). "
+    "Of the 34 sweep drives that PASS, 6 PASS such a tamper from 2, 5 or 8 s (11 of 102): "
+    "kobuki 0.5:100 seed 2; pmir 0.3:150 seed 5 (PASSed on main too); pmir 0.5:100 seed 2; "
+    "pmir 0.5:150 seeds 4, 5, 6 (main FAILed their correct firmware as well)")
+
+
+def _drive(root: Path, robot: str, seed: int, faults: str) -> Drive:
+    log = root / f"{robot}.log"
+    with watched(robot) as watch:
+        code = main(["run", "--robot", robot, "--seed", str(seed), "--duration", "10",
+                     "--faults", faults, "--firmware", "python", "--log", str(log)])
+    return log, watch, code
+
+
+@pytest.fixture(scope="module", params=sorted(DRIVES))
+def drive(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory) -> Drive:
+    robot, seed, faults = DRIVES[request.param]
+    return _drive(tmp_path_factory.mktemp(request.param), robot, seed, faults)
+
+
+def _run_and_judges(drive: Drive, capsys: pytest.CaptureFixture[str]) -> list[int]:
+    log, _, code = drive
+    codes = [code, *both_analyses(log)]
+    capsys.readouterr()
+    return codes
+
+
+def test_the_firmware_integrates_the_frames_it_took(drive: Drive) -> None:
+    _, watch, _ = drive
+    assert watch.steps > 400, watch.steps
+    assert watch.within_a_thousandth_lsb(), (watch.worst_m, watch.worst_rad)
+
+
+def test_the_correct_firmware_passes(drive: Drive, capsys: pytest.CaptureFixture[str]) -> None:
+    assert _run_and_judges(drive, capsys) == [0, 0, 0]
+
+
+@pytest.mark.parametrize("name", ["pmir_1", "kobuki_1"])
+def test_a_pose_10_mm_off_fails_by_its_position(
+        name: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    robot, seed, faults = DRIVES[name]
+    log, _, _ = _drive(tmp_path, robot, seed, faults)
+    tampered = tmp_path / "t.log"
+    assert raise_raw(log, tampered, "ODOM_POSE_X", (2, 4), TAMPER_LSB, 5.0) > 100
+    wrong = fails_by_position(tampered, tmp_path)
+    capsys.readouterr()
+    assert wrong == []
+
+
+@pytest.mark.parametrize(("seed", "reason"), [(3, SKIPPED_BY_PLAUSIBILITY), (2, RESUME_EDGE)])
+def test_the_correct_firmware_passes_kobuki_still_failing(
+        seed: int, reason: str, tmp_path: Path, capsys: pytest.CaptureFixture[str],
+        request: pytest.FixtureRequest) -> None:
+    request.applymarker(pytest.mark.xfail(strict=True, reason=reason))
+    drive = _drive(tmp_path, "kobuki", seed, "delay=0.5:150")
+    assert drive[1].within_a_thousandth_lsb()
+    assert _run_and_judges(drive, capsys) == [0, 0, 0]
+
+
+def test_a_frame_after_a_late_one_is_late_when_its_counter_says_so() -> None:
+    """ODOM_POSE_Y as pmir seed 2 heard them: 7 in order at 8.801 s, then 0, 1, 5, 6 (sent
+    8.661-8.781 s, each heard 150 ms on) and 8, 9 (sent 8.821, 8.841 s): ``sent_times`` reads
+    8 and 9 in order, heard when sent; they follow late ones and their COUNTER step from 7
+    puts their sends 7.5 periods before their stamps."""
+    heard = np.array([8.801, 8.811, 8.831, 8.911, 8.931, 8.971, 8.991])
+    counter = np.array([7, 0, 1, 5, 6, 8, 9], dtype=np.int64)
+    late, sent = late_sends(heard, counter, POSE_PERIOD_S)
+    assert late.tolist() == [False, True, True, True, True, True, True]
+    assert np.allclose(sent, [8.801, 8.661, 8.681, 8.761, 8.781, 8.821, 8.841])
+
+
+def test_a_frame_after_a_silence_continues_no_late_run() -> None:
+    """A late frame, then the sender silent 2 s (an MCU halt; kobuki circle seed 7163,
+    ``delay=0.1:150,stall=8:2``, FAILed 77.6 mm when a step from the last frame heard in order
+    read the first send after the halt as held back): that send is on time."""
+    heard = np.array([7.981, 7.991, 10.021, 10.041])
+    counter = np.array([3, 2, 5, 6], dtype=np.int64)
+    late, sent = late_sends(heard, counter, POSE_PERIOD_S)
+    assert late.tolist() == [False, True, False, False]
+    assert np.array_equal(sent[2:], heard[2:])
+
+
+def test_frames_stamped_late_in_bus_order_keep_their_place() -> None:
+    """A recorder that stamps a burst late keeps the bus order: nothing is late there, however
+    far the stamps run behind the COUNTER."""
+    heard = np.array([1.001, 1.021, 1.201, 1.2011, 1.2012, 1.221])
+    counter = np.array([0, 1, 2, 3, 4, 5], dtype=np.int64)
+    late, sent = late_sends(heard, counter, POSE_PERIOD_S)
+    assert not late.any()
+    assert np.array_equal(sent, heard)
+
+
+@pytest.mark.xfail(strict=True, reason=ABSORBED)
+def test_a_pose_10_mm_off_fails_across_refused_gaps(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    log, _, code = _drive(tmp_path, "pmir", 2, "delay=0.5:100")
+    tampered = tmp_path / "t.log"
+    assert raise_raw(log, tampered, "ODOM_POSE_X", (2, 4), TAMPER_LSB, 5.0) > 100
+    codes = [code, *both_analyses(tampered)]
+    capsys.readouterr()
+    assert codes == [0, 1, 1]
