@@ -110,7 +110,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from odocan.host.io.logs import FrameArrays
-from odocan.host.judge import acrosscut, cutreprime, floodnames, reportfacts
+from odocan.host.judge import acrosscut, cutreprime, floodnames, gapskips, reportfacts
 from odocan.host.judge.compare import (
     check_twist,
     error_summary,
@@ -490,9 +490,8 @@ def _distance(frames: FrameArrays, accepted: np.ndarray, decoder: BulkDecoder, e
               robot: RobotProfile, ref: Reference, judge: DistanceJudge, seen: Seen,
               alive_s: np.ndarray) -> dict[str, Any]:
     """``distance.check_distance`` over the firmware's steps from the reference's start
-    (``seen``: its evidence, ``holetaken``, ``nearthreshold``; those a re-prime after a set-pose
-    left out zeroed: ``cutreprime``)."""
-    e0 = ref.start
+    (``seen``: its evidence, holetaken, nearthreshold, gapskips; cutreprime's re-primes)."""
+    judge.took_none, e0 = gapskips.took_none(seen, frozenset(ref.counter_restarts)), ref.start
     steps = firmware_steps(enc, e0, Geometry.of(robot), min(robot.counter_bits, WIRE_COUNTER_BITS),
                            judge.max_wheel_speed_mm_s, through=seen.through, resets=seen.resets)
     cutreprime.cut_left_out(steps.d_left, steps.d_right, ref.stall_reprimes)
