@@ -88,9 +88,8 @@ Everything comes from the bus (``FrameArrays``, live or from a log), decoded wit
    frame it primed on), with E2E sequences starting afresh; ``reboots`` and a ``reboot`` event
    in the report say where.
 
-The code: this module runs the steps and writes the report; ``host.judge.samples`` holds steps
-1 to 3, ``host.judge.reference_path`` step 4, ``host.judge.compare`` step 5 (and the twist and
-the plot series), ``host.judge.reboots`` step 6.
+The code: this module runs the steps and writes the report; ``host.judge.samples`` steps 1-3,
+``reference_path`` 4, ``compare`` 5 (and the twist and the plot series), ``reboots`` 6.
 
 The on-board pose is the decoded signals: X, Y * 1e-4 m, HEADING * 2 pi/65536 rad
 (``TURNS * 2 pi + HEADING`` unwrapped). An applied ODOM_SET_POSE cuts the log into a new life
@@ -110,7 +109,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from odocan.host.io.logs import FrameArrays
-from odocan.host.judge import acrosscut, cutreprime, floodnames, reportfacts
+from odocan.host.judge import acrosscut, cutreprime, floodnames, gapskips, reportfacts
 from odocan.host.judge.compare import (
     check_twist,
     error_summary,
@@ -490,11 +489,12 @@ def _distance(frames: FrameArrays, accepted: np.ndarray, decoder: BulkDecoder, e
               robot: RobotProfile, ref: Reference, judge: DistanceJudge, seen: Seen,
               alive_s: np.ndarray) -> dict[str, Any]:
     """``distance.check_distance`` over the firmware's steps from the reference's start
-    (``seen``: its evidence, ``holetaken``, ``nearthreshold``; those a re-prime after a set-pose
-    left out zeroed: ``cutreprime``; its stalls' windows)."""
-    steps = firmware_steps(enc, e0 := ref.start, Geometry.of(robot), min(
-        robot.counter_bits, WIRE_COUNTER_BITS), judge.max_wheel_speed_mm_s, through=seen.through,
-        resets=seen.resets, stalled=ref.stalled)  # stallrestart: the stalls' restarts
+    (``seen``: its evidence, holetaken, nearthreshold, gapskips; cutreprime's re-primes; its
+    stalls' windows: stallrestart)."""
+    judge.took_none, e0 = gapskips.took_none(seen, frozenset(ref.counter_restarts)), ref.start
+    steps = firmware_steps(enc, e0, Geometry.of(robot), min(robot.counter_bits, WIRE_COUNTER_BITS),
+                           judge.max_wheel_speed_mm_s, through=seen.through, resets=seen.resets,
+                           stalled=ref.stalled)
     cutreprime.cut_left_out(steps.d_left, steps.d_right, ref.stall_reprimes)
     return check_distance(frames, accepted, decoder, enc, (steps.d_left, steps.d_right), e0,
                           judge, alive_s)

@@ -64,14 +64,18 @@ leave that pin. Whole and streamed give the same result: max and min are exact i
 A firmware off by exactly a multiple of 65.536 m cannot be told on the wire; one that wraps
 elsewhere (at 65.535 m) or saturates can.
 
-Not modelled (left looser, never tighter): a gap whose frames the firmware missed too (its
-ENC_E2E_LOST grew by them) still takes the path bound, though the firmware took the merged step
-exactly.
+A gap whose frames the pages prove the firmware took none of (``gapskips.took_none``: it
+missed them too, ``Seen.gap_missed``, or it received exactly the log's frames around it,
+``Seen.skipped``) takes no path above: the firmware merged the gap as the reference does (or
+more, where it refused some of the log's frames: ``skipped``' defect below), so its path grew
+by at most the reference's there (a DISTANCE 10 mm high from a bus-off's end, kobuki seed 24,
+``busoff=4:0.3``, hid in the gap's 120 mm and PASSed).
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -222,6 +226,8 @@ class DistanceJudge:
     loss_spans: list[tuple[int, int]] = field(default_factory=list)  # (first, last) frames
     twins: dict[int, tuple[float, float]] = field(default_factory=dict)  # frame: up, down (m)
     skipped: list[tuple[int, int, int]] = field(default_factory=list)  # losses.ok_count_spans
+    took_none: Callable[[int], bool] | None = None  # gap frames the pages prove it took none of
+    # the gap's frames into (``gapskips.took_none``): no path above the merged step there
     _cols: dict[str, np.ndarray] = field(default_factory=dict)  # frames kept: g, units, n, c, up
     _skip: SkipDown = field(init=False, repr=False)  # the allowance of ``skipped``
     _carry: tuple[int, int, int, float, int | None] = (0, 0, 0, 0.0, None)  # sums, last seq
@@ -253,7 +259,7 @@ class DistanceJudge:
         counts = c0 + np.cumsum(np.abs(d_left) + np.abs(d_right))
         n = n0 + np.arange(1, len(g) + 1, dtype=np.int64)
         periods = np.diff(np.concatenate(([seq[0] if last_seq is None else last_seq], seq)))
-        extra = self._gap_extra_m(periods, ds_m)
+        extra = self._gap_extra_m(g, periods, ds_m)
         for frame, (up_m, _) in self.twins.items():
             if 0 <= frame - int(g[0]) < len(g):
                 extra[frame - int(g[0])] += up_m
@@ -280,10 +286,13 @@ class DistanceJudge:
         fine path bounds them, from the span's first frame to the one after its last)."""
         return self.loss_spans + [(a, z + 1) for a, z, n in self.skipped if n > MAX_RUN]
 
-    def _gap_extra_m(self, periods: IntArray, ds_m: FloatArray) -> FloatArray:
-        """Per frame: how far above the merged step the firmware's path may be (a gap)."""
+    def _gap_extra_m(self, g: IntArray, periods: IntArray, ds_m: FloatArray) -> FloatArray:
+        """Per frame ``g``: how far above the merged step the firmware's path may be (a gap
+        whose frames it may have taken; none where ``took_none`` proves it took none)."""
         extra = np.zeros(len(periods))
         for k in np.flatnonzero(periods > 1).tolist():
+            if self.took_none is not None and self.took_none(int(g[k])):
+                continue
             extra[k] = gap_extra_m(self.robot, self.max_wheel_speed_mm_s, int(periods[k]),
                                    float(ds_m[k]))
         return extra

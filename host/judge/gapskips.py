@@ -14,17 +14,20 @@ too). Its position then differs from the reference's by that run's merge error, 
 counts the log's, gated as the firmware's). That bound, not gapbound's, is the gap's allowance
 (the smaller of the two, both true bounds). The whole-log judge reads those frames from the
 log's encoder frames; the streamed one keeps them as they go by (``SkipCounts``), the same
-numbers, bit for bit.
+numbers, bit for bit; the live one (``livegapskips``: the monitor, the bridge) keeps the latest
+frames and lowers a gap's placement to it when the pages prove the run (``rows_allowance_m``).
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from odocan.host.judge.breaks import merge_allowance_m
+from odocan.host.judge.gapseen import Seen
 from odocan.host.judge.reference import Geometry
 from odocan.host.judge.samples import Encoders, IntArray
 
@@ -66,11 +69,21 @@ class SkipCounts:
         if m is None:
             return math.inf
         first, end = frames_around(b, m)
-        rows = [self._kept.get(at) for at in range(first, end)]
-        if first < 0 or any(row is None for row in rows):
+        if first < 0:
             return math.inf
-        seq, left, right = (np.array(col, dtype=np.int64) for col in zip(*rows, strict=True))
-        return skip_allowance_m(left, right, seq, geometry, bits, integrator)
+        return rows_allowance_m([self._kept.get(at) for at in range(first, end)], geometry,
+                                bits, integrator)
+
+
+def rows_allowance_m(rows: list[tuple[int, int, int] | None], geometry: Geometry, bits: int,
+                     integrator: str) -> float:
+    """``skip_allowance_m`` of the frames kept as rows (sender number, left, right), from ``m``
+    before the gap to ``m`` after it (``frames_around``); inf where one was not kept (None): the
+    streamed judge's ``SkipCounts`` and the live judge's ``livegapskips.LiveGapSkips``."""
+    if not rows or any(row is None for row in rows):
+        return math.inf
+    seq, left, right = (np.array(col, dtype=np.int64) for col in zip(*rows, strict=True))
+    return skip_allowance_m(left, right, seq, geometry, bits, integrator)
 
 
 def skipped_at(enc: Encoders, b: int, m: int | None, geometry: Geometry, bits: int,
@@ -84,3 +97,11 @@ def skipped_at(enc: Encoders, b: int, m: int | None, geometry: Geometry, bits: i
         return math.inf
     return skip_allowance_m(enc.left[first:end], enc.right[first:end], enc.seq[first:end],
                             geometry, bits, integrator)
+
+
+def took_none(seen: Seen, reprimed: frozenset[int]) -> Callable[[int], bool]:
+    """Whether the pages prove the firmware took none of the frames the gap into encoder frame
+    ``b`` lacks: it missed them too (``Seen.gap_missed``), or it received exactly the log's
+    frames around the gap (``Seen.skipped``: not None). Its path across the gap then grew by at
+    most the reference's (``distance``: no gap path above; the whole-log and streamed judge's)."""
+    return lambda b: seen.gap_missed(b, reprimed) or seen.skipped(b, reprimed) is not None

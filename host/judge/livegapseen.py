@@ -11,7 +11,9 @@ stall's span with its merge allowance: ``liveplace.StallPlacer``) until the page
 they prove the firmware missed the gap too, or took exactly the log's frames over the stall, the
 part's allowance is withdrawn: the placement is clamped again without it and the reference moved
 back by the difference at the next sample (``StallPlacer.shift``), so the samples judged from
-then show the error the allowance hid, as ``analyze`` shows it. Bounded: the last ``KEPT_PAGES``
+then show the error the allowance hid, as ``analyze`` shows it; a gap inside a run the pages
+prove the firmware received exactly and refused ``m`` of (``Seen.skips``) is lowered to
+``gapskips``' allowance (``livegapskips``). Bounded: the last ``KEPT_PAGES``
 pages, the totals and gaps they reach, the spans proven over the last ``KEPT_FRAMES`` frames.
 
 The samples judged since that placement are judged again then (``LiveAllowance.rejudge``): a
@@ -131,7 +133,8 @@ class LiveSeen:
             horizon = base + self._enc_count - KEPT_FRAMES
             self.seen = Seen(_joined(self.seen.same, new.same, base, horizon),
                              _joined(self.seen.missed, new.missed, base, horizon),
-                             counted=_joined(self.seen.counted, new.counted, base, horizon))
+                             counted=_joined(self.seen.counted, new.counted, base, horizon),
+                             skips=_skips_joined(self.seen.skips, new.skips, base, horizon))
         return self.seen
 
     def through(self, a_s: float, b_s: float) -> int | None:
@@ -204,6 +207,13 @@ def _joined(old: list[Span], new: list[Span], base: int, horizon: int) -> list[S
     before frame ``horizon`` let go."""
     spans = old + [(first + base, last + base) for first, last in new]
     return sorted({span for span in spans if span[1] >= horizon})
+
+
+def _skips_joined(old: list[tuple[int, int, int]], new: list[tuple[int, int, int]], base: int,
+                  horizon: int) -> list[tuple[int, int, int]]:
+    """``_joined`` of ``Seen.skips`` (first, last, m; each run its own m: ``gapskips``)."""
+    runs = old + [(first + base, last + base, m) for first, last, m in new]
+    return sorted({run for run in runs if run[1] >= horizon})
 
 
 def status_values(message: Any, data: bytes, data_ids: Any, decode: Any = None

@@ -38,6 +38,7 @@ from odocan.host.judge.gapseen import Seen
 from odocan.host.judge.livedark import DarkRestarts
 from odocan.host.judge.livefill import LiveFill
 from odocan.host.judge.livegapseen import LiveSeen
+from odocan.host.judge.livegapskips import LiveGapSkips
 from odocan.host.judge.liveholdstep import BusOrder, excess_m
 from odocan.host.judge.livelosses import LiveAllowance
 from odocan.host.judge.livepagelaps import page_laps
@@ -123,6 +124,7 @@ class StallPlacer:
         self._was_lapped = False  # ``lapped`` of the frame before the latest
         self._before: tuple[float, ...] | None = None  # the window's row before the latest
         self.seen = LiveSeen()  # what the firmware's pages prove it took (its life's)
+        self.skips = LiveGapSkips()  # the latest frames' counts: a gap the pages prove (gapskips)
         self.dark = DarkRestarts()  # restarts after the input went dark (host.judge.livedark)
         self._reprimed: tuple[int, ...] = ()  # the latest counter restarts re-primed on
         self._parts: list[Part] = []  # the placements' parts whose allowance pages may withdraw
@@ -161,6 +163,7 @@ class StallPlacer:
         """``_on_encoders``, and the frame to ``seen``."""
         gap = self._on_encoders(seq, frame, prev, bits)
         self._before = prev
+        self.skips.heard(seq, self.fill.sender, frame[1], frame[2])
         self.bus.heard(seq, *frame)
         periods = self.periods - self.moved  # the stamps' numbering: sums kept
         self.seen.on_encoders(seq, frame[3], periods)
@@ -276,7 +279,7 @@ class StallPlacer:
         half an LSB on each axis per placement walked the reference away: 0.24 mm after 20
         stalls of a correct firmware's loaded capture, beyond a budget of 0)."""
         geometry, bits, integrator = reference
-        stalled, parts = self.stalled, []
+        stalled, parts, self.skips.reference = self.stalled, [], reference
         if stalled:
             allowance = self._allowance_m(last_compared, pose.seq, window, reference)
             parts.append((False, last_compared, pose.seq, allowance, pose.seq))
@@ -349,18 +352,24 @@ class StallPlacer:
         ``PARTS_KEPT``) that ``seen`` proves the firmware took as the reference did (a gap it
         missed too, a stall over which it took exactly the log's frames: ``gapseen.Seen``) lose
         their allowance: the budget of every placement from theirs on shrinks by it, and each
-        is clamped again within it, as ``breaks.bound_offsets`` places them (``_replace``).
-        True when the reference is to move at the next sample."""
+        is clamped again within it, as ``breaks.bound_offsets`` places them (``_replace``). A
+        gap inside a run it received exactly and refused ``m`` of (``livegapskips``) is lowered
+        to ``gapskips``' allowance, in the budgets and its step's bound, as ``analyze`` bounds
+        it. True when the reference is to move at the next sample."""
         reprimed = frozenset(self._reprimed)
         proven = [part for part in self._parts if not math.isinf(part[3]) and (
             seen.gap_missed(part[1], reprimed) if part[0]
             else seen.took_all(part[1] - 1, part[2], reprimed))]
-        if not proven:
-            return False
         self._parts = [part for part in self._parts if part not in proven]
+        skipped = self.skips.lowered(self._parts, seen, reprimed)
+        if not proven and not skipped:
+            return False
         for part in proven:  # the budgets only: its step's bound stays (the whole-log
             # judge's proof may not reach as far, and the judges say one thing)
             self._lower(part, part[3], 0.0)
+        for part, allowance_m in skipped:  # kept, with its allowance lowered
+            self._parts[self._parts.index(part)] = (*part[:3], allowance_m, part[4])
+            self._lower(part, part[3] - allowance_m, part[3] - allowance_m)
         self._replace()
         self.withdrawn += 1
         return self.owed

@@ -40,7 +40,7 @@ from odocan.host.judge.breaks import placed_offsets
 from odocan.host.judge.configs import ConfigPages, in_force
 from odocan.host.judge.distance import DistanceJudge
 from odocan.host.judge.gapfill import gap_or_fill_allowance
-from odocan.host.judge.gapskips import SkipCounts
+from odocan.host.judge.gapskips import SkipCounts, took_none
 from odocan.host.judge.judgedfloor import mark_floor
 from odocan.host.judge.keptmark import mark_kept
 from odocan.host.judge.nearthreshold import least_of
@@ -421,7 +421,8 @@ def _judged(
         robot, max_wheel_speed_mm_s, power_up and start_pose is None,
         [b for b in breaks.tolist() if b > e0],
         [(a, z) for a, z, _ in spans],
-        skipped=first.losses.ok_spans(power_up and start_pose is None)))
+        skipped=first.losses.ok_spans(power_up and start_pose is None),
+        took_none=took_none(seen, reprimed)))
     after_span = drops.allowance(np.array([last + 1 for _, last, _ in spans], dtype=np.int64))
     left_out = stream_first(frames, db, robot, integrator, bits,  # stallfirst
                             (tolerance.position_m, tolerance.heading_rad))

@@ -1,0 +1,148 @@
+"""The live judges' gaps the firmware's pages prove it skipped (issue #11, rule 5: a PASS must
+never hide a wrong pose; one judge: ``host.judge.livegapskips``).
+
+kobuki random seed 24, ``stall=2:0.5,stall=6:1.5,busoff=4:0.3``, +10 mm on ODOM_POSE_X's X from
+the first pose after the bus-off (4.32 s; ``tests/log_edit.raise_raw``, re-signed by cantools).
+The pages around the silence count exactly the log's frames received, one refused (REPEATED)
+that the host took: ``analyze`` bounds the gap by the merge error of the frames around it
+(``gapskips``, 0.04 mm) and FAILs the tampered log; the monitor and the bridge placed their
+reference at the gap's end within ``gapbound``'s 121.9 mm, absorbed the 10 mm and PASSed it
+(0 POSE WRONG, 0.07 mm beyond the allowance). Now the pages lower the live placement to the same
+allowance: every judge FAILs it by the position, and PASSes the drive untampered. The firmware
+is checked right on the drive (``tests/fw_watch``: every step within 1/1000 LSB of its float64
+arc), so a FAIL of the untampered drive would blame a correct one.
+
+The same drive with ODOM_TWIST DISTANCE +10 mm from the bus-off's end (bytes 6..7, u16, 1 mm):
+``analyze`` allowed the firmware's path to grow by the gap's path bound above the merged step
+(``distance.gap_extra_m``: 181.8 mm, it may have taken the gap's frames one by one) and PASSed it
+(0 mm excess); the pages prove it took none of them (``gapskips.took_none``): no path above
+there, FAIL by 9.99 mm whole and streamed. The live DISTANCE judge still PASSes it (pinned).
+
+Pinned (strict xfail): pmir straight 411 ``delay=0.4:70,busoff=3:0.4``, untampered, FAILs the
+live judges, on main too (``analyze`` PASSes it, 0.07 mm): a held frame the live E2E accepted.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from odocan.sim.robot import load
+from tests.judges_cli import STREAMS, analyze, both_analyses, fails_by_position, watched_run
+from tests.log_edit import raise_raw
+from tests.test_edge_tamper import POSE_X, first_pose_after_silence
+from tests.test_stall_bound import _live
+
+BEYOND_M = 5e-3  # a tamper's FAIL by the position: beyond the allowance by more than this
+DISTANCE = (6, 2)  # ODOM_TWIST DISTANCE: bytes 6..7, 1 mm
+
+
+def _live_verdicts(path: Path, robot: str, integrator: str) -> list[tuple[bool, float]]:
+    """Per live judge (the monitor's model, the bridge): whether it latched a wrong pose, and
+    its largest position error beyond the allowance (m)."""
+    monitor, bridge, end_s = _live(load(robot), integrator, path)
+    state = monitor.health(end_s)["state"]
+    out = [(state == "POSE WRONG", monitor.tracker.max_beyond_allowance_m)]
+    out.append((bridge.tracker.wrongs.count > 0, bridge.tracker.max_beyond_allowance_m))
+    assert out[0][0] == (monitor.tracker.wrongs.count > 0), state
+    return out
+
+
+@pytest.fixture(scope="module")
+def busoff_drive(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+    base = tmp_path_factory.mktemp("busoff_gap")
+    log = base / "clean.log"
+    watch, code = watched_run(log, "kobuki", "random", 24, 12,
+                              "stall=2:0.5,stall=6:1.5,busoff=4:0.3")
+    assert code == 0
+    assert watch.steps > 100
+    assert watch.within_a_thousandth_lsb(), (watch.worst_m, watch.worst_rad)
+    at_s = first_pose_after_silence(log, 0.3, 4.0)
+    assert raise_raw(log, base / "step.log", "ODOM_POSE_X", POSE_X, 100, at_s - 1e-4) > 100
+    return log, base / "step.log"
+
+
+def test_the_bus_off_drive_passes_every_judge_untampered(
+        busoff_drive: tuple[Path, Path], capsys: pytest.CaptureFixture[str]) -> None:
+    codes = both_analyses(busoff_drive[0])
+    capsys.readouterr()
+    assert codes == [0, 0]
+    for wrong, beyond_m in _live_verdicts(busoff_drive[0], "kobuki", "exact"):
+        assert not wrong
+        assert beyond_m <= 1e-4
+
+
+def test_plus_10_mm_after_the_bus_off_fails_live_as_analyze(
+        busoff_drive: tuple[Path, Path], tmp_path: Path,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """Before: the monitor and the bridge PASSed it (0.07 mm beyond, 9.99 mm absorbed by the
+    gap's 121.9 mm); ``analyze`` FAILed it (9.94 mm beyond)."""
+    wrong = fails_by_position(busoff_drive[1], tmp_path, BEYOND_M)
+    capsys.readouterr()
+    assert wrong == []
+    for latched, beyond_m in _live_verdicts(busoff_drive[1], "kobuki", "exact"):
+        assert latched
+        assert beyond_m > BEYOND_M
+
+
+def _distance_excess_m(report: Path) -> float:
+    return float(json.loads(report.read_text())["onboard_distance_vs_reference"]["max_excess_m"])
+
+
+@pytest.fixture(scope="module")
+def distance_raised(busoff_drive: tuple[Path, Path]) -> Path:
+    log = busoff_drive[0]
+    out = log.with_name("distance.log")
+    at_s = first_pose_after_silence(log, 0.3, 4.0)
+    assert raise_raw(log, out, "ODOM_TWIST", DISTANCE, 10, at_s - 1e-4) > 100
+    return out
+
+
+def test_the_untampered_distance_passes_whole_and_streamed(
+        busoff_drive: tuple[Path, Path], tmp_path: Path,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    for stream in STREAMS:
+        assert analyze(busoff_drive[0], stream, tmp_path / f"{stream}.json") == 0
+        assert _distance_excess_m(tmp_path / f"{stream}.json") == 0.0
+    capsys.readouterr()
+
+
+def test_distance_plus_10_mm_after_the_bus_off_fails_whole_and_streamed(
+        distance_raised: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Before: PASS, 0 mm excess (the gap's path bound, 181.8 mm above the merged step)."""
+    for stream in STREAMS:
+        assert analyze(distance_raised, stream, tmp_path / f"{stream}.json") == 1
+        assert _distance_excess_m(tmp_path / f"{stream}.json") > 9e-3, stream
+    capsys.readouterr()
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "the live DISTANCE judge (monitor, bridge) PASSes it, 0 mm excess: livedistance.on_encoders "
+    "adds distance.gap_extra_m (181.8 mm here) at every gap and nothing lowers it; the skip "
+    "proof needs the FRAME_TOTALS page after the ENC_E2E page after the run, and a proof that "
+    "comes after a twist past the gap was judged cannot lower the allowance without tightening "
+    "the samples judged before it (the twists would have to wait for it, as livechoice does)"))
+def test_distance_plus_10_mm_after_the_bus_off_fails_live(distance_raised: Path) -> None:
+    monitor, bridge, _ = _live(load("kobuki"), "exact", distance_raised)
+    assert not monitor.distance.as_dict()["passed"]
+    assert not bridge.distance.as_dict()["passed"]
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "live false FAIL, not a gap's allowance: pmir straight 411 delay=0.4:70,busoff=3:0.4 "
+    "untampered: monitor and bridge POSE WRONG 259.95 mm from 3.62 s (analyze PASS 0.07 mm): "
+    "the live E2E accepted a held pre-bus-off frame (COUNTER 6, count 1490, 21 behind the frame "
+    "before) as frame 181, a 44-period step, so the live reference stood at 1.4043 m at frame "
+    "183 (1766 counts) where the firmware said 1.6644 m; the placement there moved "
+    "the reference +260 mm within gapbound's 1886 mm, the reference itself caught up by frame "
+    "186, and the next placements' step bound (0.2 mm) cannot move it back; no skip proof "
+    "applies (the live judge refused frames the log holds in that run)"))
+def test_the_pmir_bus_off_delay_drive_passes_live_untampered(tmp_path: Path) -> None:
+    log = tmp_path / "drive.log"
+    watch, code = watched_run(log, "pmir", "straight", 411, 9, "delay=0.4:70,busoff=3:0.4")
+    assert code == 0
+    assert watch.within_a_thousandth_lsb(), (watch.worst_m, watch.worst_rad)
+    for wrong, _ in _live_verdicts(log, "pmir", "exact"):
+        assert not wrong
