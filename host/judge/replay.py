@@ -67,6 +67,7 @@ from odocan.host.judge.replay_compare import (
     starts_mid_drive,
     versus_log,
 )
+from odocan.host.judge.replay_deaf import DeafBus
 from odocan.host.judge.replay_events import (
     clock_steps_s,
     fed_events,
@@ -175,7 +176,8 @@ class LockstepReplay:
         self._buses = [VirtualBus(channel=channel, preserve_timestamps=True,
                                   receive_own_messages=False) for _ in range(3)]
         self._log_bus, fw_bus, host_bus = self._buses
-        self.board = FirmwareBoard(fw_bus, params, self.clock)
+        self._controller = DeafBus(fw_bus)  # bus-off on the plan's ``deaf`` ticks
+        self.board = FirmwareBoard(self._controller, params, self.clock)
         self.listeners = listeners
         self.loop = TickLoop(self._work, host_bus, listeners, self.clock)
         self.stopped: Stopped | None = None  # by a signal, before the log's end
@@ -194,11 +196,7 @@ class LockstepReplay:
     def _work(self, k: int) -> None:
         """The nodes' work in a tick: the firmware's board alone (the log is the rest), none
         while the log shows its firmware halted or not yet powered up (``replay_lives``)."""
-        if k in self.deaf:  # bus-off: every frame lost to it, the status interrupt first
-            while self.board.bus.recv(0) is not None:
-                pass
-            if k - 1 not in self.deaf:
-                self.board.ecu.isr_bus_state(True)
+        self._controller.deaf = k in self.deaf  # bus-off: it neither hears nor sends
         if k not in self.halted:
             self.board.run_tick()
 
@@ -299,7 +297,7 @@ class LockstepReplay:
         """Deliver what is left, stop the listeners, release the buses: every one, even when
         a listener's ``stop()`` fails (the first error is raised once all are released)."""
         release_all([self._drain, *(li.stop for li in self.listeners),
-                     *(bus.shutdown for bus in self._buses)])
+                     self._controller.shutdown, *(bus.shutdown for bus in self._buses)])
 
 
 def _unanalysed(signum: int | None, replay: LockstepReplay, log_out: Path | None,

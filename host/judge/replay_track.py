@@ -80,10 +80,10 @@ def encoder_ticks(timestamp_s: npt.NDArray[np.float64], counter: IntArray) -> In
     timestamps say that many periods passed; gaps capped at ``MAX_GAP_TICKS``."""
     if len(counter) == 0:
         return np.zeros(0, dtype=np.int64)
-    step = np.maximum(1, np.diff(counter) & ENC_COUNTER_MASK).astype(np.int64)
+    step = (np.diff(counter) & ENC_COUNTER_MASK).astype(np.int64)
     periods = np.rint(np.diff(timestamp_s) / contract.cycle_time_s("WHEEL_ENCODERS"))
     step += LAP * np.maximum(0, np.rint((periods - step) / LAP)).astype(np.int64)
-    step = np.minimum(step, MAX_GAP_TICKS)
+    step = np.clip(step, 1, MAX_GAP_TICKS)
     return np.concatenate(([0], np.cumsum(step))).astype(np.int64)
 
 
