@@ -200,6 +200,14 @@ class LockstepReplay:
         if k not in self.halted:
             self.board.run_tick()
 
+    def deaf_s(self) -> tuple[tuple[float, float], ...]:
+        """The bus-off ticks as bus times [first tick's start, the first heard tick's start]."""
+        ticks = sorted(self.deaf)
+        runs = [k for i, k in enumerate(ticks) if i == 0 or ticks[i - 1] != k - 1]
+        ends = [k + 1 for i, k in enumerate(ticks) if i + 1 == len(ticks) or ticks[i + 1] != k + 1]
+        return tuple((self.loop.start_s + a * TICK_S, self.loop.start_s + b * TICK_S)
+                     for a, b in zip(runs, ends, strict=True))
+
     def _reset(self, which: int, after: bool) -> None:
         """A fresh firmware where the log's powered up (``replay_lives.LifePlan.resets``): the
         board reset and its receive FIFO cleared with it."""
@@ -463,6 +471,7 @@ def replay_and_analyze(
         raise _unanalysed(stop.signum, replay, log_out, recording is not None)
     wall_s = time.perf_counter() - start
     replayed = collector.arrays()
+    jumps = replace(JumpModel.of(profile, integrator), deaf_s=replay.deaf_s())
     analysis = analyze(replayed, profile, integrator, tolerance=tolerance,
                        wall_seconds=wall_s)
     analysis.report["replay"] = {
@@ -475,13 +484,13 @@ def replay_and_analyze(
         "ticks_without_frame": replay.ticks - min(replay.ticks, len(feed.encoders.index)),
         "interrupted": replay.stopped is not None,
         "onboard_vs_log": versus_log(frames, feed.accepted, replayed,
-                                     jumps=JumpModel.of(profile, integrator)),
+                                     jumps=jumps),
     }
     if not plan.trivial:
         _, replayed_accepted = check_frames(replayed)
         analysis.report["replay"]["lives"] = judge_lives(
             frames, feed.accepted, replayed, replayed_accepted, feed.encoders, plan, tolerance,
-            JumpModel.of(profile, integrator))
+            jumps)
     if replay.stopped is not None:
         analysis.report["stopped"] = replay.stopped.as_dict()
     return analysis
