@@ -35,6 +35,7 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.firmware.clock import LOST_TIME_PERIODS
+from odocan.firmware.errors import ErrorFlag
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.analysis import Tolerance
 from odocan.host.judge.bootnamed import named_start, pose_enc_rows, powerup_poses
@@ -50,7 +51,7 @@ from odocan.host.judge.replay_compare import departures, versus_log
 from odocan.host.judge.replay_events import replayed_positions
 from odocan.host.judge.replay_jumps import JumpModel
 from odocan.host.judge.replay_resume import stalls_resume_excess_m
-from odocan.host.judge.replay_sent import bus_off_silences, sent_times_s
+from odocan.host.judge.replay_sent import bus_off_silences, new_error_bits, sent_times_s
 from odocan.host.judge.replay_track import EncoderTrack
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.protocol.e2e import check_frames
@@ -219,10 +220,11 @@ def judge_lives(log: FrameArrays, accepted: npt.NDArray[np.bool_], replayed: Fra
         vs = versus_log(log.select(span[0]), accepted[span[0]], replayed.select(span[1]),
                         rebooted, jumps)
         if stalls and jumps is not None:  # the log's own resume: no FIFO content excuses it
+            lost = new_error_bits(log, BulkDecoder(contract.database()), track, stalls)
             vs["max_resume_excess_m"] = stalls_resume_excess_m(
                 log.select(span[0]), accepted[span[0]],
-                [_positions(track, stall, span[0].start) for stall in stalls], jumps,
-                tolerance.position_m)
+                [_positions(track, stall, span[0].start) for stall in stalls],
+                [bool(bits & ErrorFlag.TIME_LOST) for bits in lost], jumps, tolerance.position_m)
         life: dict[str, Any] = {
             "life": k, "t_s": round(float(log.timestamp_s[track.index[first]]) - t0, 3),
             "from_power_up": rebooted or plan.powered,
