@@ -19,6 +19,10 @@ Found by the outside trial, run and analyze PASSing each drive, replay not:
   was replayed as a halt, the MCU frozen, where the recording one ticked on hearing nothing
   (``replay_sent.bus_off_silences``).
 
+* kobuki random 516, 10 s, ``delay=0.1:20,busoff=4.0:0.3``: reported FAILing (217 mm), PASSes
+  here before and after the bus-off fixes of ``tests/test_replay_busoff.py`` (the same drive
+  without its delay, UNJUDGED before them); kept with its tamper.
+
 Still wrong (strict xfail, figures in the reason): kobuki circle 420 and kobuki random 430.
 A bus-off under a delay (pmir circle 5, ``delay=0.3:50,busoff=5:1,reboot=12,dup=0.1``) is
 ``tests/test_replay_trust.py``'s.
@@ -48,6 +52,7 @@ DRIVES = {
     "kobuki-420": ("kobuki", "circle", 420, 12, "delay=0.5:90,busoff=5:0.5", 6.0),
     "kobuki-430": ("kobuki", "random", 430, 8, "delay=0.3:110,reboot=3:0.5,dup=0.1", 5.0),
     "kobuki-busoff-1": ("kobuki", "random", 1, 8, "delay=0.3:55,busoff=3:0.5", 3.6),
+    "kobuki-busoff-516": ("kobuki", "random", 516, 10, "delay=0.1:20,busoff=4.0:0.3", 4.5),
 }
 LEFT = {
     "kobuki-420": "a 90 ms delay, past half the 4-bit ENC_COUNTER's lap: the replayed firmware "

@@ -67,6 +67,7 @@ from odocan.host.judge.replay_compare import (
     starts_mid_drive,
     versus_log,
 )
+from odocan.host.judge.replay_deaf import DeafBus
 from odocan.host.judge.replay_events import (
     clock_steps_s,
     fed_events,
@@ -175,7 +176,8 @@ class LockstepReplay:
         self._buses = [VirtualBus(channel=channel, preserve_timestamps=True,
                                   receive_own_messages=False) for _ in range(3)]
         self._log_bus, fw_bus, host_bus = self._buses
-        self.board = FirmwareBoard(fw_bus, params, self.clock)
+        self._controller = DeafBus(fw_bus)  # bus-off on the plan's ``deaf`` ticks
+        self.board = FirmwareBoard(self._controller, params, self.clock)
         self.listeners = listeners
         self.loop = TickLoop(self._work, host_bus, listeners, self.clock)
         self.stopped: Stopped | None = None  # by a signal, before the log's end
@@ -194,13 +196,17 @@ class LockstepReplay:
     def _work(self, k: int) -> None:
         """The nodes' work in a tick: the firmware's board alone (the log is the rest), none
         while the log shows its firmware halted or not yet powered up (``replay_lives``)."""
-        if k in self.deaf:  # bus-off: every frame lost to it, the status interrupt first
-            while self.board.bus.recv(0) is not None:
-                pass
-            if k - 1 not in self.deaf:
-                self.board.ecu.isr_bus_state(True)
+        self._controller.deaf = k in self.deaf  # bus-off: it neither hears nor sends
         if k not in self.halted:
             self.board.run_tick()
+
+    def deaf_s(self) -> tuple[tuple[float, float], ...]:
+        """The bus-off ticks as bus times [first tick's start, the first heard tick's start]."""
+        ticks = sorted(self.deaf)
+        runs = [k for i, k in enumerate(ticks) if i == 0 or ticks[i - 1] != k - 1]
+        ends = [k + 1 for i, k in enumerate(ticks) if i + 1 == len(ticks) or ticks[i + 1] != k + 1]
+        return tuple((self.loop.start_s + a * TICK_S, self.loop.start_s + b * TICK_S)
+                     for a, b in zip(runs, ends, strict=True))
 
     def _reset(self, which: int, after: bool) -> None:
         """A fresh firmware where the log's powered up (``replay_lives.LifePlan.resets``): the
@@ -299,7 +305,7 @@ class LockstepReplay:
         """Deliver what is left, stop the listeners, release the buses: every one, even when
         a listener's ``stop()`` fails (the first error is raised once all are released)."""
         release_all([self._drain, *(li.stop for li in self.listeners),
-                     *(bus.shutdown for bus in self._buses)])
+                     self._controller.shutdown, *(bus.shutdown for bus in self._buses)])
 
 
 def _unanalysed(signum: int | None, replay: LockstepReplay, log_out: Path | None,
@@ -465,6 +471,7 @@ def replay_and_analyze(
         raise _unanalysed(stop.signum, replay, log_out, recording is not None)
     wall_s = time.perf_counter() - start
     replayed = collector.arrays()
+    jumps = replace(JumpModel.of(profile, integrator), deaf_s=replay.deaf_s())
     analysis = analyze(replayed, profile, integrator, tolerance=tolerance,
                        wall_seconds=wall_s)
     analysis.report["replay"] = {
@@ -477,13 +484,13 @@ def replay_and_analyze(
         "ticks_without_frame": replay.ticks - min(replay.ticks, len(feed.encoders.index)),
         "interrupted": replay.stopped is not None,
         "onboard_vs_log": versus_log(frames, feed.accepted, replayed,
-                                     jumps=JumpModel.of(profile, integrator)),
+                                     jumps=jumps),
     }
     if not plan.trivial:
         _, replayed_accepted = check_frames(replayed)
         analysis.report["replay"]["lives"] = judge_lives(
             frames, feed.accepted, replayed, replayed_accepted, feed.encoders, plan, tolerance,
-            JumpModel.of(profile, integrator))
+            jumps)
     if replay.stopped is not None:
         analysis.report["stopped"] = replay.stopped.as_dict()
     return analysis

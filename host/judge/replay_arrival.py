@@ -32,6 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from odocan.firmware.clock import LOST_TIME_PERIODS
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.replay_events import clock_steps_s
 from odocan.host.judge.replay_lives import LifePlan
@@ -131,21 +132,38 @@ def fed_plan(plan: LifePlan, fed: FedTicks) -> tuple[set[int], dict[int, int], s
         halted.update(range(int(fed.tick[min(plan.resets, default=0)])))
     for first, end in plan.halts:
         halted.update(fed.span(first, end))
-    deaf = {t for first, end in plan.deaf for t in _deaf_span(fed, first, end)}
+    # the silence's first tick still heard: its frames failed to leave, which took the
+    # controller bus-off (pmir circle 5: the frame of 4.99 s taken, its poses never logged)
+    deaf = {t for first, end in plan.deaf
+            for t in _last_heard(fed, _bus_back(fed, fed.span(first + 1, end)))}
     return halted, {position: fed.of_period(tick) for position, tick in plan.held}, deaf
 
 
-def _deaf_span(fed: FedTicks, first: int, end: int) -> range:
-    """The arrival ticks a bus-off silence [first, end) (periods) leaves the firmware deaf.
+def _bus_back(fed: FedTicks, span: range) -> range:
+    """A bus-off's ``span`` of arrival ticks, ended at the first encoder frame that came back
+    after the whole bus fell silent with it (no encoder frame for ``LOST_TIME_PERIODS`` ticks
+    before it): the bus was back, and the controllers with it. The firmware's silence ends only
+    at its own first frame after, up to a pose period later: kobuki random 516, 10 s,
+    ``busoff=4.0:0.3``, the encoder frame of 4.31 s (the recovery at 4.3028 s) lost to a
+    replayed board still deaf, where the recording one took it (a repeated COUNTER, counted as
+    such by its E2E check). A sender that talks on through the firmware's silence (its
+    controller alone bus-off) keeps the span whole."""
+    ticks = fed.tick
+    j = int(np.searchsorted(ticks, span.start))
+    if j == 0 or j >= len(ticks) or ticks[j] >= span.stop:
+        return span
+    if int(ticks[j]) - int(ticks[j - 1]) <= LOST_TIME_PERIODS:
+        return span
+    return range(span.start, int(ticks[j]))
 
-    Its first tick still heard: its frames failed to leave, which took the controller bus-off
-    (pmir circle 5: the frame of 4.99 s taken, its poses never logged). Its last tick heard
-    when the bus's first encoder frame since the silence began reached the firmware there: the
-    firmware sends its poses every other tick, so its frames name its recovery a tick late,
-    and a bus that fell silent with it came back with it (pmir random 14, 10 s,
-    ``busoff=2:0.4``: the frame of 2.41 s, the recording firmware's step, drained; its steps
-    split otherwise, the replay 0.36 mm off the reference, FAIL)."""
-    span = fed.span(first + 1, end)
+
+def _last_heard(fed: FedTicks, span: range) -> range:
+    """``span`` without its last tick when the bus's first encoder frame since the silence
+    began (accepted or refused) reached the firmware there: the firmware sends its poses every
+    other tick, so its frames name its recovery a tick late, and a bus that fell silent with it
+    came back with it (pmir random 14, 10 s, ``busoff=2:0.4``: the frame of 2.41 s, the
+    recording firmware's step, drained; its steps split otherwise, the replay 0.36 mm off the
+    reference, FAIL)."""
     arrivals = np.concatenate((fed.tick, fed.late))
     inside = arrivals[(arrivals >= span.start) & (arrivals < span.stop)]
     if len(inside) and int(inside.min()) == span.stop - 1:

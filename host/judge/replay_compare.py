@@ -338,6 +338,11 @@ def departures(vs_log: dict[str, Any], tolerance: Tolerance) -> list[str]:
         reasons.append(f"the log's resent positions differ from its first at the same encoder "
                        f"frame by up to {resent * 1e3:.4f} mm "
                        f"(tolerance {tolerance.position_m * 1e3:.4g} mm)")
+    resume = vs_log.get("max_resume_excess_m")
+    if resume is not None and resume > 0.0:
+        reasons.append(f"after a stall its first pose lies {resume * 1e3:.4f} mm beyond any "
+                       "its firmware can resume at from its pose before (stallresume: fine "
+                       "steps to a frame its FIFO kept, one merged step, fine steps on)")
     heading = vs_log["max_heading_diff_rad"]
     if heading is not None and heading > tolerance.heading_rad:
         reasons.append(f"its heading differs from the log's by up to {heading * 1e3:.4f} mrad "

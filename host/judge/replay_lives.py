@@ -35,6 +35,7 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.firmware.clock import LOST_TIME_PERIODS
+from odocan.firmware.errors import ErrorFlag
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.analysis import Tolerance
 from odocan.host.judge.bootnamed import named_start, pose_enc_rows, powerup_poses
@@ -49,7 +50,8 @@ from odocan.host.judge.replay_boots import boot_starts
 from odocan.host.judge.replay_compare import departures, versus_log
 from odocan.host.judge.replay_events import replayed_positions
 from odocan.host.judge.replay_jumps import JumpModel
-from odocan.host.judge.replay_sent import bus_off_silences, sent_times_s
+from odocan.host.judge.replay_resume import stalls_resume_excess_m
+from odocan.host.judge.replay_sent import bus_off_silences, new_error_bits, sent_times_s
 from odocan.host.judge.replay_track import EncoderTrack
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.protocol.e2e import check_frames
@@ -217,12 +219,19 @@ def judge_lives(log: FrameArrays, accepted: npt.NDArray[np.bool_], replayed: Fra
         rebooted = k > 0 or plan.primed_known  # its start known: from (0, 0, 0) there
         vs = versus_log(log.select(span[0]), accepted[span[0]], replayed.select(span[1]),
                         rebooted, jumps)
+        if stalls and jumps is not None:  # the log's own resume: no FIFO content excuses it
+            lost = new_error_bits(log, BulkDecoder(contract.database()), track, stalls)
+            vs["max_resume_excess_m"] = stalls_resume_excess_m(
+                log.select(span[0]), accepted[span[0]],
+                [_positions(track, stall, span[0].start) for stall in stalls],
+                [bool(bits & ErrorFlag.TIME_LOST) for bits in lost], jumps, tolerance.position_m)
         life: dict[str, Any] = {
             "life": k, "t_s": round(float(log.timestamp_s[track.index[first]]) - t0, 3),
             "from_power_up": rebooted or plan.powered,
             "stalls": [{"t_s": _tick_s(track, a, t0), "ticks": b - a} for a, b in stalls],
             "onboard_vs_log": vs, "unjudged": None}
-        if stalls and (departures(vs, tolerance) or _raw_departs(vs, tolerance)):
+        resumed = (vs.get("max_resume_excess_m") or 0.0) <= 0.0
+        if stalls and resumed and (departures(vs, tolerance) or _raw_departs(vs, tolerance)):
             cut = int(np.searchsorted(track.tick, stalls[0][0]))
             pre = _span(track, fed, first, cut, len(log), len(replayed))
             before = versus_log(log.select(pre[0]), accepted[pre[0]], replayed.select(pre[1]),
@@ -241,6 +250,14 @@ def _span(track: EncoderTrack, fed: IntArray, first: int, end: int, n_log: int,
     replay_end = int(fed[end]) if end < len(fed) else n_replayed
     return (slice(int(track.index[first]), log_end),
             slice(int(fed[first]) if first < len(fed) else n_replayed, replay_end))
+
+
+def _positions(track: EncoderTrack, stall: tuple[int, int], start: int) -> tuple[int, int]:
+    """The positions, from the log's ``start``, of the encoder frames at or after a stall's
+    first and end ticks."""
+    at = np.minimum(np.searchsorted(track.tick, stall), len(track.tick) - 1)
+    first, end = (int(track.index[k]) - start for k in at.tolist())
+    return first, end
 
 
 def _tick_s(track: EncoderTrack, tick: int, t0: float) -> float:

@@ -75,12 +75,23 @@ def bus_off_silences(frames: FrameArrays, decoder: BulkDecoder, track: EncoderTr
     pmir circle 5, 15 s, ``delay=0.3:50,busoff=5:1,reboot=12,dup=0.1``, a step of (474, 641)
     counts at 6.02 s where the recording firmware's E2E window, widened by 100 frame-less ticks,
     refused frames until 6.10 s."""
+    return [silence for silence, new in zip(silences, new_error_bits(
+        frames, decoder, track, silences), strict=True)
+            if new & ErrorFlag.BUS_OFF and not new & ErrorFlag.TIME_LOST]
+
+
+def new_error_bits(frames: FrameArrays, decoder: BulkDecoder, track: EncoderTrack,
+                   silences: list[tuple[int, int]]) -> list[int]:
+    """Per silence ([first, end) ticks of ``track``): the ERROR_MASK bits its first ODOM_STATUS
+    summary after it (CRC holding) reports that the last one before it did not (0: no summary
+    after it, or none decodable)."""
+    none = [0] * len(silences)
     try:
         page = decoder.decode_page(frames, "ODOM_STATUS", 0)
     except DecodeError:
-        return []
+        return none
     if "ERROR_MASK" not in page or not len(track.tick):
-        return []
+        return none
     good = crc_holds(frames, decoder, page["index"])
     at, masks = page["index"][good], page["ERROR_MASK"][good].astype(np.int64)
     times = np.asarray(frames.timestamp_s, dtype=np.float64)[at]
@@ -92,9 +103,8 @@ def bus_off_silences(frames: FrameArrays, decoder: BulkDecoder, track: EncoderTr
         k_before = int(np.searchsorted(times, before_s, "right")) - 1
         k_after = int(np.searchsorted(times, after_s))
         if k_after >= len(times):
+            found.append(0)
             continue
         was = int(masks[k_before]) if k_before >= 0 else 0
-        new = int(masks[k_after]) & ~was
-        if new & ErrorFlag.BUS_OFF and not new & ErrorFlag.TIME_LOST:
-            found.append((first, end))
+        found.append(int(masks[k_after]) & ~was)
     return found

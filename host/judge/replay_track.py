@@ -87,7 +87,7 @@ def encoder_ticks(timestamp_s: npt.NDArray[np.float64], counter: IntArray) -> In
     step = ((np.diff(counter) - 1) & ENC_COUNTER_MASK).astype(np.int64) + 1
     periods = np.rint(np.diff(timestamp_s) / contract.cycle_time_s("WHEEL_ENCODERS"))
     step += LAP * np.maximum(0, np.rint((periods - step) / LAP)).astype(np.int64)
-    step = np.minimum(step, MAX_GAP_TICKS)
+    step = np.clip(step, 1, MAX_GAP_TICKS)
     return np.concatenate(([0], np.cumsum(step))).astype(np.int64)
 
 
