@@ -1,8 +1,11 @@
 """The motor controller's restarts as the firmware tells them from CTRL_UPTIME (firmware/
 encoders.py ``_controller_restarted``), from a log: a frame whose CTRL_UPTIME is below what the
 last accepted frame's aged to, both reported, and whose counts are young enough for that age,
-when the next frame confirms it (``confirmed_holds``). Used by the reference's step walk
-(``reference_path.firmware_steps``)."""
+when the next frame confirms it (``confirmed_holds``), and only between two frames the
+firmware's E2E window lets follow each other (``window_periods``: a pair beyond it means the host
+took a frame the firmware never had). Used by the reference's step walk
+(``reference_path.firmware_steps``); the live reference's per-frame rule (``livepose``) takes
+``in_window``."""
 
 from __future__ import annotations
 
