@@ -79,11 +79,16 @@ DRIVES = [
     (1, "delay=0.5:100", False),
     (1, "delay=0.5:150", False),
     (2, "delay=0.5:100", False),
-    (703, "delay=0.5:100,stall=2:1", False),  # stallrestart: 40.2 mm till then
+    # 40.2 mm, 67.1 mrad till a CTRL_UPTIME restart inside a stall followed the firmware's
+    # COUNTER_RESET (stallrestart) and asked its E2E window (ctrlrestart.window_periods,
+    # tests/test_mcu_bus_combos.py): either rule alone PASSes it
+    (703, "delay=0.5:100,stall=2:1", False),
     # stallfirst FAILed it 762 mm once merged; 29.96 mm beyond till a silence anywhere between
     # two samples was a stall (stalls.inner_silences, tests/test_stall_delay_dup.py)
     (2, "delay=0.5:100,stall=2:1", False),
-    (2, "stall=1.5:0.5,delay=0.3:55", False),  # stallrestart: 3.75 mrad till then
+    # 3.75 mrad till then (the same two rules): the host took the on-time 7 and 8 (CTRL_UPTIME
+    # 3) the full mailbox dropped, so the late 5 (CTRL_UPTIME 2) after them read as a restart
+    (2, "stall=1.5:0.5,delay=0.3:55", False),
     (2, "delay=0.5:150", False),  # a held-back summary read as a reboot: 65.6 mm till lateup
     # FAILed (3.58 mm of DISTANCE; 17.7, 1.8, 33.8, 59.3 mm) till a pose or twist frame held
     # back was named from where it was sent (host.judge.latenames, tests/test_delay_long.py)

@@ -1,10 +1,15 @@
 """The motor controller's restarts as the firmware tells them from CTRL_UPTIME (firmware/
 encoders.py ``_controller_restarted``), from a log: a frame whose CTRL_UPTIME is below what the
 last accepted frame's aged to, both reported, and whose counts are young enough for that age,
-when the next frame confirms it (``confirmed_holds``). Used by the reference's step walk
-(``reference_path.firmware_steps``)."""
+when the next frame confirms it (``confirmed_holds``), and only between two frames the
+firmware's E2E window lets follow each other (``window_periods``: a pair beyond it means the host
+took a frame the firmware never had). Used by the reference's step walk
+(``reference_path.firmware_steps``); the live reference's per-frame rule (``livepose``) takes
+``in_window``."""
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 import numpy.typing as npt
@@ -25,7 +30,30 @@ def ctrl_restarts(uptime: IntArray, young: npt.NDArray[np.bool_], elapsed_s: Flo
     before, after = uptime[:-1], uptime[1:]
     aged = aged_uptime(before, elapsed_s, cycle_s, successors(counter[:-1], counter[1:]))
     restarted: npt.NDArray[np.bool_] = (after != 0) & (before != 0) & (after < aged)
+    if cycle_s is not None:
+        restarted &= (((counter[1:] - counter[:-1] - 1) & MASK) + 1
+                      <= window_periods(np.asarray(elapsed_s), cycle_s))
     return restarted & young[1:]
+
+
+def window_periods(elapsed_s: FloatArray, cycle_s: float) -> IntArray:
+    """The widest E2E window (periods) the firmware's receiver can have reached ``elapsed_s``
+    (bus time) after taking a frame: one period a tick from 0 (Profile 2, WHEEL_ENCODERS), its
+    ticks following the frames' arrival, plus one for the bus-to-tick rounding. A pair of
+    accepted frames whose COUNTER step (1..16) lies beyond it never followed each other in the
+    firmware: the host took a frame between that the firmware did not have (issue #11: pmir
+    square 645, ``busoff=2.7:0.2,stall=4.7:0.3,delay=0.3:55``: the host took a frame sent while
+    the MCU was halted, CTRL_UPTIME 6, then one held 55 ms on the bus, CTRL_UPTIME 5, 11
+    COUNTERs on 5 ms later, which the firmware resumed on after the stall; told a controller
+    restart there, the reference re-primed where the firmware did not: 19.3 mm off it).
+    Saturated at a lap (16)."""
+    return np.minimum(np.ceil(elapsed_s / cycle_s).astype(np.int64) + 1, MASK + 1)
+
+
+def in_window(counter_step: int, elapsed_s: float, cycle_s: float) -> bool:
+    """``window_periods`` for one pair (the live reference, per frame): whether a COUNTER step
+    (mod 16, 0 a lap) ``elapsed_s`` after the frame before fits the firmware's window."""
+    return ((counter_step - 1) & MASK) + 1 <= min(math.ceil(elapsed_s / cycle_s) + 1, MASK + 1)
 
 
 def successors(before: IntArray, after: IntArray) -> npt.NDArray[np.bool_]:

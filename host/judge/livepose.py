@@ -16,6 +16,7 @@ from odocan.firmware.encoders import (
     RESYNC_FRAMES,
 )
 from odocan.host.judge.ambiguity import least_ambiguous_periods
+from odocan.host.judge.ctrlrestart import in_window
 from odocan.host.judge.livewindow import CYCLE_S, Counted
 from odocan.host.judge.nearthreshold import NEAR_DETAIL, near
 from odocan.host.judge.reference import Geometry, wrap_delta
@@ -125,6 +126,7 @@ class StepGate:
         if uptime and last_uptime and (uptime < last_uptime or (
                 t_s - last_t > AGED_AFTER_S and (counter - prev[0]) & RING_MASK != 1  # not waited
                 and uptime < aged(last_uptime, t_s - last_t))) \
+                and in_window(counter - prev[0], t_s - last_t, CYCLE_S) \
                 and self._young(frame, uptime):
             self.prev, self._prev_seq, self.uptime = prev, prev_seq, last_uptime  # held
             self._prev_t = last_t

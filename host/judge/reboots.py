@@ -413,12 +413,17 @@ def _worst(parts: list[dict[str, Any]]) -> dict[str, Any]:
     known = [p for p in parts if p["max_position_error_m"] is not None]
     if not known:
         return dict(parts[-1])
-    return {
+    worst = {
         "max_position_error_m": max(p["max_position_error_m"] for p in known),
         "max_heading_error_rad": max(p["max_heading_error_rad"] for p in known),
         "final_position_error_m": known[-1]["final_position_error_m"],
         "final_heading_error_rad": known[-1]["final_heading_error_rad"],
     }
+    beyond = "max_position_error_beyond_allowance_m"  # kept over the lives (summary, tests)
+    if any(beyond in p for p in known):  # a life without an allowance: its whole error
+        worst["loss_allowance_m"] = max(p.get("loss_allowance_m", 0.0) for p in known)
+        worst[beyond] = max(p.get(beyond, p["max_position_error_m"]) for p in known)
+    return worst
 
 
 def _twist(parts: list[dict[str, Any]]) -> dict[str, Any]:

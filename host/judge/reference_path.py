@@ -19,10 +19,8 @@ from odocan.host.judge.breaks import BreakSummary, placed_offsets
 from odocan.host.judge.breakspan import break_allowance as break_allowance
 from odocan.host.judge.breakspan import seen_whole
 from odocan.host.judge.ctrlrestart import (
-    aged_uptime,
     confirmed_holds,
     ctrl_restarts,
-    successors,
     young_counts,
 )
 from odocan.host.judge.cutreprime import Backlog, cut_reprime
@@ -278,9 +276,9 @@ def firmware_steps(
         return within(a, b, max(1, int(seq[b] - seq[a])))
 
     def restarted(a: int, b: int) -> bool | None:  # None: held, not confirmed (refused)
-        aged = aged_uptime(uptime[a : a + 1], stamps[b : b + 1] - stamps[a], enc.cycle_s,
-                           successors(counter[a : a + 1], counter[b : b + 1]))
-        if not (uptime[b] != 0 and uptime[a] != 0 and uptime[b] < aged[0] and young[b]):
+        pair = [a, b]  # ``ctrl_restarts`` of the one step from a to b
+        if not ctrl_restarts(uptime[pair], young[pair], stamps[b : b + 1] - stamps[a],
+                             enc.cycle_s, counter[pair])[0]:
             return False
         return True if confirmed[b] else None
 
