@@ -118,6 +118,22 @@ def test_bad_episodes_are_one_line_exit_2(
     assert not log.exists()  # refused before any file
 
 
+def test_faults_given_twice_add_up(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``--faults A --faults B`` is ``--faults A,B`` (the outside trial: argparse kept only B,
+    so a bus-off drive "under a delay" ran with no delay and said nothing); a key both set is
+    refused as within one option."""
+    report = tmp_path / "r.json"
+    assert main(["run", "--duration", "3", "--faults", "delay=0.1:20", "--faults",
+                 "busoff=1:0.3", "--report", str(report)]) == 0
+    assert json.loads(report.read_text())["inputs"]["faults"] == "delay=0.1:20,busoff=1:0.3,seed=0"
+    capsys.readouterr()
+    assert main(["run", "--duration", "3", "--faults", "drop=0.1", "--faults", "drop=0.2",
+                 "--log", str(tmp_path / "never.log")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1, err
+    assert "drop given twice" in err, err
+
+
 @pytest.mark.parametrize("command", [["sim"], ["firmware"]])
 def test_a_live_node_refuses_them_before_opening_a_bus(
     command: list[str], capsys: pytest.CaptureFixture[str]

@@ -89,23 +89,28 @@ def add_fault_argument(parser: argparse.ArgumentParser) -> None:
     """``--faults SPEC``: inject faults on what this node sends (``sim.faults``)."""
     parser.add_argument(
         "--faults",
-        default="",
+        action="append",
+        default=[],
         metavar="SPEC",
         help="faults on this node's sends: drop=P,burst=P:LEN,dup=P,delay=P:MS,flip=P,"
         "babble=RATE[:ID[:T:DUR]],busoff=T:DUR,seed=N (babble's RATE: frames/s on the wire; "
         "seed: default --seed where the command has one, else 0); odocan run only, the "
         "firmware MCU's own: stall=T:DUR (halted from T s for DUR s), reboot=T[:DUR] (reset "
-        "at T s, DUR s of boot), each repeatable; docs/bus.md, 'Faults on the bus'",
+        "at T s, DUR s of boot), each repeatable; --faults given twice adds the second SPEC "
+        "to the first; docs/bus.md, 'Faults on the bus'",
     )
 
 
 def parse_faults(args: argparse.Namespace, *, mcu: bool = False) -> FaultSpec | None:
-    """The ``--faults`` option as a spec (None when absent or empty), within the limits a run
+    """The ``--faults`` options as one spec (None when absent or empty; given twice, the two
+    joined: ``--faults delay=0.1:20 --faults busoff=4:0.3`` is ``delay=0.1:20,busoff=4:0.3``,
+    and a key two of them set is refused as within one), within the limits a run
     can honour (``check_fault_limits``); one-line errors. Its seed, unless the text sets one:
     the command's ``--seed`` (0 for a command without one). ``mcu``: the command can halt and
     reset the firmware's MCU (``odocan run``); elsewhere stall and reboot are refused before
     any bus is opened."""
-    text = getattr(args, "faults", "") or ""
+    given = getattr(args, "faults", None) or []
+    text = ",".join(part for part in ([given] if isinstance(given, str) else given) if part)
     if not text:
         return None
     spec = FaultSpec.parse(text, seed=getattr(args, "seed", 0))
