@@ -1,9 +1,9 @@
 """The outside trial's FAILs of the twenty-ninth pass not fixed yet (issue #11: a FAIL must never
 blame a correct firmware): each firmware's every step watched (``tests.fw_watch``: within 1/1000
-LSB; kobuki 444's frame choice likely wrong all the same), the verdicts pinned as strict xfails
-with their figures and cause. Fixed ones:
+LSB), the verdicts pinned as strict xfails with their figures and cause. Fixed ones:
 ``test_busoff_queued_twist`` (kobuki 414, 446's DISTANCE), ``test_held_boot_summary`` (kobuki
-410); pmir figure8 405 ``busoff=4:0.2,dup=0.1,delay=0.1:20`` PASSes on main since the revert.
+410), ``test_reprime_after_busoff`` (kobuki 444: the firmware's COUNTER_RESET after the bus-off);
+pmir figure8 405 ``busoff=4:0.2,dup=0.1,delay=0.1:20`` PASSes on main since the revert.
 """
 
 from __future__ import annotations
@@ -16,14 +16,6 @@ from tests.fw_watch import Watch
 from tests.judges_cli import both_analyses, watched_run
 
 DRIVES = {  # name: (robot, scenario, seed, duration s, faults), why the judges FAIL it
-    "reprime_after_busoff": (
-        ("kobuki", "random", "444", "11", "reboot=2:0.4,delay=0.3:55,busoff=7:0.2"),
-        "issue #11: likely the firmware's fault: after the 0.2 s bus-off it refused the frames "
-        "after the motor controller's held ones (7.2028 s) and took three consistent ones for "
-        "a counter restart (COUNTER_RESET at 7.40 s, re-primed on the 7.31 s frame) where the "
-        "controller never restarted: 148 mm and 964 mrad off the truth (as pmir figure8 80 of "
-        "test_trial_false_fails was before firmware.sampledoubt); the reference re-primed at "
-        "7.26 s instead: DISTANCE 15.9 mm, the pose 21.0 mm and 266.7 mrad off the firmware"),
     "late_frame_a_lap_on": (
         ("pmir", "figure8", "82", "10", "delay=0.3:55,busoff=1:1"),
         "issue #11: after the 1 s bus-off the host's E2E took a frame the delay held back "
