@@ -2,7 +2,8 @@
 blame a correct firmware): each firmware's every step watched (``tests.fw_watch``: within 1/1000
 LSB), the verdicts pinned as strict xfails with their figures and cause. Fixed ones:
 ``test_busoff_queued_twist`` (kobuki 414, 446's DISTANCE), ``test_held_boot_summary`` (kobuki
-410), ``test_reprime_after_busoff`` (kobuki 444: the firmware's COUNTER_RESET after the bus-off);
+410), ``test_reprime_after_busoff`` (kobuki 444's COUNTER_RESET after the bus-off and pmir
+figure8 82's refusals after it: the firmware's, a held frame's doubt);
 pmir figure8 405 ``busoff=4:0.2,dup=0.1,delay=0.1:20`` PASSes on main since the revert.
 """
 
@@ -16,12 +17,6 @@ from tests.fw_watch import Watch
 from tests.judges_cli import both_analyses, watched_run
 
 DRIVES = {  # name: (robot, scenario, seed, duration s, faults), why the judges FAIL it
-    "late_frame_a_lap_on": (
-        ("pmir", "figure8", "82", "10", "delay=0.3:55,busoff=1:1"),
-        "issue #11: after the 1 s bus-off the host's E2E took a frame the delay held back "
-        "(COUNTER 2, heard at 2.155 s) as one a lap on, after three newer frames the firmware "
-        "refused; the reference's path steps back and forth through it: DISTANCE 24.5 mm off "
-        "a right firmware (the pose 0.53 mm)"),
     "stall_delay_dup": (
         ("pmir", "random", "12", "12", "delay=0.3:55,dup=0.1,stall=4:2"),
         "issue #11: pmir random 12 halted 2 s under delay=0.3:55,dup=0.1: the pose 9.0 mm, "
