@@ -37,7 +37,7 @@ from odocan.firmware.restartage import PERIODS_PER_S as PERIODS_PER_S
 from odocan.firmware.restartage import RESTART_SLACK_PERIODS as RESTART_SLACK_PERIODS
 from odocan.firmware.restartage import aged_uptime, young_counts
 from odocan.firmware.restarthold import RestartHold
-from odocan.firmware.sampledoubt import doubted_periods, step_periods
+from odocan.firmware.sampledoubt import accepted_doubt, doubted_periods, step_periods
 from odocan.firmware.twist import ENCODER_PERIOD_US, Twist
 
 # The plausibility bound of a robot whose parameters state none (RobotParams.max_wheel_speed_mm_s)
@@ -142,7 +142,7 @@ class EncoderInput:
         # taken in a tick that lost time were sampled at unknown times during the stall).
         self._periods_since_sample = 0  # u16, saturated
         self._samples_stale = False  # the last accepted frame was taken in a tick that lost time
-        self._sample_doubt = 0  # u16: _periods_since_sample when the last frame was accepted
+        self._sample_doubt = 0  # u16: periods the last frame's sample may lie before its tick
         self.tick_budget = 0  # _periods_since_sample at the start of this tick
         self._tick_late = 0  # u32: periods this tick came after its due time
         self._this_step_periods = 1  # u32: the sample periods of the step being accepted
@@ -284,7 +284,8 @@ class EncoderInput:
         self.periods_since_frame = 0
         time_lost_now = self._clock.time_lost_now
         self._samples_stale = time_lost_now
-        self._sample_doubt = 0 if time_lost_now else self._periods_since_sample
+        self._sample_doubt = accepted_doubt(self._periods_since_sample, self._sample_doubt,
+                                            time_lost_now)
         if not time_lost_now:
             self._periods_since_sample = 0
         self._overflows_at_accept = health.overflows_before

@@ -15,7 +15,17 @@ off the firmware). Its sample was taken no earlier than the last accepted one's 
 step from it spans at most the periods since that one (``doubted_periods``); a step the nearer
 count refused is judged by those, so a regular stream's periods (and its twist) are unchanged.
 
-C: ``step_periods``, ``periods_nearest`` and ``doubted_periods`` in firmware/c/ecu.c.
+The held frames go out back to back, so the firmware may take two or more of them in one tick:
+the second was sampled no earlier than the first's sample, which may lie the whole silence back,
+so it shares the first's doubt (``accepted_doubt``), not 0 (the periods between the two). With 0
+the frames sampled at the recovery were refused against it as if due a period after it, and three
+of them taken for a counter restart (issue #11, kobuki random ``--seed 444 --faults
+reboot=2:0.4,delay=0.3:55,busoff=7:0.2``: COUNTER 9 and 10, sampled 6.97 and 6.98 s, heard at
+7.2028 s; COUNTER 11, sampled 7.31 s, 33 periods after COUNTER 10 but counted 17 from its
+acceptance; COUNTER_RESET, 148 mm and 964 mrad off the truth).
+
+C: ``step_periods``, ``periods_nearest``, ``doubted_periods`` and ``accepted_doubt`` in
+firmware/c/ecu.c.
 """
 
 from __future__ import annotations
@@ -58,3 +68,15 @@ def doubted_periods(advance: int, since: int, doubt: int, late: int) -> int:
         return 0
     total = since + doubt  # u32: < 2^17
     return periods_nearest(advance, total if total < STEP_PERIODS_MAX else STEP_PERIODS_MAX, late)
+
+
+def accepted_doubt(since: int, doubt: int, time_lost: bool) -> int:
+    """The doubt of a frame accepted now (``doubted_periods``' ``doubt``, u16): ``since``, the
+    periods since the last accepted frame was taken (its sample is no earlier than that one's);
+    that frame's ``doubt`` when it was taken in this same tick (``since`` 0: it came with this one
+    out of one drain, after the same silence, and this one's sample is no earlier than its own,
+    which may lie ``doubt`` periods back); 0 in a tick that lost time (its frames were sampled
+    at unknown times during the stall, and the lost time bounds their steps instead)."""
+    if time_lost:
+        return 0
+    return doubt if since == 0 else since

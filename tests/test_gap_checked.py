@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -229,3 +230,16 @@ def test_over_a_run_with_skips_the_firmware_took_only_the_host_s_frames(
         refused = [f for f in inside if f.status != OK]
         assert all(f.host_took for f in refused), (first, last)
         assert len(refused) <= m, (first, last, m)
+
+
+def test_as_many_frames_taken_but_others_block_it() -> None:
+    """ENC_E2E_OK's growth equals the host's, but the host counted a whole COUNTER cycle more
+    lost from frame 10 on (it took a frame the firmware refused, and refused one it took:
+    kobuki 444 after its bus-off): the firmware's ENC_E2E_LOST did not grow so, not the same
+    frames, no proof across frame 10; the same sums keep the proof."""
+    seen, bus = run([*BEFORE, *refusing(9), *AFTER])
+    assert proven(seen, 8, 14)
+    same = np.zeros(bus.enc, dtype=np.int64)
+    assert proven(seen_of(bus.pages, bus.totals, [], None, same), 8, 14)
+    other = np.where(np.arange(bus.enc) >= 10, 16, 0).astype(np.int64)
+    assert not proven(seen_of(bus.pages, bus.totals, [], None, other), 8, 14)

@@ -1,14 +1,16 @@
 """The outside trial's FAILs of the twenty-ninth pass not fixed yet (issue #11: a FAIL must never
 blame a correct firmware): each firmware's every step watched (``tests.fw_watch``: within 1/1000
-LSB; kobuki 444's frame choice likely wrong all the same), the verdicts pinned as strict xfails
-with their figures and cause. Fixed ones:
+LSB), the verdicts pinned as strict xfails with their figures and cause. Fixed ones:
 ``test_busoff_queued_twist`` (kobuki 414, 446's DISTANCE and pose), ``test_held_boot_summary``
-(kobuki 410); pmir figure8 405 ``busoff=4:0.2,dup=0.1,delay=0.1:20`` PASSes on main since the
-revert. Fixed here, each with a pose 10 mm off from the fault's end still FAILed:
+(kobuki 410), ``test_reprime_after_busoff`` (kobuki 444's COUNTER_RESET after the bus-off and
+pmir figure8 82's refusals after it: the firmware's, a held frame's doubt); pmir figure8 405
+``busoff=4:0.2,dup=0.1,delay=0.1:20`` PASSes on main since the revert. Fixed here, each with a
+pose 10 mm off from the fault's end still FAILed:
 
 * ``late_frame_a_lap_on`` (DISTANCE 24.5 mm, the pose 0.53 mm off; now 0 and 0.043 mm): the
   poses' proof that the firmware skipped COUNTER 9 was read as its E2E refusal, where its
-  plausibility bound refused the step (``host.protocol.e2e_implausible``);
+  plausibility bound refused the step (``host.protocol.e2e_implausible``); the firmware's own
+  doubt of the held frames fixed too (``test_reprime_after_busoff``): either PASSes it;
 * ``stall_delay_dup`` (9.0 mm, 28.3 mrad; now 0.056 mm, 0.048 mrad): the reference re-primed on
   a CTRL_UPTIME gone back against a frame the halted firmware never had, which it did not report
   (``host.judge.stallrestart``).
@@ -27,14 +29,6 @@ from tests.log_edit import raise_raw
 
 DRIVES: dict[str, tuple[tuple[str, str, str, str, str], str | None]] = {
     # name: (robot, scenario, seed, duration s, faults), why the judges FAIL it (None: fixed)
-    "reprime_after_busoff": (
-        ("kobuki", "random", "444", "11", "reboot=2:0.4,delay=0.3:55,busoff=7:0.2"),
-        "issue #11: likely the firmware's fault: after the 0.2 s bus-off it refused the frames "
-        "after the motor controller's held ones (7.2028 s) and took three consistent ones for "
-        "a counter restart (COUNTER_RESET at 7.40 s, re-primed on the 7.31 s frame) where the "
-        "controller never restarted: 148 mm and 964 mrad off the truth (as pmir figure8 80 of "
-        "test_trial_false_fails was before firmware.sampledoubt); the reference re-primed at "
-        "7.26 s instead: DISTANCE 15.9 mm, the pose 21.0 mm and 266.7 mrad off the firmware"),
     "late_frame_a_lap_on": (("pmir", "figure8", "82", "10", "delay=0.3:55,busoff=1:1"), None),
     "stall_delay_dup": (("pmir", "random", "12", "12", "delay=0.3:55,dup=0.1,stall=4:2"), None),
     "late_naming_100ms": (

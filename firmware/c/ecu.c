@@ -90,6 +90,7 @@ static bool mailbox_dropped(const struct odom_ecu *ecu);
 static uint32_t step_periods(const struct odom_ecu *ecu, uint32_t advance);
 static uint32_t periods_nearest(const struct odom_ecu *ecu, uint32_t advance, uint32_t since);
 static uint32_t doubted_periods(const struct odom_ecu *ecu, uint32_t advance);
+static uint32_t accepted_doubt(const struct odom_ecu *ecu);
 static uint32_t bound_periods(const struct odom_ecu *ecu, uint32_t periods);
 static void count_cycles_dropped(struct odom_ecu *ecu, uint8_t counter, uint32_t advance);
 static void step_bounds(struct odom_ecu *ecu);
@@ -466,7 +467,7 @@ static void accept_encoders(struct odom_ecu *ecu, uint8_t counter, const uint32_
     ecu->enc_overflows_at_accept = ecu->overflows_before;
     ecu->enc_dropped_at_accept = ecu->enc_dropped_before;
     ecu->samples_stale = ecu->time_lost_now;
-    ecu->sample_doubt = ecu->time_lost_now ? 0u : ecu->periods_since_sample;
+    ecu->sample_doubt = accepted_doubt(ecu);
     if (!ecu->time_lost_now) {
         ecu->periods_since_sample = 0u;
     }
@@ -576,6 +577,19 @@ static uint32_t doubted_periods(const struct odom_ecu *ecu, uint32_t advance)
     }
     uint32_t since = ecu->periods_since_sample + doubt; /* < 2^17 */
     return periods_nearest(ecu, advance, since < STEP_PERIODS_MAX ? since : STEP_PERIODS_MAX);
+}
+
+/* The doubt of a frame accepted now: the periods since the last accepted frame was taken (its
+ * sample is no earlier than that one's); that frame's doubt when it was taken in this same tick
+ * (periods_since_sample 0: the held frames go out back to back, and this one's sample is no
+ * earlier than that frame's, which may lie the whole silence back); 0 in a tick that lost time
+ * (sampledoubt.py accepted_doubt). */
+static uint32_t accepted_doubt(const struct odom_ecu *ecu)
+{
+    if (ecu->time_lost_now) {
+        return 0u;
+    }
+    return ecu->periods_since_sample == 0u ? ecu->sample_doubt : ecu->periods_since_sample;
 }
 
 /* The periods the plausibility bound allows this step: periods, or, when the mailbox may have

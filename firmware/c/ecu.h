@@ -118,7 +118,7 @@ struct odom_ecu {
     uint32_t periods_since_sample;
     bool time_lost_now;  /* this tick came LOST_TIME_PERIODS periods or more late */
     bool samples_stale;  /* the last accepted frame was taken in a tick that lost time */
-    uint32_t sample_doubt; /* periods_since_sample when the last frame was accepted (u16) */
+    uint32_t sample_doubt; /* periods its sample may lie before the last frame's tick (u16) */
     uint32_t tick_budget; /* periods_since_sample at the start of this tick */
     /* The steps since the last twist update (one tick; two after a tick that lost time). */
     int64_t tick_ds_q20_m;         /* saturated to +-2^32 (4096 m) */

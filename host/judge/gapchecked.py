@@ -39,6 +39,17 @@ it). REJECTED_FRAMES counts every E2E refusal too.
   growth must equal the frames the host accepted there (lo(q) - hi(p) + 1): the host's E2E
   check is the firmware's on the same frames. Where it chose otherwise the proof could only make
   the judge FAIL a correct firmware, never PASS a wrong one: it withdraws allowances.
+* As many is not the same ones: the host's window is never narrower than the firmware's
+  (``e2e_periods.receive_periods``), so after a frame held back over a silence it can take a
+  frame the firmware refused and then refuse one the firmware took, the counts equal. ENC_E2E_LOST
+  tells (each accepted frame adds its COUNTER advance less one: over the same frames from the
+  same last one, the same sum; over others, a whole COUNTER cycle apart): its growth mod 256
+  must equal the host's over its frames from lo(p) to lo(q) (``LostPages.host_lost``). kobuki
+  random ``--seed 444 --faults reboot=2:0.4,delay=0.3:55,busoff=7:0.2``: after the bus-off the
+  host took COUNTER 1 and 3 (7.265, 7.285 s), the firmware refused them and took COUNTER 11
+  (7.31 s), one frame fewer near there and one more elsewhere; the window from 3.1 to 8.5 s was
+  proven, the gap into COUNTER 1 earned no allowance, and the firmware's merged step over the
+  bus-off, 0.44 mm off the reference's steps, FAILed a correct firmware (issue #11).
 
 A frame near a page's tick (on the wire between the summary and its page, or taken by the
 firmware only at the next tick) lies outside raw_hi(p) .. raw_lo(q) or makes N differ: the window
@@ -110,6 +121,9 @@ def by_checked(pages: LostPages, totals: TotalsPages, i: IntArray, j: IntArray) 
     encoder frames between them (module docstring)."""
     received, ok, sure = _received_logged(pages, totals, i, j)
     proven: Bools = received & (sure > 0) & (ok == sure)
+    if pages.host_lost is not None:  # the same frames, not only as many (module docstring)
+        proven &= ((pages.lost[j] - pages.lost[i]) & U8) == (
+            (pages.host_lost[j] - pages.host_lost[i]) & U8)
     return proven
 
 

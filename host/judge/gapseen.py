@@ -135,6 +135,7 @@ class LostPages:
     raw_lo: IntArray  # lo and hi among every encoder frame logged, refused ones too
     raw_hi: IntArray
     refused: IntArray  # the E2E refusal counts packed (``gapchecked.packed``; -1: unknown)
+    host_lost: IntArray | None = None  # the host's E2E LOST summed up to lo (``gapchecked``)
 
 
 @dataclass(frozen=True)
@@ -276,21 +277,25 @@ def with_boot(pages: LostPages, totals: TotalsPages, first_s: float, boot_s: flo
                       np.r_[zero, pages.ok], np.r_[zero, pages.lost], np.r_[now, pages.sent_s],
                       np.r_[[ok_u], pages.ok_u], np.r_[[chain], pages.chain],
                       np.r_[zero, pages.raw_lo], np.r_[zero, pages.raw_hi],
-                      np.r_[[UNKNOWN], pages.refused]),
+                      np.r_[[UNKNOWN], pages.refused],
+                      None if pages.host_lost is None else np.r_[zero, pages.host_lost]),
             TotalsPages(np.r_[now, totals.sent_s], np.r_[zero, totals.rejected],
                         np.r_[zero, totals.overflowed], np.r_[breaks, totals.breaks]))
 
 
 def seen_of(pages: list[Page], totals: list[Totals], gaps: list[tuple[int, int]],
-            boot: tuple[float, float] | None = None) -> Seen:
+            boot: tuple[float, float] | None = None, lost_sums: IntArray | None = None) -> Seen:
     """``seen_by_pages`` of pages, totals and gaps (frame after, frames missing) kept as rows;
-    ``boot``: the log's first encoder frame's time and the power-up's (``with_boot``)."""
+    ``boot``: the log's first encoder frame's time and the power-up's (``with_boot``);
+    ``lost_sums``: per encoder frame of the life, the host's E2E LOST summed up to it
+    (``host_lost_sums``; None: not known, ``gapchecked.by_checked`` does without)."""
     if not pages:
         return NOTHING
     col = list(zip(*pages, strict=True))
     ints = [np.array(col[k], dtype=np.int64) for k in (0, 2, 3, 4, 6, 7, 8, 9, 10)]
     lost = LostPages(ints[0], np.array(col[1], dtype=np.float64), ints[1], ints[2], ints[3],
-                     np.array(col[5], dtype=np.float64), *ints[4:])
+                     np.array(col[5], dtype=np.float64), ints[4], ints[5], ints[6], ints[7],
+                     ints[8], None if lost_sums is None else lost_sums[ints[0]])
     tcol = list(zip(*totals, strict=True)) if totals else [(), (), (), ()]
     counts = TotalsPages(np.array(tcol[0], dtype=np.float64), np.array(tcol[1], dtype=np.int64),
                          np.array(tcol[2], dtype=np.int64), np.array(tcol[3], dtype=np.int64))
@@ -311,6 +316,9 @@ class PageEvidence:
     first_s: float | None = None  # the first encoder frame's time
     keeper: PageKeeper = field(default_factory=PageKeeper)
     _enc_count: int = 0  # encoder frames fed
+    _lost_sums: list[IntArray] = field(default_factory=list)  # ``host_lost_sums``, by chunk
+    _last_counter: int | None = None  # the last accepted encoder frame's COUNTER
+    _lost_sum: int = 0  # the host's E2E LOST summed over the encoder frames fed
     _raw_count: int = 0  # encoder frames fed, those the host's E2E check refused too
     _offset: int = 0  # frames fed
     _last_seq: int | None = None
@@ -339,7 +347,11 @@ class PageEvidence:
         raw = self._raw_rows(chunk)
         if self._usable:
             self._add_status(chunk, enc, raw)
+        sums = host_lost_sums(enc.counter, self._last_counter, self._lost_sum)
+        self._lost_sums.append(sums)
         self._enc_count += len(enc.seq)
+        if len(enc.seq):
+            self._last_counter, self._lost_sum = int(enc.counter[-1]), int(sums[-1])
         self._raw_count += len(raw)
         self._offset += len(chunk)
         if len(enc.seq):
@@ -357,7 +369,8 @@ class PageEvidence:
             return Seen([], [], fills, holes=holes)
         boot = (None if not power_up or self.first_s is None
                 else (self.first_s, self.first_s - keeper.cycle_s))
-        return replace(seen_of(keeper.pages, keeper.totals, self._gaps, boot), fills=fills,
+        sums = np.concatenate(self._lost_sums) if self._lost_sums else None
+        return replace(seen_of(keeper.pages, keeper.totals, self._gaps, boot, sums), fills=fills,
                        holes=holes, through=through_gaps(keeper.pages, keeper.totals,
                                                          keeper.cycle_s, self._gap_s),
                        resets=self.resets.resets(self._gap_s, keeper.cycle_s, holes))
@@ -439,6 +452,17 @@ class PageEvidence:
             np.asarray(head["PAGE"], dtype=np.int64), np.asarray(head["COUNTER"], dtype=np.int64),
             chunk.timestamp_s[rows], crc, self._enc_count + before, last_s, counts[0], counts[1],
             counted, self._raw_count + np.searchsorted(raw, rows), refused))
+
+
+def host_lost_sums(counter: IntArray, last: int | None, start: int) -> IntArray:
+    """Per accepted encoder frame (``counter``: their COUNTERs, ``last``: the one accepted
+    before them, None: none), ``start`` plus the frames the host's E2E check counted lost up to
+    it: (COUNTER - previous - 1) mod 16 each, as the firmware's ENC_E2E_LOST counts them
+    (``gapchecked.by_checked``)."""
+    first = last if last is not None else (int(counter[0]) - 1 if len(counter) else 0)
+    lost = (np.diff(np.concatenate(([first], counter))) - 1) & ENC_COUNTER_MASK
+    sums: IntArray = start + np.cumsum(lost, dtype=np.int64)
+    return sums
 
 
 def crc_holds(frames: FrameArrays, decoder: BulkDecoder, rows: IntArray,

@@ -59,12 +59,21 @@ def doubted_bound_periods(seq: IntArray, timestamp_s: FloatArray, cycle_s: float
     frame ``a`` (the last accepted) to frame ``b``, its sequence step, widened by the bus time
     since the frame before ``a``: ``a`` may have waited out the silence before it (a delayed
     frame held in a bus-off sender's transmit buffer goes out first at the recovery), its sample
-    no earlier than that frame's. 0 (no second chance) when ``a`` is the first frame, or came
-    within a period and a half of the one before (nothing to doubt), or without bus times."""
-    if a == 0 or cycle_s is None or timestamp_s[a] - timestamp_s[a - 1] < 1.5 * cycle_s:
+    no earlier than that frame's. Frames heard within half a period of each other (the held
+    frames go out back to back: the firmware takes them in one tick) share the first one's
+    doubt (``sampledoubt.accepted_doubt``): the bus time since the frame before the first. 0 (no
+    second chance) when that first frame is the log's first, or came within a period and a half
+    of the one before (nothing to doubt), or without bus times."""
+    if cycle_s is None:
+        return 0
+    first = a
+    while first > 0 and timestamp_s[first] - timestamp_s[first - 1] < 0.5 * cycle_s:
+        first -= 1
+    if first == 0 or timestamp_s[first] - timestamp_s[first - 1] < 1.5 * cycle_s:
         return 0
     return int(widened_periods(np.array([int(seq[b] - seq[a])]),
-                               np.array([float(timestamp_s[b] - timestamp_s[a - 1])]), cycle_s)[0])
+                               np.array([float(timestamp_s[b] - timestamp_s[first - 1])]),
+                               cycle_s)[0])
 
 
 DOUBTED = (pair_bound_periods, doubted_bound_periods)  # the bound's periods, then the second
