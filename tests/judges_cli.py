@@ -6,6 +6,9 @@ raw signals decoded by cantools (not the host's decoder)."""
 from __future__ import annotations
 
 import json
+import os
+import subprocess
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -18,6 +21,8 @@ from odocan.sim.contract import DBC_PATH
 from tests.fw_watch import Watch, watched
 
 STREAMS = ("never", "always")
+POSE_X = (2, 4)  # ODOM_POSE_X's X: bytes 2..5, signed, 0.1 mm
+TEN_MM_LSB = 100  # 10 mm in ODOM_POSE_X's 0.1 mm LSBs
 
 
 def analyze(log: Path, stream: str, report: Path | None = None) -> int:
@@ -53,6 +58,26 @@ def watched_run(log: Path, robot: str, scenario: str, seed: object, duration: ob
                      "--duration", str(duration), "--faults", faults, "--firmware", "python",
                      "--log", str(log)])
     return watch, code
+
+
+def correct_drive(log: Path, robot: str, scenario: str, seed: object, duration: object,
+                  faults: str) -> Path:
+    """``log``, recorded by ``watched_run`` and asserted right: run exits 0, and its firmware
+    integrated over 300 steps, each within 1/1000 LSB of the float64 check."""
+    watch, code = watched_run(log, robot, scenario, seed, duration, faults)
+    assert code == 0
+    assert watch.steps > 300
+    assert watch.within_a_thousandth_lsb(), (watch.worst_m, watch.worst_rad)
+    return log
+
+
+def cli(*args: str) -> subprocess.CompletedProcess[str]:
+    """``odocan ARGS`` in a process of its own, this tree first on its path (a replay's state
+    left in no module of the test process)."""
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(
+        [str(Path(__file__).resolve().parents[1]), os.environ.get("PYTHONPATH", "")]))
+    return subprocess.run([sys.executable, "-m", "odocan", *args], capture_output=True,
+                          text=True, env=env, check=False)
 
 
 def raw_signals(log: Path, names: tuple[str, ...]) -> list[tuple[float, str, dict[str, Any]]]:

@@ -29,9 +29,6 @@ with cantools (``tests.log_edit``).
 
 from __future__ import annotations
 
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import can
@@ -40,21 +37,12 @@ import pytest
 
 from odocan.host.judge.replay_track import encoder_ticks
 from odocan.sim import contract
-from tests.judges_cli import watched_run
+from tests.judges_cli import POSE_X, TEN_MM_LSB, cli, correct_drive
 from tests.log_edit import raise_raw
 
-POSE_X = (2, 4)  # ODOM_POSE_X's X: bytes 2..5, signed, 0.1 mm
-TEN_MM_LSB = 100
 FIRMWARE_IDS = {m.frame_id for m in contract.database().messages if m.senders == ["ODOM_MCU"]}
 DRIVE = ("kobuki", "random", 516, 10, "busoff=4.0:0.3")
 BUS_OFF_S = (4.0, 4.31)
-
-
-def _cli(*args: str) -> subprocess.CompletedProcess[str]:
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join(
-        [str(Path(__file__).resolve().parents[1]), os.environ.get("PYTHONPATH", "")]))
-    return subprocess.run([sys.executable, "-m", "odocan", *args], capture_output=True,
-                          text=True, env=env, check=False)
 
 
 def _firmware_frames(log: Path) -> list[tuple[float, int, bytes]]:
@@ -66,10 +54,7 @@ def _firmware_frames(log: Path) -> list[tuple[float, int, bytes]]:
 def drive(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """The drive recorded by the Python firmware, watched: it must be right."""
     log = tmp_path_factory.mktemp("busoff") / "drive.log"
-    watch, code = watched_run(log, *DRIVE)
-    assert code == 0
-    assert watch.steps > 300
-    assert watch.within_a_thousandth_lsb(), (watch.worst_m, watch.worst_rad)
+    correct_drive(log, *DRIVE)
     return log
 
 
@@ -84,7 +69,7 @@ def test_a_silence_of_whole_counter_laps_is_numbered_by_its_periods() -> None:
 def test_the_correct_firmware_replays_pass_and_its_bus_is_the_logs(drive: Path,
                                                                    tmp_path: Path) -> None:
     replayed = tmp_path / "replayed.log"
-    done = _cli("replay", str(drive), "--log", str(replayed))
+    done = cli("replay", str(drive), "--log", str(replayed))
     assert done.returncode == 0, done.stdout[-2500:]
     logged = _firmware_frames(drive)
     # the bus-off is in the log: the firmware sent nothing while it lasted
@@ -98,6 +83,6 @@ def test_plus_10_mm_from_after_the_bus_off_fails(drive: Path, tmp_path: Path,
                                                  from_s: float) -> None:
     out = tmp_path / "raised.log"
     assert raise_raw(drive, out, "ODOM_POSE_X", POSE_X, TEN_MM_LSB, from_s) > 50
-    done = _cli("replay", str(out))
+    done = cli("replay", str(out))
     assert done.returncode == 1, done.stdout[-2500:]
     assert "FAIL" in done.stdout

@@ -28,9 +28,8 @@ from pathlib import Path
 
 import pytest
 
-from tests.judges_cli import watched_run
+from tests.judges_cli import POSE_X, TEN_MM_LSB, cli, correct_drive
 from tests.log_edit import raise_raw
-from tests.test_replay_delay import POSE_X, TEN_MM_LSB, _cli
 
 # name: robot, scenario, seed, duration (s), faults, tamper from (s, after the bus-off)
 DRIVES = {
@@ -58,16 +57,13 @@ def drive(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFacto
     name = request.param
     robot, scenario, seed, duration, faults, _ = DRIVES[name]
     log = tmp_path_factory.mktemp(name) / "drive.log"
-    watch, code = watched_run(log, robot, scenario, seed, duration, faults)
-    assert code == 0
-    assert watch.steps > 300
-    assert watch.within_a_thousandth_lsb(), (watch.worst_m, watch.worst_rad)
+    correct_drive(log, robot, scenario, seed, duration, faults)
     return name, log
 
 
 def test_the_correct_firmware_replays_pass(drive: tuple[str, Path]) -> None:
     name, log = drive
-    done = _cli("replay", str(log))
+    done = cli("replay", str(log))
     assert done.returncode == 0, f"{name}: {done.stdout[-2500:]}"
 
 
@@ -78,5 +74,5 @@ def test_plus_10_mm_after_the_bus_off_fails(drive: tuple[str, Path], tmp_path: P
         request.applymarker(pytest.mark.xfail(strict=True, reason=LEFT[name]))
     out = tmp_path / "raised.log"
     assert raise_raw(log, out, "ODOM_POSE_X", POSE_X, TEN_MM_LSB, DRIVES[name][5]) > 50
-    done = _cli("replay", str(out))
+    done = cli("replay", str(out))
     assert done.returncode == 1, f"{name}: {done.stdout[-2500:]}"

@@ -33,18 +33,13 @@ The firmware is proven right by the tests' watch (every step integrated again in
 
 from __future__ import annotations
 
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 
-from tests.judges_cli import watched_run
+from tests.judges_cli import POSE_X, TEN_MM_LSB, cli, correct_drive
 from tests.log_edit import raise_raw
 
-POSE_X = (2, 4)  # ODOM_POSE_X's X: bytes 2..5, signed, 0.1 mm
-TEN_MM_LSB = 100
 # name: robot, scenario, seed, duration (s), faults, tamper from (s, after the stall)
 DRIVES = {
     "kobuki-404": ("kobuki", "random", 404, 14, "delay=0.25:30,reboot=6:0.3,stall=9:0.5", 9.7),
@@ -71,13 +66,6 @@ LEFT = {
 }
 
 
-def _cli(*args: str) -> subprocess.CompletedProcess[str]:
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join(
-        [str(Path(__file__).resolve().parents[1]), os.environ.get("PYTHONPATH", "")]))
-    return subprocess.run([sys.executable, "-m", "odocan", *args], capture_output=True,
-                          text=True, env=env, check=False)
-
-
 @pytest.fixture(scope="module", params=sorted(DRIVES))
 def drive(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory
           ) -> tuple[str, Path]:
@@ -85,10 +73,7 @@ def drive(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFacto
     name = request.param
     robot, scenario, seed, duration, faults, _ = DRIVES[name]
     log = tmp_path_factory.mktemp(name) / "drive.log"
-    watch, code = watched_run(log, robot, scenario, seed, duration, faults)
-    assert code == 0
-    assert watch.steps > 300
-    assert watch.within_a_thousandth_lsb(), (watch.worst_m, watch.worst_rad)
+    correct_drive(log, robot, scenario, seed, duration, faults)
     return name, log
 
 
@@ -97,7 +82,7 @@ def test_the_correct_firmware_replays_pass(drive: tuple[str, Path],
     name, log = drive
     if name in LEFT:
         request.applymarker(pytest.mark.xfail(strict=True, reason=LEFT[name]))
-    done = _cli("replay", str(log))
+    done = cli("replay", str(log))
     assert done.returncode == 0, f"{name}: {done.stdout[-2500:]}"
 
 
@@ -105,5 +90,5 @@ def test_plus_10_mm_from_a_pose_on_fails(drive: tuple[str, Path], tmp_path: Path
     name, log = drive
     out = tmp_path / "raised.log"
     assert raise_raw(log, out, "ODOM_POSE_X", POSE_X, TEN_MM_LSB, DRIVES[name][5]) > 50
-    done = _cli("replay", str(out))
+    done = cli("replay", str(out))
     assert done.returncode == 1, f"{name}: {done.stdout[-2500:]}"

@@ -14,48 +14,33 @@ The firmware is proven right by the tests' watch (every step integrated again in
 
 from __future__ import annotations
 
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 
-from tests.judges_cli import watched_run
+from tests.judges_cli import POSE_X, TEN_MM_LSB, cli, correct_drive
 from tests.log_edit import raise_raw
 
-POSE_X = (2, 4)  # ODOM_POSE_X's X: bytes 2..5, signed, 0.1 mm
-TEN_MM_LSB = 100
 DRIVE = ("kobuki", "circle", 526, 11, "stall=2.0:0.5,busoff=2.3:0.3,drop=0.05")
-
-
-def _cli(*args: str) -> subprocess.CompletedProcess[str]:
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join(
-        [str(Path(__file__).resolve().parents[1]), os.environ.get("PYTHONPATH", "")]))
-    return subprocess.run([sys.executable, "-m", "odocan", *args], capture_output=True,
-                          text=True, env=env, check=False)
 
 
 @pytest.fixture(scope="module")
 def drive(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """The drive recorded by the Python firmware, watched: it must be right."""
     log = tmp_path_factory.mktemp("resume") / "drive.log"
-    watch, code = watched_run(log, *DRIVE)
-    assert code == 0
-    assert watch.steps > 300
-    assert watch.within_a_thousandth_lsb(), (watch.worst_m, watch.worst_rad)
+    correct_drive(log, *DRIVE)
     return log
 
 
 def test_the_correct_firmware_replays_pass(drive: Path) -> None:
-    done = _cli("replay", str(drive))
+    done = cli("replay", str(drive))
     assert done.returncode == 0, done.stdout[-2500:]
 
 
 def test_plus_10_mm_from_inside_the_silence_fails(drive: Path, tmp_path: Path) -> None:
     out = tmp_path / "raised.log"
     assert raise_raw(drive, out, "ODOM_POSE_X", POSE_X, TEN_MM_LSB, 2.55) > 50
-    done = _cli("replay", str(out))
+    done = cli("replay", str(out))
     assert done.returncode == 1, done.stdout[-2500:]
     assert "beyond any its firmware can resume at" in done.stdout, done.stdout[-2500:]
 
@@ -65,5 +50,5 @@ def test_plus_10_mm_from_after_the_stall_is_no_pass(drive: Path, tmp_path: Path)
     frames the FIFO kept), exit 1, as before; never a PASS."""
     out = tmp_path / "raised.log"
     assert raise_raw(drive, out, "ODOM_POSE_X", POSE_X, TEN_MM_LSB, 3.0) > 50
-    done = _cli("replay", str(out))
+    done = cli("replay", str(out))
     assert done.returncode == 1, done.stdout[-2500:]

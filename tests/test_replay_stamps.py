@@ -28,11 +28,9 @@ import can
 import pytest
 
 from odocan.host.cli.app import main
-from tests.judges_cli import both_analyses, watched_run
+from tests.judges_cli import POSE_X, TEN_MM_LSB, both_analyses, correct_drive
 from tests.log_edit import raise_raw
 
-POSE_X = (2, 4)  # ODOM_POSE_X's X: bytes 2..5, signed, 0.1 mm
-TEN_MM_LSB = 100
 USB_FRAME_S = 1e-3
 LATE_S = 2e-3
 # name: robot, scenario, seed, duration (s), faults, tamper from (s)
@@ -67,9 +65,7 @@ def drive(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFacto
     name = request.param
     robot, scenario, seed, duration, faults, _ = DRIVES[name]
     log = tmp_path_factory.mktemp(name) / "drive.log"
-    watch, code = watched_run(log, robot, scenario, seed, duration, faults)
-    assert code == 0
-    assert watch.within_a_thousandth_lsb(), (watch.worst_m, watch.worst_rad)
+    correct_drive(log, robot, scenario, seed, duration, faults)
     return name, log
 
 
