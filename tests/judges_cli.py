@@ -71,6 +71,14 @@ def correct_drive(log: Path, robot: str, scenario: str, seed: object, duration: 
     return log
 
 
+def named_drive(name: str, drives: dict[str, tuple[Any, ...]], tmp_dir: Path
+                ) -> tuple[str, Path]:
+    """(``name``, its log in ``tmp_dir``): ``drives[name]``'s first five (robot, scenario,
+    seed, duration, faults) recorded by ``correct_drive``, as the tests' module-wide drive
+    fixtures take them."""
+    return name, correct_drive(tmp_dir / "drive.log", *drives[name][:5])
+
+
 def cli(*args: str) -> subprocess.CompletedProcess[str]:
     """``odocan ARGS`` in a process of its own, this tree first on its path (a replay's state
     left in no module of the test process)."""

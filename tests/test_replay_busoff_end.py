@@ -28,7 +28,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.judges_cli import POSE_X, TEN_MM_LSB, cli, correct_drive
+from tests.judges_cli import POSE_X, TEN_MM_LSB, cli, named_drive
 from tests.log_edit import raise_raw
 
 # name: robot, scenario, seed, duration (s), faults, tamper from (s, after the bus-off)
@@ -54,11 +54,7 @@ LEFT = {  # the tamper still PASSing (main and the tree before the deaf board al
 def drive(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory
           ) -> tuple[str, Path]:
     """The drive recorded by the Python firmware, watched: it must be right."""
-    name = request.param
-    robot, scenario, seed, duration, faults, _ = DRIVES[name]
-    log = tmp_path_factory.mktemp(name) / "drive.log"
-    correct_drive(log, robot, scenario, seed, duration, faults)
-    return name, log
+    return named_drive(request.param, DRIVES, tmp_path_factory.mktemp(request.param))
 
 
 def test_the_correct_firmware_replays_pass(drive: tuple[str, Path]) -> None:

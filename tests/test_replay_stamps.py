@@ -28,7 +28,7 @@ import can
 import pytest
 
 from odocan.host.cli.app import main
-from tests.judges_cli import POSE_X, TEN_MM_LSB, both_analyses, correct_drive
+from tests.judges_cli import POSE_X, TEN_MM_LSB, both_analyses, named_drive
 from tests.log_edit import raise_raw
 
 USB_FRAME_S = 1e-3
@@ -62,11 +62,7 @@ def restamped(src: Path, dst: Path, how: str) -> int:
 def drive(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory
           ) -> tuple[str, Path]:
     """The drive recorded by the Python firmware, watched: it must be right."""
-    name = request.param
-    robot, scenario, seed, duration, faults, _ = DRIVES[name]
-    log = tmp_path_factory.mktemp(name) / "drive.log"
-    correct_drive(log, robot, scenario, seed, duration, faults)
-    return name, log
+    return named_drive(request.param, DRIVES, tmp_path_factory.mktemp(request.param))
 
 
 @pytest.mark.parametrize("how", ["late", "usb"])
