@@ -78,6 +78,7 @@ from odocan.host.protocol.e2e_cycles import (
     new_cycles,
 )
 from odocan.host.protocol.e2e_evidence import (
+    Evidence,
     evidence_frames,
     pose_evidence,
     readings,
@@ -95,6 +96,7 @@ from odocan.host.protocol.e2e_periods import (
     periods_between as periods_between,
 )
 from odocan.host.protocol.e2e_repeats import repeats_by_pages
+from odocan.host.protocol.e2e_skipveto import by_page_skips
 from odocan.host.protocol.e2e_silence import add_silence, is_silence, silences
 from odocan.sim.exceptions import OdocanError
 
@@ -470,11 +472,14 @@ def _settled(frames: FrameArrays, index: npt.NDArray[np.intp], counter: npt.NDAr
     evidence = pose_evidence(frames, index, counter, crc_ok, poses)
     released = recorder_releases(frames.timestamp_s, frame_keys(frames) == config.key,
                                  config.cycle_s)[index]
-    def run(reading: npt.NDArray[np.int8] | None) -> npt.NDArray[np.int8]:
-        return settle(crc_ok, counter, (periods, wide, narrow), evidence, config.max_delta_init,
+    def run(reading: npt.NDArray[np.int8] | None, proofs: Evidence = evidence
+            ) -> npt.NDArray[np.int8]:
+        return settle(crc_ok, counter, (periods, wide, narrow), proofs, config.max_delta_init,
                       released, None if cycle_s is None else (t_s, cycle_s), reading)
 
     settled = by_pages(run, run(None), index, released, pages)
+    settled = by_page_skips(lambda proofs: run(None, proofs), settled, status, index, evidence,
+                            pages)  # e2e_skipveto
     if touched is not None:
         touched.append(index[settled != status])
     return settled
