@@ -49,9 +49,9 @@ def exact_surplus(enc_pos: npt.NDArray[np.intp], status: Statuses, pages: OkPage
     cum = np.concatenate([np.zeros(1, dtype=np.int64), np.cumsum(taken)])
     before = np.searchsorted(enc_pos, pages.at)
     firmware = np.diff(pages.ok) & U16_MASK
-    result = np.diff(cum[before]) - firmware
+    result: IntArray = (np.diff(cum[before]) - firmware).astype(np.int64)
     result[firmware > np.diff(before)] = 0
-    return result.astype(np.int64)
+    return result
 
 
 def contradicted_skips(enc_pos: npt.NDArray[np.intp], settled: Statuses, strict: Statuses,
