@@ -78,6 +78,7 @@ from odocan.host.protocol.e2e_cycles import (
     new_cycles,
 )
 from odocan.host.protocol.e2e_evidence import (
+    Evidence,
     evidence_frames,
     pose_evidence,
     readings,
@@ -96,6 +97,7 @@ from odocan.host.protocol.e2e_periods import (
 )
 from odocan.host.protocol.e2e_repeats import repeats_by_pages
 from odocan.host.protocol.e2e_silence import add_silence, is_silence, silences
+from odocan.host.protocol.e2e_skipveto import by_page_skips
 from odocan.sim.exceptions import OdocanError
 
 if TYPE_CHECKING:  # a cantools Database or a plan of it (host.protocol.dbcplan)
@@ -458,7 +460,8 @@ def _settled(frames: FrameArrays, index: npt.NDArray[np.intp], counter: npt.NDAr
              pages: OkPages | None = None,
              touched: list[npt.NDArray[np.intp]] | None = None) -> npt.NDArray[np.int8]:
     """``status`` where the capture's stamps decide every frame; else settled from the
-    firmware's poses (``e2e_evidence``) and its counts (``e2e_pages``), the bus positions of
+    firmware's poses (``e2e_evidence``) and its counts (``e2e_pages``; a skip proof they
+    contradict dropped: ``e2e_skipveto``), the bus positions of
     the frames where they change a verdict of the stamps' added to ``touched``."""
     assert config.cycle_s is not None
     t_s, cycle_s = frames.timestamp_s[index], new_cycle_s(config)
@@ -470,11 +473,19 @@ def _settled(frames: FrameArrays, index: npt.NDArray[np.intp], counter: npt.NDAr
     evidence = pose_evidence(frames, index, counter, crc_ok, poses)
     released = recorder_releases(frames.timestamp_s, frame_keys(frames) == config.key,
                                  config.cycle_s)[index]
-    def run(reading: npt.NDArray[np.int8] | None) -> npt.NDArray[np.int8]:
-        return settle(crc_ok, counter, (periods, wide, narrow), evidence, config.max_delta_init,
+    def run_with(reading: npt.NDArray[np.int8] | None, proofs: Evidence
+                 ) -> npt.NDArray[np.int8]:
+        return settle(crc_ok, counter, (periods, wide, narrow), proofs, config.max_delta_init,
                       released, None if cycle_s is None else (t_s, cycle_s), reading)
 
+    def run(reading: npt.NDArray[np.int8] | None) -> npt.NDArray[np.int8]:
+        return run_with(reading, evidence)
+
+    def unread(proofs: Evidence) -> npt.NDArray[np.int8]:
+        return run_with(None, proofs)
+
     settled = by_pages(run, run(None), index, released, pages)
+    settled = by_page_skips(unread, settled, status, index, evidence, pages)  # e2e_skipveto
     if touched is not None:
         touched.append(index[settled != status])
     return settled
