@@ -15,6 +15,16 @@ FRAME_TOTALS pages around them (0.00 s and 7.80 s: 274), where 274 - 185 < 256 a
 out a wrap of the u8 counts. The gap's allowance fell from 1886 mm to 0, the replay's jump
 allowance from 1898 mm to 54.7 mm.
 
+Fixed: pmir straight seed 423, ``drop=0.05,busoff=6:0.4,delay=0.3:55``, from 6.0 s: the pages
+at 3.10 s and 6.70 s count 149 frames accepted where the host accepted 148 (a late frame taken
+the host refused: no proof by checked), but their E2E counts grew by exactly the log's 300
+encoder frames between them, nothing dropped: the firmware received none the log lacks
+(``gapreceived``). So across the 18-period gap at 5.84 s and the bus-off's 12 periods (6.40 s)
+it took only frames the log holds, of known counts: the gaps' allowances fell from 617.4 and
+238.5 mm to 0 (the robot standing), the step from 5.305 s to 6.51 s from 907 mm to the 0.2 mm slack,
+and the tamper FAILs 9.8 mm beyond (replay: its jump allowance 617.4 -> 510.7 mm, the jump
+9.75 mm beyond).
+
 Pinned (strict xfails, their reasons give the figures): the drives whose gaps no page proves.
 The firmware is checked correct on each drive (``tests/fw_watch``: every step it took within
 1/1000 LSB of its float64 arc), so a FAIL of the untampered drive would blame a correct one.
@@ -38,21 +48,23 @@ UNPROVEN = ("no page proves what the firmware took in the gap: gapbound's allowa
 DRIVES = {
     "busoff_delay": ("pmir", "straight", 411, 9, "delay=0.4:70,busoff=3:0.4", 3.403, None),
     "drop_busoff_delay": (
-        "pmir", "straight", 423, 12, "drop=0.05,busoff=6:0.4,delay=0.3:55", 6.0,
-        UNPROVEN + "4868 mm over the drops' gaps summed (the bus-off's alone 238.5 mm, 12 "
-        "periods by COUNTER over 0.41 s; the pages at 3.10 s and 6.70 s count 149 accepted "
-        "frames where the host accepted 148, one late frame taken the host refused)"),
+        "pmir", "straight", 423, 12, "drop=0.05,busoff=6:0.4,delay=0.3:55", 6.0, None),
     "stalls_delay": (
         "pmir", "random", 431, 12, "stall=4:0.2,stall=8:0.2,delay=0.3:55", 6.0,
-        UNPROVEN + "3756 mm summed since the last free placement, from gaps of 3 to 11 periods "
-        "at 4.2 to 5.6 s (100 to 198 mm each) after the 4 s stall: the pages there (3.70 s, "
-        "5.16 s, 5.70 s) count fewer frames accepted than the host's (317 at frame 331) and the "
-        "log holds late frames the host refused, so no proof applies"),
+        UNPROVEN + "the first pose after 6.0 s (6.02 s) steps from the one placed at 5.80 s "
+        "within 637 mm (3752 mm summed since the start), 601.8 mm of it the gap into COUNTER 7 "
+        "at 5.99 s (18 periods): the host and the firmware took COUNTER 5 held back 55 ms "
+        "(heard at 5.865 s) as 11 ahead of COUNTER 10, so the gap's frames, all in the log (6 "
+        "to 10 accepted before it, 11 to 5 refused after it), lie 16 numbers off the host's "
+        "sequence and gapfill cannot fill it; no ENC_E2E page pair proves what the firmware "
+        "received there (the pages kept near it, 5.70 s and 8.90 s, enclose the 8 s stall's "
+        "mailbox overflow: no gapreceived run)"),
     "kobuki_delay_dup_stall": (
         "kobuki", "random", 422, 14, "delay=0.3:55,dup=0.1,stall=10:0.6", 10.601,
         "not a gap's bound: the 0.6 s stall's merge allowance (17.03 mm, breaks.merge_allowance_m"
         ": the pages count 41 frames fewer accepted than the host over it, which the log cannot "
-        "name) holds the 14.4 mm the tamper asks (6.6 mm untampered); replay's jump allowance "
+        "name; 17.21 mm with the gaps since) holds the 14.32 mm the tamper asks at 13.9 s, the "
+        "first placement with a pose after it (6.60 mm untampered); replay's jump allowance "
         "499 mm"),
 }
 

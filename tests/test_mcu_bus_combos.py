@@ -216,11 +216,15 @@ def test_a_restart_is_told_only_within_the_firmware_s_window() -> None:
 
 
 TAMPER_645_RIGHT_AFTER = (
-    "pmir 645 +10 mm from 5.3 s (0.3 s after the stall) PASSes: a gap of the log the delay "
-    "left there is re-placed by gapbound's allowance (6493 mm summed: the worst split of the "
-    "gap's travel within pmir's 4 m/s bound), which absorbs 10.03 mm; 0.075 mm beyond. No page "
-    "proves what the firmware took in that gap (``tests/test_gap_tamper_trial.py``'s UNPROVEN "
-    "family, not this drive's cause); from 6.0 s on the tamper FAILs by 9.8 mm")
+    "pmir 645 +10 mm from 5.3 s (0.3 s after the stall) PASSes: the first pose raised names the "
+    "frame at 5.285 s, whose placement steps from the one at 5.095 s within 27.9 mm (6493 mm "
+    "summed since the start), the gaps of 2 and 3 periods at 5.145, 5.195 and 5.285 s (3.19, "
+    "12.35, 12.37 mm: gapbound's worst split within pmir's 4 m/s): 0.075 mm beyond. Their "
+    "frames are in the log (held 55 ms), but the host's sequence runs 16 numbers ahead of the "
+    "sender's since it took COUNTER 15 (held, 5.005 s) as 11 ahead of COUNTER 4 (5.000 s), so "
+    "gapfill's numbers of the held frames miss them; no page pair proves what the firmware "
+    "received (OVERFLOWED_FRAMES grew in the 4.7 s stall, the first ENC_E2E page after it is "
+    "at 5.256 s: no gapreceived run). From 6.0 s on the tamper FAILs by 9.8 mm")
 
 
 def test_645_plus_10_mm_right_after_the_stall_fails(

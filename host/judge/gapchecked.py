@@ -127,6 +127,12 @@ def by_checked(pages: LostPages, totals: TotalsPages, i: IntArray, j: IntArray) 
     return proven
 
 
+def by_received(pages: LostPages, totals: TotalsPages, i: IntArray, j: IntArray) -> Bools:
+    """Per pair of pages (i, j) of one life: whether the firmware received exactly the log's
+    encoder frames between them, however many of them it accepted (``gapreceived``)."""
+    return _received_logged(pages, totals, i, j)[0]
+
+
 def skipped_frames(pages: LostPages, totals: TotalsPages, i: IntArray, j: IntArray) -> IntArray:
     """Per pair of pages (i, j): how many of the log's encoder frames between them the firmware
     refused, where it received exactly the log's frames there, every one of which the host

@@ -96,6 +96,16 @@ class LateFrames:
         found = [self.counts.get(s) for s in range(seq_before + 1, seq_before + periods)]
         return None if any(c is None for c in found) else found  # type: ignore[return-value]
 
+    def known(self, seq_before: int, periods: int) -> list[tuple[int, Counts]] | None:
+        """The frames of a gap of ``periods`` after sender frame ``seq_before`` the log holds
+        (refused), as (periods after the frame before the gap, counts), those it lacks left out;
+        None when two frames of one number disagreed (``gapreceived``)."""
+        found = [(k, self.counts[seq_before + k]) for k in range(1, periods)
+                 if seq_before + k in self.counts]
+        if any(c is None for _, c in found):
+            return None
+        return found  # type: ignore[return-value]
+
 
 def late_seq(counter: IntArray, sent_s: np.ndarray, anchor: Anchors, cycle_s: float) -> IntArray:
     """Sender sequence numbers of refused frames (COUNTER, bus time) after accepted frames
@@ -206,13 +216,21 @@ def _plausible(left: IntArray, right: IntArray, geometry: Geometry, bits: int,
                max_wheel_speed_mm_s: SpeedBound) -> bool:
     """Whether every one-period step is within the firmware's plausibility bound (none known:
     no)."""
+    return plausible_steps(left, right, np.ones(len(left) - 1, dtype=np.int64), geometry, bits,
+                           max_wheel_speed_mm_s)
+
+
+def plausible_steps(left: IntArray, right: IntArray, periods: IntArray, geometry: Geometry,
+                    bits: int, max_wheel_speed_mm_s: SpeedBound) -> bool:
+    """Whether every step (of ``periods`` encoder periods each) is within the firmware's
+    plausibility bound over its periods (none known: no)."""
     speed_mm_s = geometry.speed_bound_mm_s(max_wheel_speed_mm_s)
     if speed_mm_s is None:
         return False
     bound_left, bound_right = period_bounds(geometry, speed_mm_s)
     d_left = np.abs(wrap_delta(np.diff(left), bits))
     d_right = np.abs(wrap_delta(np.diff(right), bits))
-    return bool(np.all(d_left <= bound_left) and np.all(d_right <= bound_right))
+    return bool(np.all(d_left <= bound_left * periods) and np.all(d_right <= bound_right * periods))
 
 
 def gap_allowance_at(

@@ -89,6 +89,7 @@ from odocan.host.judge.gapchecked import (
     REFUSED,
     UNKNOWN,
     by_checked,
+    by_received,
     packed_rows,
     skipped_frames,
 )
@@ -172,6 +173,10 @@ class Seen:
     resets: Resets = field(default_factory=Resets)  # its COUNTER_RESET word (nearthreshold)
     skips: list[tuple[int, int, int]] = field(default_factory=list)  # (first, last, m): runs
     # of the log's frames over which it received exactly them and refused m (``gapchecked``)
+    received: list[Span] = field(default_factory=list)  # runs of the log's frames over which
+    # it received exactly them, whichever it accepted (``gapreceived``)
+    known: dict[int, list[tuple[int, Counts]]] = field(default_factory=dict)  # per gap (its
+    # frame after): the frames it lacks the log holds (``LateFrames.known``)
 
     def skipped(self, frame: int, reprimed: frozenset[int] = frozenset()) -> int | None:
         """The fewest frames the firmware refused over a run of ``skips`` holding the gap into
@@ -240,7 +245,9 @@ def seen_by_pages(pages: LostPages, totals: TotalsPages, gap_frames: IntArray,
     skips = [(int(pages.hi[a]), int(pages.lo[b]), int(k))
              for a, b, k in zip(i[m > 0].tolist(), j[m > 0].tolist(), m[m > 0].tolist(),
                                 strict=True)]
-    return Seen(_runs(windows, pages), missed, counted=_runs(counted, pages), skips=skips)
+    got = by_received(pages, totals, i, j)
+    return Seen(_runs(windows, pages), missed, counted=_runs(counted, pages), skips=skips,
+                received=_runs(list(zip(i[got].tolist(), j[got].tolist(), strict=True)), pages))
 
 
 def _runs(windows: list[tuple[int, int]], pages: LostPages) -> list[Span]:
@@ -364,6 +371,8 @@ class PageEvidence:
         keeper.keep_pending(True)  # no summary after the last: not let out in a burst
         fills = {b: f for b, missing in self._gaps
                  if (f := self.late.fill(self._gap_seq[b], missing + 1)) is not None}
+        known = {b: k for b, missing in self._gaps
+                 if (k := self.late.known(self._gap_seq[b], missing + 1)) is not None}
         holes = frozenset(self._holes)
         if not self._usable or keeper.cycle_s is None:
             return Seen([], [], fills, holes=holes)
@@ -373,7 +382,8 @@ class PageEvidence:
         return replace(seen_of(keeper.pages, keeper.totals, self._gaps, boot, sums), fills=fills,
                        holes=holes, through=through_gaps(keeper.pages, keeper.totals,
                                                          keeper.cycle_s, self._gap_s),
-                       resets=self.resets.resets(self._gap_s, keeper.cycle_s, holes))
+                       resets=self.resets.resets(self._gap_s, keeper.cycle_s, holes),
+                       known=known)
 
     def _add_holes(self, chunk: FrameArrays, enc: Encoders) -> None:
         """``Seen.holes``: the accepted encoder frames at or after an encoder frame of the chunk

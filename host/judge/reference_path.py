@@ -26,6 +26,7 @@ from odocan.host.judge.ctrlrestart import (
 from odocan.host.judge.cutreprime import Backlog, cut_reprime
 from odocan.host.judge.fitsegments import fit_segments
 from odocan.host.judge.gapfill import gap_allowance_at
+from odocan.host.judge.gapreceived import received_at
 from odocan.host.judge.gapseen import NOTHING, Seen
 from odocan.host.judge.gapskips import skipped_at
 from odocan.host.judge.lossgate import beyond_width
@@ -168,7 +169,9 @@ def build_reference(
             return 0.0  # the firmware took the gap as the reference's one step
         return min(gap_allowance_at(enc, b, seen.filled(b, reprimed), geometry, bits, integrator,
                                     max_wheel_speed_mm_s),  # gapbound's, or gapfill's known counts
-                   skipped_at(enc, b, seen.skipped(b, reprimed), geometry, bits, integrator))
+                   skipped_at(enc, b, seen.skipped(b, reprimed), geometry, bits, integrator),
+                   received_at(enc, b, seen, reprimed, geometry, bits, integrator,
+                               max_wheel_speed_mm_s))  # none the log lacks taken: gapreceived
 
     off_x, off_y, placed = placed_offsets(
         raw_segment_offsets(segment, at, onboard.x_m - x_m[at]),

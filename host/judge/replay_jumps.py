@@ -41,6 +41,7 @@ from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.analysis import HEADING_LSB_RAD, POSITION_LSB_M
 from odocan.host.judge.breaks import merge_allowance_m
 from odocan.host.judge.gapbound import gap_allowance_of_counts
+from odocan.host.judge.gapreceived import received_allowance_m, received_fill
 from odocan.host.judge.gapseen import NOTHING, Seen, seen_in_log
 from odocan.host.judge.reference import PROFILE_SPEED, Geometry
 from odocan.host.judge.replay_track import MAX_GAP_TICKS, EncoderTrack
@@ -144,6 +145,15 @@ class LogSteps:
         """The firmware took exactly the log's frames ``first`` .. ``last`` (of ``track``)."""
         return self.seen.took_all(int(self.enc_at[first]), int(self.enc_at[last]))
 
+    def gap_m(self, model: JumpModel, after: int, periods: int) -> float:
+        """The allowance (m) of the gap into ``track``'s frame ``after`` of ``periods``:
+        ``gapbound``'s, or ``gapreceived``'s where its pages prove the firmware received none
+        of the frames the log lacks there."""
+        before, now = _pair(self.counts[after - 1]), _pair(self.counts[after])
+        return min(model.allowance_m(before, now, periods), received_allowance_m(
+            received_fill(self.seen, int(self.enc_at[after])), before, now, periods,
+            model.geometry, model.bits, model.integrator, PROFILE_SPEED))
+
 
 def offset_jumps(model: JumpModel, common: IntArray, offset: npt.NDArray[np.float64],
                  turn: IntArray, anchored: npt.NDArray[np.bool_], replay_xy: IntArray,
@@ -186,8 +196,7 @@ def _pair_allowance_m(model: JumpModel, steps: tuple[LogSteps, LogSteps | None],
     times, period_s = log.track.timestamp_s, log.track.cycle_s or 0.0
     across = sum(0.0 if log.gap_missed(a + g + 1) or model.deaf_through(
         float(times[a + g]), float(times[a + g + 1]), period_s) else
-                 model.allowance_m(_pair(counts[a + g]), _pair(counts[a + g + 1]),
-                                   int(ticks[g + 1] - ticks[g])) for g in gaps.tolist())
+                 log.gap_m(model, a + g + 1, int(ticks[g + 1] - ticks[g])) for g in gaps.tolist())
     if replayed is None:
         return across if len(gaps) else None
     runs = model.merge_m(counts[a:b + 1])  # steps of runs of the log's frames

@@ -40,6 +40,7 @@ from odocan.host.judge.breaks import placed_offsets
 from odocan.host.judge.configs import ConfigPages, in_force
 from odocan.host.judge.distance import DistanceJudge
 from odocan.host.judge.gapfill import gap_or_fill_allowance
+from odocan.host.judge.gapreceived import received_allowance_m, received_fill
 from odocan.host.judge.gapskips import SkipCounts, took_none
 from odocan.host.judge.judgedfloor import mark_floor
 from odocan.host.judge.keptmark import mark_kept
@@ -392,7 +393,9 @@ def _judged(
         lambda b: 0.0 if b in info.by_uptime or seen.gap_missed(b, reprimed)  # reference_path's
         else min(gap_or_fill_allowance(seen.filled(b, reprimed),  # gapfill: late frames
             *info.gap_steps[b], geometry, bits, integrator, max_wheel_speed_mm_s),
-            skips.allowance_m(b, seen.skipped(b, reprimed), geometry, bits, integrator)),
+            skips.allowance_m(b, seen.skipped(b, reprimed), geometry, bits, integrator),
+            received_allowance_m(received_fill(seen, b, reprimed), *info.gap_steps[b], geometry,
+                                 bits, integrator, max_wheel_speed_mm_s)),  # gapreceived
         tolerance.position_m)
     offsets = (off_x, off_y)
     truth = TruthCompare((x0, y0, h0), offsets, rebase=rebase, e0=e0)
