@@ -30,6 +30,7 @@ from odocan.firmware.e2e import COUNTER_MASK, FRAME_LEN, E2EReceiver, p02_crc
 from odocan.firmware.errors import ErrorFlag, ErrorMask, Reason, State
 from odocan.firmware.fixmath import U16_MAX, U32_MAX, muldiv_round_u64, wrap_signed, wrap_u32
 from odocan.firmware.health import RECOVERY_FRAMES, Health
+from odocan.firmware.heldback import HeldBack
 from odocan.firmware.odometry import Odometry
 from odocan.firmware.reception import Reception
 from odocan.firmware.restartage import CTRL_UPTIME_MAX as CTRL_UPTIME_MAX
@@ -58,43 +59,14 @@ class EncoderInput:
     # Fixed fields (C: the struct; 35 would outgrow CPython 3.11's shared-key instance dicts and
     # every read would be a dict lookup); ``__dict__`` kept for tests that plant a method.
     __slots__ = (
-        "__dict__",
-        "_clock",
-        "_count_half",
-        "_counter_bits",
-        "_counts_prev",
-        "_counts_u32",
-        "_dropped_at_accept",
-        "_dropped_before",
-        "_dropped_seen",
-        "_enc_prev_counter",
-        "_errors",
-        "_health",
-        "_max_counts_per_period",
-        "_odometry",
-        "_overflows_at_accept",
-        "_periods_since_sample",
-        "_reception",
-        "_resync_first",
-        "_resync_frames",
-        "_resync_last",
-        "_sample_doubt",
-        "_samples_stale",
-        "_this_step_periods",
-        "_tick_late",
-        "_twist",
-        "_uptime_now",
-        "_uptime_prev",
-        "_wide_counters",
-        "_wire_prev",
-        "_wire_unused_mask",
-        "enc_counter",
-        "frames_dropped",
-        "frames_implausible",
-        "max_wheel_speed_mm_s",
-        "periods_since_frame",
-        "rx",
-        "tick_budget",
+        "__dict__", "_clock", "_count_half", "_counter_bits", "_counts_prev", "_counts_u32",
+        "_dropped_at_accept", "_dropped_before", "_dropped_seen", "_enc_prev_counter", "_errors",
+        "_health", "_held", "_max_counts_per_period", "_odometry", "_overflows_at_accept",
+        "_periods_since_sample", "_reception", "_resync_first", "_resync_frames", "_resync_last",
+        "_sample_doubt", "_samples_stale", "_this_step_periods", "_tick_late", "_twist",
+        "_uptime_now", "_uptime_prev", "_wide_counters", "_wire_prev", "_wire_unused_mask",
+        "enc_counter", "frames_dropped", "frames_implausible", "max_wheel_speed_mm_s",
+        "periods_since_frame", "rx", "tick_budget",
     )
 
     def __init__(
@@ -137,6 +109,7 @@ class EncoderInput:
         self._resync_last: tuple[int, int, int] = (0, 0, 0)
         self._resync_frames = 0
         self._hold = RestartHold()  # a frame saying its controller restarted, until the next
+        self._held = HeldBack()  # recent steps that skipped COUNTERs: a frame held back in one
         self.periods_since_frame = 0  # periods (of firmware time) since the last accepted frame
         # Periods since the last accepted frame's sample is known to have been taken (frames
         # taken in a tick that lost time were sampled at unknown times during the stall).
@@ -230,12 +203,8 @@ class EncoderInput:
         # The periods the plausibility bound allows this step: ``periods``, or, when the mailbox
         # may have dropped frames between the last accepted frame and this one (drops seen at a
         # tick's start from the accepting tick on, before this frame's tick: a full ring drops
-        # the newest, so they came after that tick's frames), ``_dropped_bound_periods``. A
-        # queued burst (a babbler held the bus) that overflows the mailbox can drop 16 or more
-        # encoder frames, which the 4-bit COUNTER cannot count (E2E takes the 17th for the next
-        # one) and firmware time cannot see (they all waited); bounded by ``periods`` alone such
-        # a step was refused and the next frames taken for a counter restart. The counters are
-        # absolute, so the wider step is exact.
+        # the newest, so they came after that tick's frames), ``_dropped_bound_periods`` (why:
+        # its docstring; the counters are absolute, so the wider step is exact).
         dropped = self._overflows_at_accept != self._health.overflows_before  # _mailbox_dropped
         bound = self._dropped_bound_periods(periods) if dropped else periods
         if bound >= self._ambiguous_periods and self._counts_prev is not None:
@@ -245,17 +214,22 @@ class EncoderInput:
             periods = self._doubted_step(counter, wire, counts, advance)
             if periods == 0:  # refused, or re-primed on
                 return
+        if self._held.used and self._held.held_back(counter, counts, self._count_half):
+            return  # sampled inside a step taken already (firmware.heldback): not a step back
         self._resync_first = None
         self._this_step_periods = periods
-        # ENC_E2E_LOST (the E2E receiver's ``lost_frames``) also counts the whole COUNTER
-        # cycles of frames the mailbox dropped, which the E2E check (the COUNTER mod 16) cannot
-        # see: ``advance`` less the plain COUNTER advance (0 but after such drops).
+        self._count_cycles_dropped(counter, advance)
+        self._accept(counter, wire, counts)
+
+    def _count_cycles_dropped(self, counter: int, advance: int) -> None:
+        """ENC_E2E_LOST (the E2E receiver's ``lost_frames``) also counts the whole COUNTER
+        cycles of frames the mailbox dropped, which the E2E check (the COUNTER mod 16) cannot
+        see: ``advance`` less the plain COUNTER advance (0 but after such drops)."""
         prev = self._enc_prev_counter
         if prev is not None:
             plain = ((counter - prev) & COUNTER_MASK) or COUNTER_VALUES
             if advance != plain:
                 self.rx.lost_frames = wrap_u32(self.rx.lost_frames + advance - plain)
-        self._accept(counter, wire, counts)
 
     def _doubted_step(self, counter: int, wire: Counts, counts: Counts, advance: int) -> int:
         """A step the bound refused, judged again over ``sampledoubt.doubted_periods``: those
@@ -272,6 +246,8 @@ class EncoderInput:
 
     def _accept(self, counter: int, wire: Counts, counts: Counts) -> None:
         """Integrate an accepted WHEEL_ENCODERS frame; it feeds the watchdog's recovery."""
+        if self._enc_prev_counter is not None and self._counts_prev is not None:
+            self._held.note(self._enc_prev_counter, counter, self._counts_prev, counts)
         self._wire_prev = wire  # the counters are the base of the next deltas
         self._counts_u32 = counts
         self._counts_prev = counts
@@ -416,6 +392,7 @@ class EncoderInput:
         self._resync_first = None
         self._resync_frames = 0
         self._odometry.unprime()
+        self._held.clear()
         self._odometry.step_counts(first[0], first[1])
         self._enc_prev_counter = None
         self._this_step_periods = ((counter - first[2]) & COUNTER_MASK) or COUNTER_VALUES
@@ -473,6 +450,7 @@ class EncoderInput:
         self._resync_first = None
         self._resync_frames = 0
         self._odometry.unprime()
+        self._held.clear()
         self._enc_prev_counter = None
         self._this_step_periods = 1
         self._accept(counter, wire, counts)
@@ -486,6 +464,7 @@ class EncoderInput:
             self._wire_prev = None
             self._counts_prev = None
             self._hold.held = False
+            self._held.clear()
         self._counter_bits = self._odometry.consts.counter_bits
         self._count_half = 1 << (self._counter_bits - 1)
         self._wide_counters = self._counter_bits > WIRE_COUNTER_BITS
