@@ -182,6 +182,8 @@ class EncoderInput:
     def on_frame(self, data: bytes) -> None:
         """One WHEEL_ENCODERS frame from the mailbox. The common case (16-bit counters, no
         restart, a plausible step) runs in line: ~60 000 frames a simulated minute."""
+        if self._held.used and self._held_back(data):
+            return  # sampled inside a step taken already (firmware.heldback): not a step back
         if not self._reception.usable(self.rx, data):
             return
         counter, left, right, uptime = fr.unpack_wheel_encoders_fields(data)
@@ -214,12 +216,33 @@ class EncoderInput:
             periods = self._doubted_step(counter, wire, counts, advance)
             if periods == 0:  # refused, or re-primed on
                 return
-        if self._held.used and self._held.held_back(counter, counts, self._count_half):
-            return  # sampled inside a step taken already (firmware.heldback): not a step back
         self._resync_first = None
         self._this_step_periods = periods
         self._count_cycles_dropped(counter, advance)
         self._accept(counter, wire, counts)
+
+    def _held_back(self, data: bytes) -> bool:
+        """True (counted) for a frame, its CRC right, sampled inside a step taken already that
+        the bound (or the doubt) would pass as a step back: dropped before its E2E check, as if
+        the bus had lost it (firmware.heldback)."""
+        ids = self.rx.data_ids
+        if len(data) != FRAME_LEN or data[0] != p02_crc(data, ids[data[1] & COUNTER_MASK]):
+            return False
+        counter, left, right, _ = fr.unpack_wheel_encoders_fields(data)
+        counts = self._extend_counters((left, right)) if self._wide_counters else (left, right)
+        if (left | right) & self._wire_unused_mask or not self._held.held_back(
+                counter, counts, self._count_half):
+            return False
+        advance = self._counter_advance(counter)
+        periods = self._step_periods(advance)
+        doubted = doubted_periods(advance, self._periods_since_sample, self._sample_doubt,
+                                  self._tick_late)
+        bound = self._dropped_bound_periods(periods) if self._mailbox_dropped() else periods
+        if self._plausible(self._counts_prev, counts, bound) or (
+                doubted != 0 and self._plausible(self._counts_prev, counts, doubted)):
+            self._held.refused = wrap_u32(self._held.refused + 1)
+            return True
+        return False
 
     def _count_cycles_dropped(self, counter: int, advance: int) -> None:
         """ENC_E2E_LOST (the E2E receiver's ``lost_frames``) also counts the whole COUNTER
@@ -246,8 +269,7 @@ class EncoderInput:
 
     def _accept(self, counter: int, wire: Counts, counts: Counts) -> None:
         """Integrate an accepted WHEEL_ENCODERS frame; it feeds the watchdog's recovery."""
-        if self._enc_prev_counter is not None and self._counts_prev is not None:
-            self._held.note(self._enc_prev_counter, counter, self._counts_prev, counts)
+        self._held.note(self._enc_prev_counter, counter, self._counts_prev, counts)
         self._wire_prev = wire  # the counters are the base of the next deltas
         self._counts_u32 = counts
         self._counts_prev = counts

@@ -10,18 +10,19 @@ before 5, let out after the bus-off: steps of +156, -104 and +52 counts on the l
 turned +104 from 2 to 4, the wheels' counts and the truth rising throughout; after the stall,
 COUNTER 0 after 3, -156; DISTANCE 1.99 mm beyond the judge's tolerance, 20 mm above the path).
 
-Such a frame is told, when it would be integrated (one the bound refuses goes on to
-``EncoderInput._on_implausible`` as before), by what the firmware integrated already: its COUNTER
-is one a recent step skipped (an OKSOMELOST advance of n from COUNTER ``first``: ``first`` + k,
-0 < k < n) and each wheel's counts lie within that step (between its two frames' counts): it was
-sampled inside a step taken already. Refused, nothing is integrated and no state moves (the E2E
-check took it: ENC_E2E_OK counts it): the next frame steps from the last integrated one, as if
-the held frame had been lost (the counts are absolute: the pose is the same). ``first`` + k is
-told until the frames accepted since the step come round to it (16 - n + k COUNTER advances): a
-frame the bus held through a silence, when no frame was accepted, is still told. A genuine frame
-is refused so only when the robot came back inside the step's counts (standing still, or
-reversing onto it) with a COUNTER the step skipped: nothing is lost but its own step, merged into
-the next (the pose exact, DISTANCE as a lost frame leaves it).
+Such a frame is told before its E2E check (its CRC right) by what the firmware integrated
+already: its COUNTER is one a recent step skipped (an OKSOMELOST advance of n from COUNTER
+``first``: ``first`` + k, 0 < k < n) and each wheel's counts lie within that step (between its two
+frames' counts): it was sampled inside a step taken already. When the plausibility bound (or the
+doubt, ``sampledoubt``) would pass it as a step back, it is dropped as if the bus had lost it:
+the E2E check never sees it (ENC_E2E_OK does not count it, the E2E state does not move), nothing
+is integrated, and the next frame steps from the last integrated one (the counts are absolute:
+the pose is the same). One the bound refuses goes on to E2E and ``_on_implausible`` as before.
+``first`` + k is told until the frames accepted since the step come round to it (16 - n + k
+COUNTER advances): a frame the bus held through a silence, when no frame was accepted, is still
+told. A genuine frame is dropped so only when the robot came back inside the step's counts
+(standing still, or reversing onto it) with a COUNTER the step skipped: nothing is lost but its
+own step, merged into the next (the pose exact, DISTANCE as a lost frame leaves it).
 
 C: the ``held_*`` arrays of ``struct odom_ecu`` (firmware/c/ecu.c ``held_note``, ``held_back``).
 """
@@ -52,7 +53,7 @@ class HeldBack:
         self.frames = 0  # u32, wrapping: the COUNTER advances of the frames accepted
         self.next_slot = 0  # u8: the slot the next step takes (a ring)
         self.used = 0  # u8: slots in use
-        self.refused = 0  # u32, wrapping: frames refused as held back
+        self.refused = 0  # u32, wrapping: frames refused as held back (the caller counts)
 
     def clear(self) -> None:
         """Forget every step (a re-prime: counts before it are no base for a frame after it)."""
@@ -60,9 +61,13 @@ class HeldBack:
         for slot in range(HELD_STEPS):
             self._span[slot] = 0
 
-    def note(self, first: int, last: int, counts_first: Counts, counts_last: Counts) -> None:
+    def note(self, first: int | None, last: int, counts_first: Counts | None,
+             counts_last: Counts) -> None:
         """A step integrated from the frame of COUNTER ``first`` (``counts_first``) to the one of
-        ``last`` (``counts_last``): remembered when it skipped a COUNTER."""
+        ``last`` (``counts_last``): remembered when it skipped a COUNTER (None: no frame before,
+        no step; C: ``enc_prev_counter`` -1 or ``counts_prev_valid`` false)."""
+        if first is None or counts_first is None:
+            return
         span = ((last - first) & COUNTER_MASK) or COUNTER_VALUES  # u8: 1..16
         self.frames = (self.frames + span) & U32_MAX
         if span < 2:
@@ -76,9 +81,9 @@ class HeldBack:
             self.used += 1
 
     def held_back(self, counter: int, counts: Counts, half: int) -> bool:
-        """True (counted in ``refused``) when the frame (``counter``, ``counts``) was sampled
-        inside a remembered step: a COUNTER it skipped, each wheel's counts within it (read
-        wrap-safe in the counters' width, ``half`` its half range)."""
+        """True when the frame (``counter``, ``counts``) was sampled inside a remembered step:
+        a COUNTER it skipped, each wheel's counts within it (read wrap-safe in the counters'
+        width, ``half`` its half range)."""
         if self.used == 0:
             return False
         for slot in range(HELD_STEPS):
@@ -90,7 +95,6 @@ class HeldBack:
             if since >= COUNTER_VALUES - span + skipped:  # its COUNTER came round since
                 continue
             if _within(self._from[slot], self._to[slot], counts, half):
-                self.refused = (self.refused + 1) & U32_MAX
                 return True
         return False
 

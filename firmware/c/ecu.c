@@ -116,7 +116,8 @@ static bool hold_confirmed(const struct odom_ecu *ecu, uint8_t counter, const ui
 static void held_clear(struct odom_ecu *ecu);
 static void held_note(struct odom_ecu *ecu, uint8_t first, uint8_t last,
                       const uint32_t counts_first[2], const uint32_t counts_last[2]);
-static bool held_back(struct odom_ecu *ecu, uint8_t counter, const uint32_t counts[2]);
+static bool held_back(const struct odom_ecu *ecu, uint8_t counter, const uint32_t counts[2]);
+static bool held_back_frame(struct odom_ecu *ecu, const uint8_t *data, size_t len);
 static void sum_step(struct odom_ecu *ecu);
 static void add_merged_step(struct odom_ecu *ecu);
 static void update_twist(struct odom_ecu *ecu, uint32_t periods);
@@ -389,6 +390,9 @@ static bool e2e(struct odom_ecu *ecu, struct e2e_receiver *receiver, const uint8
 
 static void on_wheel_encoders(struct odom_ecu *ecu, const uint8_t *data, size_t len)
 {
+    if (ecu->held_used != 0u && held_back_frame(ecu, data, len)) {
+        return; /* sampled inside a step taken already (heldback.py): not a step back */
+    }
     if (!e2e(ecu, &ecu->rx_encoders, data, len)) {
         return;
     }
@@ -432,9 +436,6 @@ static void on_wheel_encoders(struct odom_ecu *ecu, const uint8_t *data, size_t 
             reprime(ecu, counter, wire, counts);
             return;
         }
-    }
-    if (ecu->held_used != 0u && held_back(ecu, counter, counts)) {
-        return; /* sampled inside a step taken already (heldback.py): not a step back */
     }
     ecu->resync_first_valid = false;
     ecu->this_step_periods = periods;
@@ -868,9 +869,9 @@ static bool held_within(const struct odom_ecu *ecu, unsigned slot, const uint32_
     return true;
 }
 
-/* True (counted in held_refused) when the frame was sampled inside a remembered step: a COUNTER
- * it skipped whose frames accepted since have not come round to it, each wheel within it. */
-static bool held_back(struct odom_ecu *ecu, uint8_t counter, const uint32_t counts[2])
+/* True when the frame was sampled inside a remembered step: a COUNTER it skipped whose frames
+ * accepted since have not come round to it, each wheel within it. */
+static bool held_back(const struct odom_ecu *ecu, uint8_t counter, const uint32_t counts[2])
 {
     for (unsigned slot = 0u; slot < HELD_STEPS; ++slot) {
         uint32_t span = ecu->held_span[slot];
@@ -883,9 +884,37 @@ static bool held_back(struct odom_ecu *ecu, uint8_t counter, const uint32_t coun
             continue;
         }
         if (held_within(ecu, slot, counts)) {
-            ecu->held_refused++;
             return true;
         }
+    }
+    return false;
+}
+
+/* True (counted in held_refused) for a frame, its CRC right, sampled inside a step taken already
+ * that the bound (or the doubt) would pass as a step back: dropped before its E2E check, as if
+ * the bus had lost it (encoders.py _held_back). */
+static bool held_back_frame(struct odom_ecu *ecu, const uint8_t *data, size_t len)
+{
+    if (len != 8u || data[0] != p02_crc(data, ecu->rx_encoders.data_ids[data[1] & COUNTER_MASK])) {
+        return false;
+    }
+    uint8_t counter;
+    uint8_t uptime;
+    uint32_t wire[2];
+    unpack_wheel_encoders(data, &counter, &wire[0], &wire[1], &uptime);
+    uint32_t counts[2];
+    extend_counters(ecu, wire, counts);
+    if (beyond_width(ecu, wire) || !held_back(ecu, counter, counts)) {
+        return false;
+    }
+    uint32_t advance = counter_advance(ecu, counter);
+    uint32_t periods = step_periods(ecu, advance);
+    uint32_t doubted = doubted_periods(ecu, advance);
+    const uint32_t *prev = ecu->counts_prev_valid ? ecu->counts_prev : NULL;
+    if (plausible(ecu, prev, counts, bound_periods(ecu, periods))
+        || (doubted != 0u && plausible(ecu, prev, counts, doubted))) {
+        ecu->held_refused++;
+        return true;
     }
     return false;
 }
