@@ -22,8 +22,12 @@ beyond any window the firmware's E2E can have reached: such a pair never followe
 the firmware, and tells no restart (``host.judge.ctrlrestart.window_periods``, the whole-log and
 streamed references' rule; the live one's ``in_window``). Now 0.049 mm, PASS.
 
-kobuki circle 652, 9 s, ``busoff=3.1:0.3,stall=5.5:0.2,delay=0.3:55``: pinned (strict xfail,
-``UNFIXED``).
+kobuki circle 652, 9 s, ``busoff=3.1:0.3,stall=5.5:0.2,delay=0.3:55``: FAIL, DISTANCE 1.99 mm
+beyond its tolerance (44.0 mm before ``reprime444``), the pose within 0.056 mm. The firmware was
+wrong: after the bus-off it integrated COUNTER 3 and 4, sent before the COUNTER 5 it had
+integrated (held by the delay, then by the bus-off), as a step back of -104 counts and forward
+again, a path the wheels never turned (``tests/test_distance_late.py``). It now refuses a frame
+sampled inside a step it took already (``firmware.heldback``): PASS.
 """
 
 from __future__ import annotations
@@ -46,18 +50,6 @@ from tests.log_edit import raise_raw
 POSE_X = (2, 4)  # ODOM_POSE_X's X: bytes 2..5, signed, 0.1 mm
 TAMPER_X_LSB = 100  # 10 mm
 Drive = tuple[Path, Watch, int]  # the log, the firmware's watch, run's exit code
-UNFIXED = (
-    "kobuki circle 652: DISTANCE 44.0 mm off the reference's path (the pose within 0.056 mm). "
-    "The firmware re-primed after the bus-off (COUNTER_RESET at 3.60 s: the held frames the "
-    "bus-off let out back to back, ``reprime444``'s cause; with that branch's firmware no "
-    "re-prime, DISTANCE still 1.99 mm off). Its restart run was COUNTER 5 (3.465 s), 11 (3.524 "
-    "s, held 55 ms), 14 (3.555 s): re-primed on 5, one step to 14 (DISTANCE +45 mm). The "
-    "host's E2E refused 11, which the firmware's took: the pose evidence (ODOM_POSE_X held on "
-    "ENC_COUNTER 4 from 3.42 to 3.555 s) proves 11 not integrated and reads it as refused by "
-    "E2E, but the firmware refused 5 and 11 as implausible steps (REASON IMPLAUSIBLE_STEP at "
-    "3.50 s) after its E2E took them; the pages (ENC_E2E_OK 108 at 2.50 s, 155 at 3.70 s) "
-    "differ from the host's count by no more than their race. So the reference's run is 5, "
-    "14, 3 (one step 5 -> 3 at 3.605 s) and every DISTANCE between is 45 mm above it.")
 # name: (robot, scenario, seed, duration s, faults, the faults' end s: the tamper from there,
 #        None or the strict xfail's reason)
 DRIVES = {
@@ -66,7 +58,7 @@ DRIVES = {
     "stall_uptime_back": ("pmir", "square", 645, 9, "busoff=2.7:0.2,stall=4.7:0.3,delay=0.3:55",
                           6.0, None),
     "busoff_restart_run": ("kobuki", "circle", 652, 9,
-                           "busoff=3.1:0.3,stall=5.5:0.2,delay=0.3:55", 5.8, UNFIXED),
+                           "busoff=3.1:0.3,stall=5.5:0.2,delay=0.3:55", 5.8, None),
 }
 
 
@@ -101,8 +93,9 @@ LIVE_UNFIXED = (
     "kobuki circle 652 once merged with reprime444 (the firmware gives held frames let out "
     "together the first one's doubt, and no longer re-primes after the bus-off): the monitor "
     "0.194 mm beyond its allowance (combo655 alone: within; main, replayed in real time: "
-    "194.5 mm at 3.86 s). The live judge has no doubted-period rule (step_periods) for the "
-    "frames the firmware took after the bus-off")
+    "194.5 mm at 3.86 s; max_beyond_allowance_m 0.1945, and 0.1736 since the firmware drops "
+    "the held frames, firmware.heldback). The live judge has no doubted-period rule "
+    "(step_periods) for the frames the firmware took after the bus-off")
 
 
 def test_the_live_judge_passes_the_correct_firmware(drive: tuple[str, Drive],
