@@ -8,7 +8,8 @@ forward again, but DISTANCE (the sum of |dS|) counts both, a path the robot neve
 #11: kobuki circle 652, 9 s, ``busoff=3.1:0.3,stall=5.5:0.2,delay=0.3:55``: COUNTER 3, sampled
 before 5, let out after the bus-off: steps of +156, -104 and +52 counts on the left wheel where it
 turned +104 from 2 to 4, the wheels' counts and the truth rising throughout; after the stall,
-COUNTER 0 after 3, -156; DISTANCE 1.99 mm beyond the judge's tolerance, 20 mm above the path).
+COUNTER 0 after 3, -156; DISTANCE 1.99 mm beyond the judge's tolerance, 50.0 mm above the
+wheels' path at the end: ``tests/test_distance_late.py``).
 
 Such a frame is told before its E2E check (its CRC right) by what the firmware integrated
 already: its COUNTER is one a recent step skipped (an OKSOMELOST advance of n from COUNTER
