@@ -30,7 +30,6 @@ from odocan.firmware.e2e import COUNTER_MASK, FRAME_LEN, E2EReceiver, p02_crc
 from odocan.firmware.errors import ErrorFlag, ErrorMask, Reason, State
 from odocan.firmware.fixmath import U16_MAX, U32_MAX, muldiv_round_u64, wrap_signed, wrap_u32
 from odocan.firmware.health import RECOVERY_FRAMES, Health
-from odocan.firmware.heldback import HeldBack
 from odocan.firmware.odometry import Odometry
 from odocan.firmware.reception import Reception
 from odocan.firmware.restartage import CTRL_UPTIME_MAX as CTRL_UPTIME_MAX
@@ -59,14 +58,43 @@ class EncoderInput:
     # Fixed fields (C: the struct; 35 would outgrow CPython 3.11's shared-key instance dicts and
     # every read would be a dict lookup); ``__dict__`` kept for tests that plant a method.
     __slots__ = (
-        "__dict__", "_clock", "_count_half", "_counter_bits", "_counts_prev", "_counts_u32",
-        "_dropped_at_accept", "_dropped_before", "_dropped_seen", "_enc_prev_counter", "_errors",
-        "_health", "_held", "_max_counts_per_period", "_odometry", "_overflows_at_accept",
-        "_periods_since_sample", "_reception", "_resync_first", "_resync_frames", "_resync_last",
-        "_sample_doubt", "_samples_stale", "_this_step_periods", "_tick_late", "_twist",
-        "_uptime_now", "_uptime_prev", "_wide_counters", "_wire_prev", "_wire_unused_mask",
-        "enc_counter", "frames_dropped", "frames_implausible", "max_wheel_speed_mm_s",
-        "periods_since_frame", "rx", "tick_budget",
+        "__dict__",
+        "_clock",
+        "_count_half",
+        "_counter_bits",
+        "_counts_prev",
+        "_counts_u32",
+        "_dropped_at_accept",
+        "_dropped_before",
+        "_dropped_seen",
+        "_enc_prev_counter",
+        "_errors",
+        "_health",
+        "_max_counts_per_period",
+        "_odometry",
+        "_overflows_at_accept",
+        "_periods_since_sample",
+        "_reception",
+        "_resync_first",
+        "_resync_frames",
+        "_resync_last",
+        "_sample_doubt",
+        "_samples_stale",
+        "_this_step_periods",
+        "_tick_late",
+        "_twist",
+        "_uptime_now",
+        "_uptime_prev",
+        "_wide_counters",
+        "_wire_prev",
+        "_wire_unused_mask",
+        "enc_counter",
+        "frames_dropped",
+        "frames_implausible",
+        "max_wheel_speed_mm_s",
+        "periods_since_frame",
+        "rx",
+        "tick_budget",
     )
 
     def __init__(
@@ -109,7 +137,6 @@ class EncoderInput:
         self._resync_last: tuple[int, int, int] = (0, 0, 0)
         self._resync_frames = 0
         self._hold = RestartHold()  # a frame saying its controller restarted, until the next
-        self._held = HeldBack()  # recent steps that skipped COUNTERs: a frame held back in one
         self.periods_since_frame = 0  # periods (of firmware time) since the last accepted frame
         # Periods since the last accepted frame's sample is known to have been taken (frames
         # taken in a tick that lost time were sampled at unknown times during the stall).
@@ -182,8 +209,6 @@ class EncoderInput:
     def on_frame(self, data: bytes) -> None:
         """One WHEEL_ENCODERS frame from the mailbox. The common case (16-bit counters, no
         restart, a plausible step) runs in line: ~60 000 frames a simulated minute."""
-        if self._held.used and self._held_back(data):
-            return  # sampled inside a step taken already (firmware.heldback): not a step back
         if not self._reception.usable(self.rx, data):
             return
         counter, left, right, uptime = fr.unpack_wheel_encoders_fields(data)
@@ -205,8 +230,12 @@ class EncoderInput:
         # The periods the plausibility bound allows this step: ``periods``, or, when the mailbox
         # may have dropped frames between the last accepted frame and this one (drops seen at a
         # tick's start from the accepting tick on, before this frame's tick: a full ring drops
-        # the newest, so they came after that tick's frames), ``_dropped_bound_periods`` (why:
-        # its docstring; the counters are absolute, so the wider step is exact).
+        # the newest, so they came after that tick's frames), ``_dropped_bound_periods``. A
+        # queued burst (a babbler held the bus) that overflows the mailbox can drop 16 or more
+        # encoder frames, which the 4-bit COUNTER cannot count (E2E takes the 17th for the next
+        # one) and firmware time cannot see (they all waited); bounded by ``periods`` alone such
+        # a step was refused and the next frames taken for a counter restart. The counters are
+        # absolute, so the wider step is exact.
         dropped = self._overflows_at_accept != self._health.overflows_before  # _mailbox_dropped
         bound = self._dropped_bound_periods(periods) if dropped else periods
         if bound >= self._ambiguous_periods and self._counts_prev is not None:
@@ -218,41 +247,15 @@ class EncoderInput:
                 return
         self._resync_first = None
         self._this_step_periods = periods
-        self._count_cycles_dropped(counter, advance)
-        self._accept(counter, wire, counts)
-
-    def _held_back(self, data: bytes) -> bool:
-        """True (counted) for a frame, its CRC right, sampled inside a step taken already that
-        the bound (or the doubt) would pass as a step back: dropped before its E2E check, as if
-        the bus had lost it (firmware.heldback)."""
-        ids = self.rx.data_ids
-        if len(data) != FRAME_LEN or data[0] != p02_crc(data, ids[data[1] & COUNTER_MASK]):
-            return False
-        counter, left, right, _ = fr.unpack_wheel_encoders_fields(data)
-        counts = self._extend_counters((left, right)) if self._wide_counters else (left, right)
-        if (left | right) & self._wire_unused_mask or not self._held.held_back(
-                counter, counts, self._count_half):
-            return False
-        advance = self._counter_advance(counter)
-        periods = self._step_periods(advance)
-        doubted = doubted_periods(advance, self._periods_since_sample, self._sample_doubt,
-                                  self._tick_late)
-        bound = self._dropped_bound_periods(periods) if self._mailbox_dropped() else periods
-        if self._plausible(self._counts_prev, counts, bound) or (
-                doubted != 0 and self._plausible(self._counts_prev, counts, doubted)):
-            self._held.refused = wrap_u32(self._held.refused + 1)
-            return True
-        return False
-
-    def _count_cycles_dropped(self, counter: int, advance: int) -> None:
-        """ENC_E2E_LOST (the E2E receiver's ``lost_frames``) also counts the whole COUNTER
-        cycles of frames the mailbox dropped, which the E2E check (the COUNTER mod 16) cannot
-        see: ``advance`` less the plain COUNTER advance (0 but after such drops)."""
+        # ENC_E2E_LOST (the E2E receiver's ``lost_frames``) also counts the whole COUNTER
+        # cycles of frames the mailbox dropped, which the E2E check (the COUNTER mod 16) cannot
+        # see: ``advance`` less the plain COUNTER advance (0 but after such drops).
         prev = self._enc_prev_counter
         if prev is not None:
             plain = ((counter - prev) & COUNTER_MASK) or COUNTER_VALUES
             if advance != plain:
                 self.rx.lost_frames = wrap_u32(self.rx.lost_frames + advance - plain)
+        self._accept(counter, wire, counts)
 
     def _doubted_step(self, counter: int, wire: Counts, counts: Counts, advance: int) -> int:
         """A step the bound refused, judged again over ``sampledoubt.doubted_periods``: those
@@ -269,7 +272,6 @@ class EncoderInput:
 
     def _accept(self, counter: int, wire: Counts, counts: Counts) -> None:
         """Integrate an accepted WHEEL_ENCODERS frame; it feeds the watchdog's recovery."""
-        self._held.note(self._enc_prev_counter, counter, self._counts_prev, counts)
         self._wire_prev = wire  # the counters are the base of the next deltas
         self._counts_u32 = counts
         self._counts_prev = counts
@@ -414,7 +416,6 @@ class EncoderInput:
         self._resync_first = None
         self._resync_frames = 0
         self._odometry.unprime()
-        self._held.clear()
         self._odometry.step_counts(first[0], first[1])
         self._enc_prev_counter = None
         self._this_step_periods = ((counter - first[2]) & COUNTER_MASK) or COUNTER_VALUES
@@ -472,7 +473,6 @@ class EncoderInput:
         self._resync_first = None
         self._resync_frames = 0
         self._odometry.unprime()
-        self._held.clear()
         self._enc_prev_counter = None
         self._this_step_periods = 1
         self._accept(counter, wire, counts)
@@ -486,7 +486,6 @@ class EncoderInput:
             self._wire_prev = None
             self._counts_prev = None
             self._hold.held = False
-            self._held.clear()
         self._counter_bits = self._odometry.consts.counter_bits
         self._count_half = 1 << (self._counter_bits - 1)
         self._wide_counters = self._counter_bits > WIRE_COUNTER_BITS

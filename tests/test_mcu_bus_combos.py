@@ -22,12 +22,8 @@ beyond any window the firmware's E2E can have reached: such a pair never followe
 the firmware, and tells no restart (``host.judge.ctrlrestart.window_periods``, the whole-log and
 streamed references' rule; the live one's ``in_window``). Now 0.049 mm, PASS.
 
-kobuki circle 652, 9 s, ``busoff=3.1:0.3,stall=5.5:0.2,delay=0.3:55``: FAIL, DISTANCE 1.99 mm
-beyond its tolerance (44.0 mm before ``reprime444``), the pose within 0.056 mm. The firmware was
-wrong: after the bus-off it integrated COUNTER 3 and 4, sent before the COUNTER 5 it had
-integrated (held by the delay, then by the bus-off), as a step back of -104 counts and forward
-again, a path the wheels never turned (``tests/test_distance_late.py``). It now refuses a frame
-sampled inside a step it took already (``firmware.heldback``): PASS.
+kobuki circle 652, 9 s, ``busoff=3.1:0.3,stall=5.5:0.2,delay=0.3:55``: pinned (strict xfail,
+``UNFIXED``).
 """
 
 from __future__ import annotations
@@ -50,6 +46,17 @@ from tests.log_edit import raise_raw
 POSE_X = (2, 4)  # ODOM_POSE_X's X: bytes 2..5, signed, 0.1 mm
 TAMPER_X_LSB = 100  # 10 mm
 Drive = tuple[Path, Watch, int]  # the log, the firmware's watch, run's exit code
+UNFIXED = (
+    "kobuki circle 652: DISTANCE 1.99 mm beyond its tolerance (44.0 mm before reprime444), the "
+    "pose within 0.056 mm. The firmware is wrong (tests/test_distance_late.py): after the bus-off "
+    "it integrates COUNTER 3 and 4, sent before the COUNTER 5 it had integrated (held by the "
+    "delay, then by the bus-off), as steps of -104 and +52 counts after +156 where the wheels "
+    "turned +104, every count forward; after the stall COUNTER 0 after 3 (-156): DISTANCE 50.0 mm "
+    "above the wheels' path. A firmware that drops such a frame before its E2E check (commits "
+    "ea44d5b3, a0114f90 of branch distlate, reverted) PASSes here, but the judges then read its "
+    "held pose after a bus-off as a hold: kobuki random 241, delay=0.3:55,busoff=1:1,drop=0.05, "
+    "a +10 mm pose step after the bus-off PASSed (1344 mm re-placement allowance; "
+    "tests/test_edge_tamper.py)")
 # name: (robot, scenario, seed, duration s, faults, the faults' end s: the tamper from there,
 #        None or the strict xfail's reason)
 DRIVES = {
@@ -58,7 +65,7 @@ DRIVES = {
     "stall_uptime_back": ("pmir", "square", 645, 9, "busoff=2.7:0.2,stall=4.7:0.3,delay=0.3:55",
                           6.0, None),
     "busoff_restart_run": ("kobuki", "circle", 652, 9,
-                           "busoff=3.1:0.3,stall=5.5:0.2,delay=0.3:55", 5.8, None),
+                           "busoff=3.1:0.3,stall=5.5:0.2,delay=0.3:55", 5.8, UNFIXED),
 }
 
 
@@ -93,9 +100,8 @@ LIVE_UNFIXED = (
     "kobuki circle 652 once merged with reprime444 (the firmware gives held frames let out "
     "together the first one's doubt, and no longer re-primes after the bus-off): the monitor "
     "0.194 mm beyond its allowance (combo655 alone: within; main, replayed in real time: "
-    "194.5 mm at 3.86 s; max_beyond_allowance_m 0.1945, and 0.1736 since the firmware drops "
-    "the held frames, firmware.heldback). The live judge has no doubted-period rule "
-    "(step_periods) for the frames the firmware took after the bus-off")
+    "194.5 mm at 3.86 s). The live judge has no doubted-period rule (step_periods) for the "
+    "frames the firmware took after the bus-off")
 
 
 def test_the_live_judge_passes_the_correct_firmware(drive: tuple[str, Drive],

@@ -113,11 +113,6 @@ static void release_held(struct odom_ecu *ecu, uint8_t counter, const uint32_t w
                          uint8_t uptime, uint32_t counts[2]);
 static bool hold_confirmed(const struct odom_ecu *ecu, uint8_t counter, const uint32_t wire[2],
                            uint8_t uptime);
-static void held_clear(struct odom_ecu *ecu);
-static void held_note(struct odom_ecu *ecu, uint8_t first, uint8_t last,
-                      const uint32_t counts_first[2], const uint32_t counts_last[2]);
-static bool held_back(const struct odom_ecu *ecu, uint8_t counter, const uint32_t counts[2]);
-static bool held_back_frame(struct odom_ecu *ecu, const uint8_t *data, size_t len);
 static void sum_step(struct odom_ecu *ecu);
 static void add_merged_step(struct odom_ecu *ecu);
 static void update_twist(struct odom_ecu *ecu, uint32_t periods);
@@ -390,9 +385,6 @@ static bool e2e(struct odom_ecu *ecu, struct e2e_receiver *receiver, const uint8
 
 static void on_wheel_encoders(struct odom_ecu *ecu, const uint8_t *data, size_t len)
 {
-    if (ecu->held_used != 0u && held_back_frame(ecu, data, len)) {
-        return; /* sampled inside a step taken already (heldback.py): not a step back */
-    }
     if (!e2e(ecu, &ecu->rx_encoders, data, len)) {
         return;
     }
@@ -463,9 +455,6 @@ static void count_cycles_dropped(struct odom_ecu *ecu, uint8_t counter, uint32_t
 static void accept_encoders(struct odom_ecu *ecu, uint8_t counter, const uint32_t wire[2],
                             const uint32_t counts[2])
 {
-    if (ecu->enc_prev_counter >= 0 && ecu->counts_prev_valid) {
-        held_note(ecu, (uint8_t)ecu->enc_prev_counter, counter, ecu->counts_prev, counts);
-    }
     commit_counters(ecu, wire, counts);
     ecu->uptime_prev = ecu->uptime_now;
     if (ecu->state != STATE_FAULT
@@ -736,7 +725,6 @@ static void restart_counters(struct odom_ecu *ecu, uint8_t counter, const uint32
     ecu->resync_first_valid = false;
     ecu->resync_frames = 0;
     odometry_unprime(&ecu->odometry);
-    held_clear(ecu);
     (void)odometry_step_counts(&ecu->odometry, ecu->resync_first[0], ecu->resync_first[1]);
     ecu->enc_prev_counter = -1;
     ecu->this_step_periods =
@@ -810,113 +798,9 @@ static void reprime(struct odom_ecu *ecu, uint8_t counter, const uint32_t wire[2
     ecu->resync_first_valid = false;
     ecu->resync_frames = 0;
     odometry_unprime(&ecu->odometry);
-    held_clear(ecu);
     ecu->enc_prev_counter = -1;
     ecu->this_step_periods = 1u;
     accept_encoders(ecu, counter, wire, counts);
-}
-
-/* --- a frame the bus held back behind newer ones (heldback.py) --- */
-
-/* Forget every step (a re-prime: counts before it are no base for a frame after it). */
-static void held_clear(struct odom_ecu *ecu)
-{
-    ecu->held_used = 0u;
-    for (unsigned slot = 0u; slot < HELD_STEPS; ++slot) {
-        ecu->held_span[slot] = 0u;
-    }
-}
-
-/* A step integrated from the frame of COUNTER first to the one of last: remembered when it
- * skipped a COUNTER. */
-static void held_note(struct odom_ecu *ecu, uint8_t first, uint8_t last,
-                      const uint32_t counts_first[2], const uint32_t counts_last[2])
-{
-    uint32_t span = ((uint32_t)last - (uint32_t)first) & COUNTER_MASK;
-    if (span == 0u) {
-        span = COUNTER_MASK + 1u;
-    }
-    ecu->held_frames += span; /* wrapping */
-    if (span < 2u) {
-        return;
-    }
-    unsigned slot = ecu->held_next;
-    ecu->held_first[slot] = first;
-    ecu->held_span[slot] = (uint8_t)span;
-    for (unsigned side = 0u; side < 2u; ++side) {
-        ecu->held_from[slot][side] = counts_first[side];
-        ecu->held_to[slot][side] = counts_last[side];
-    }
-    ecu->held_ends[slot] = ecu->held_frames;
-    ecu->held_next = (uint8_t)((slot + 1u) & (HELD_STEPS - 1u));
-    if (ecu->held_used < HELD_STEPS) {
-        ecu->held_used++;
-    }
-}
-
-/* Each wheel's counts between the slot's two frames' (ends included), read signed in the
- * counters' width. */
-static bool held_within(const struct odom_ecu *ecu, unsigned slot, const uint32_t counts[2])
-{
-    unsigned bits = (unsigned)ecu->odometry.consts.counter_bits;
-    for (unsigned side = 0u; side < 2u; ++side) {
-        int32_t step = wrap_signed(ecu->held_to[slot][side] - ecu->held_from[slot][side], bits);
-        int32_t into = wrap_signed(counts[side] - ecu->held_from[slot][side], bits);
-        if (!((0 <= into && into <= step) || (step <= into && into <= 0))) {
-            return false;
-        }
-    }
-    return true;
-}
-
-/* True when the frame was sampled inside a remembered step: a COUNTER it skipped whose frames
- * accepted since have not come round to it, each wheel within it. */
-static bool held_back(const struct odom_ecu *ecu, uint8_t counter, const uint32_t counts[2])
-{
-    for (unsigned slot = 0u; slot < HELD_STEPS; ++slot) {
-        uint32_t span = ecu->held_span[slot];
-        uint32_t skipped = ((uint32_t)counter - (uint32_t)ecu->held_first[slot]) & COUNTER_MASK;
-        if (span == 0u || skipped == 0u || skipped >= span) {
-            continue;
-        }
-        uint32_t since = ecu->held_frames - ecu->held_ends[slot]; /* wrapping */
-        if (since >= COUNTER_MASK + 1u - span + skipped) {
-            continue;
-        }
-        if (held_within(ecu, slot, counts)) {
-            return true;
-        }
-    }
-    return false;
-}
-
-/* True (counted in held_refused) for a frame, its CRC right, sampled inside a step taken already
- * that the bound (or the doubt) would pass as a step back: dropped before its E2E check, as if
- * the bus had lost it (encoders.py _held_back). */
-static bool held_back_frame(struct odom_ecu *ecu, const uint8_t *data, size_t len)
-{
-    if (len != 8u || data[0] != p02_crc(data, ecu->rx_encoders.data_ids[data[1] & COUNTER_MASK])) {
-        return false;
-    }
-    uint8_t counter;
-    uint8_t uptime;
-    uint32_t wire[2];
-    unpack_wheel_encoders(data, &counter, &wire[0], &wire[1], &uptime);
-    uint32_t counts[2];
-    extend_counters(ecu, wire, counts);
-    if (beyond_width(ecu, wire) || !held_back(ecu, counter, counts)) {
-        return false;
-    }
-    uint32_t advance = counter_advance(ecu, counter);
-    uint32_t periods = step_periods(ecu, advance);
-    uint32_t doubted = doubted_periods(ecu, advance);
-    const uint32_t *prev = ecu->counts_prev_valid ? ecu->counts_prev : NULL;
-    if (plausible(ecu, prev, counts, bound_periods(ecu, periods))
-        || (doubted != 0u && plausible(ecu, prev, counts, doubted))) {
-        ecu->held_refused++;
-        return true;
-    }
-    return false;
 }
 
 /* The frame after a held one (counts: from the last accepted frame): if it confirms the held
@@ -1249,7 +1133,6 @@ static void apply_config(struct odom_ecu *ecu, const struct mux_record *frame)
         ecu->wire_prev_valid = false;
         ecu->counts_prev_valid = false;
         ecu->hold_valid = false;
-        held_clear(ecu);
     }
     ecu->params = candidate;
     ecu->profile_crc = profile_crc32(&candidate);

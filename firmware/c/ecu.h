@@ -25,7 +25,6 @@
 /* The plausibility bound of a robot whose parameters state none (robot_params) */
 #define MAX_WHEEL_SPEED_MM_S MAX_WHEEL_SPEED_DEFAULT_MM_S
 #define RESYNC_FRAMES 3 /* frames consistent with each other, not with the last: restarted */
-#define HELD_STEPS 8u /* steps that skipped COUNTERs remembered (heldback.py): a cycle holds 8 */
 #define STEP_PERIODS_MAX 0xFFFFu /* the twist's dt and the plausibility bound saturate (655 s) */
 #define TWO_PI_Q30 ((TWO_PI_Q60 + (INT64_C(1) << 29)) >> 30) /* one turn in Q30 rad (< 2^33) */
 #define TWIST_SUM_MAX (INT64_C(1) << 32) /* one tick's summed steps: 4096 m (Q20), 4 rad (Q30) */
@@ -111,18 +110,6 @@ struct odom_ecu {
     uint8_t hold_counter;
     uint8_t hold_uptime;
     uint32_t hold_wire[2];
-    /* The recent steps that skipped COUNTERs (heldback.py HeldBack): a frame the bus held back
-     * inside one is refused. Per slot: its first frame's COUNTER, its COUNTER advance (2..16; 0:
-     * unused), its two frames' counts and held_frames when it was taken. */
-    uint8_t held_first[HELD_STEPS];
-    uint8_t held_span[HELD_STEPS];
-    uint32_t held_from[HELD_STEPS][2];
-    uint32_t held_to[HELD_STEPS][2];
-    uint32_t held_ends[HELD_STEPS];
-    uint32_t held_frames;  /* the COUNTER advances of the frames accepted, wrapping */
-    uint8_t held_next;     /* the slot the next step takes (a ring) */
-    uint8_t held_used;     /* slots in use */
-    uint32_t held_refused; /* frames refused as held back, wrapping */
     uint32_t ticks_since_encoder; /* periods (firmware time) since the last accepted frame, sat. */
     uint32_t reason_tick;         /* the tick that set reason */
     bool unreported; /* no ODOM_STATUS summary has carried the last cause yet (health.py) */
