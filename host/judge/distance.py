@@ -84,6 +84,7 @@ import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.breaks import path_bound_m
+from odocan.host.judge.earlytwins import early_twins_of
 from odocan.host.judge.gapbound import period_bounds
 from odocan.host.judge.latenames import sent_places
 from odocan.host.judge.reference import Geometry, SpeedBound, wrap_delta
@@ -150,6 +151,7 @@ def twist_samples(frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder:
     e = match_encoder(enc, *sent_places(frames, decoder, "ODOM_TWIST", index, t_s,
                                         rows["ENC_COUNTER"][keep].astype(np.int64)),
                       rows["COUNTER"][keep].astype(np.int64))  # a late one: where sent
+    e[np.isin(e, early_twins_of(frames, accepted, decoder))] = -1  # which one it named: unknown
     heard = np.searchsorted(enc.timestamp_s, t_s).astype(np.int64)
     return e.astype(np.int64), rows["DISTANCE"][keep].astype(np.int64), t_s, heard
 

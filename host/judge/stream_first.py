@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from odocan.host.io.logs import FrameArrays
+from odocan.host.judge.earlytwins import EarlyTwinScan
 from odocan.host.judge.gapfill import crc_holds
 from odocan.host.judge.gapseen import PageEvidence
 from odocan.host.judge.samples import (
@@ -87,6 +88,7 @@ class FirstPass:
         self.late = StreamLate(self.decoder)  # a pose or twist frame named where sent
         self.queued = False  # frames of a periodic sender let out in a burst (queued_frames)
         self.twins = False  # an encoder frame with a twin (samples.twinned_encoder_frames)
+        self.early = EarlyTwinScan(self.decoder)  # or an early twin (earlytwins)
         self.resent_kept = False  # a sample kept whose resend differs (StreamPoses.resent)
         self._last_enc: dict[str, np.ndarray] | None = None  # the last accepted encoder row
         self._last_t: dict[str, float] = {}  # per such message, its last accepted frame's time
@@ -146,6 +148,7 @@ class FirstPass:
             self._last_enc = {k: v[last:last + 1] for k, v in rows.items()}
         self.twins = self.twins or bool(
             twinned_encoder_frames(chunk, rows, keep, self.decoder).any())
+        self.twins = self.early.feed(chunk, accepted) or self.twins
 
     def _bursts(self, chunk: FrameArrays, accepted: np.ndarray, cycle_s: float) -> None:
         """Whether a message ``samples.queued_frames`` looks at (encoder frames, poses, twist)
