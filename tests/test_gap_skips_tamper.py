@@ -18,8 +18,10 @@ The same drive with ODOM_TWIST DISTANCE +10 mm from the bus-off's end (bytes 6..
 (0 mm excess); the pages prove it took none of them (``gapskips.took_none``): no path above
 there, FAIL by 9.99 mm whole and streamed. The live DISTANCE judge still PASSes it (pinned).
 
-Pinned (strict xfail): pmir straight 411 ``delay=0.4:70,busoff=3:0.4``, untampered, FAILs the
-live judges, on main too (``analyze`` PASSes it, 0.07 mm): a held frame the live E2E accepted.
+pmir straight 411 ``delay=0.4:70,busoff=3:0.4``, untampered, FAILed the live judges (POSE WRONG
+259.95 mm; ``analyze`` PASSes it, 0.07 mm): the frames after a held frame the bus-off let out were
+refused over the periods since it, not since the frame before it as the firmware doubts them
+(``livepose.StepGate``, ``tests/test_live_doubt.py``); now 0.045 mm, PASS.
 """
 
 from __future__ import annotations
@@ -143,15 +145,6 @@ def test_distance_plus_10_mm_after_the_bus_off_fails_live(distance_raised: Path)
     assert not bridge.distance.as_dict()["passed"]
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "live false FAIL, not a gap's allowance: pmir straight 411 delay=0.4:70,busoff=3:0.4 "
-    "untampered: monitor and bridge POSE WRONG 259.95 mm from 3.62 s (analyze PASS 0.07 mm): "
-    "the live E2E accepted a held pre-bus-off frame (COUNTER 6, count 1490, 21 behind the frame "
-    "before) as frame 181, a 44-period step, so the live reference stood at 1.4043 m at frame "
-    "183 (1766 counts) where the firmware said 1.6644 m; the placement there moved "
-    "the reference +260 mm within gapbound's 1886 mm, the reference itself caught up by frame "
-    "186, and the next placements' step bound (0.2 mm) cannot move it back; no skip proof "
-    "applies (the live judge refused frames the log holds in that run)"))
 def test_the_pmir_bus_off_delay_drive_passes_live_untampered(tmp_path: Path) -> None:
     log = tmp_path / "drive.log"
     watch, code = watched_run(log, "pmir", "straight", 411, 9, "delay=0.4:70,busoff=3:0.4")

@@ -22,8 +22,9 @@ beyond any window the firmware's E2E can have reached: such a pair never followe
 the firmware, and tells no restart (``host.judge.ctrlrestart.window_periods``, the whole-log and
 streamed references' rule; the live one's ``in_window``). Now 0.049 mm, PASS.
 
-kobuki circle 652, 9 s, ``busoff=3.1:0.3,stall=5.5:0.2,delay=0.3:55``: pinned (strict xfail,
-``UNFIXED``).
+kobuki circle 652, 9 s, ``busoff=3.1:0.3,stall=5.5:0.2,delay=0.3:55``: run and analyze pinned
+(strict xfail, ``UNFIXED``: DISTANCE); the live judge PASSes its pose (POSE WRONG 194.5 mm before
+it counted the firmware's doubted periods: ``tests/test_live_doubt.py``).
 """
 
 from __future__ import annotations
@@ -96,21 +97,11 @@ def test_run_and_both_analyzes_pass_the_correct_firmware(
     assert codes == [0, 0, 0], out[-2500:]
 
 
-LIVE_UNFIXED = (
-    "kobuki circle 652 once merged with reprime444 (the firmware gives held frames let out "
-    "together the first one's doubt, and no longer re-primes after the bus-off): the monitor "
-    "0.194 mm beyond its allowance (combo655 alone: within; main, replayed in real time: "
-    "194.5 mm at 3.86 s). The live judge has no doubted-period rule (step_periods) for the "
-    "frames the firmware took after the bus-off")
-
-
-def test_the_live_judge_passes_the_correct_firmware(drive: tuple[str, Drive],
-                                                    request: pytest.FixtureRequest) -> None:
+def test_the_live_judge_passes_the_correct_firmware(drive: tuple[str, Drive]) -> None:
     """The monitor's judge fed the log frame by frame: its position error beyond its allowance
-    within the 0.1 mm tolerance (kobuki 655: 837.6 mm before)."""
+    within the 0.1 mm tolerance (kobuki 655: 837.6 mm before; kobuki 652: 194.5 mm before the
+    live judge counted the firmware's doubted periods, ``livepose.StepGate``)."""
     name, (log, _, _) = drive
-    if name == "busoff_restart_run":
-        request.applymarker(pytest.mark.xfail(strict=True, reason=LIVE_UNFIXED))
     monitor = BusMonitor(load(DRIVES[name][0]))
     with can.LogReader(str(log)) as reader:
         for msg in reader:

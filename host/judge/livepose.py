@@ -33,6 +33,10 @@ MARKS_KEPT = 16  # pairs ``ErrorStats.withdraw_from`` can take back: a reboot's 
 # (``bootticks.BOOT_WINDOW_MS``, 80 ms: 4 poses) with room to spare
 WIRE_BITS = busfacts.ENC_WIRE_COUNTER_BITS  # WHEEL_ENCODERS carries the low 24 bits of each counter
 WIRE_MASK = (1 << WIRE_BITS) - 1
+# ``step_periods.doubted_bound_periods``: frames closer than half a period share one burst's
+# doubt; a burst a period and a half or more after the frame before has one
+HALF_CYCLE_S = 0.5 * CYCLE_S
+DOUBTED_GAP_S = 1.5 * CYCLE_S
 
 
 class Sample(NamedTuple):
@@ -81,6 +85,12 @@ class StepGate:
         self._prev_t = 0.0  # its bus time (s)
         self._told = told
         self._held: Held | None = None  # a restart's first frame, until the next confirms it
+        # ``step_periods.doubted_bound_periods``: the bus time of the frame heard before the
+        # latest, of the frame before the latest's burst (frames heard within half a period of
+        # each other; -1.0: nothing to doubt), and the latter of the last accepted frame
+        self._heard_t: float = math.inf
+        self._origin_t: float = -1.0
+        self._prev_origin_t: float = -1.0
 
     def rebound(self, geometry: Geometry) -> None:
         """Gate the next frames with ``geometry``'s speed bound (the firmware's, from its PROFILE
@@ -111,6 +121,7 @@ class StepGate:
         refused, (0, 0) when it re-primes on a controller restart."""
         seq, counter, left, right, heard, uptime, t_s = heard_frame
         self._seq += heard
+        self._hear(t_s)
         if self.bits < WIRE_BITS and ((left | right) & WIRE_MASK) >> self.bits:
             return None  # beyond the counters' width: refused outright (lossgate.beyond_width)
         frame = (counter, left, right)
@@ -121,6 +132,7 @@ class StepGate:
         prev_seq, self._prev_seq = self._prev_seq, self._seq
         last_uptime, self.uptime = self.uptime, uptime
         last_t, self._prev_t = self._prev_t, t_s
+        origin_t, self._prev_origin_t = self._prev_origin_t, self._origin_t
         if prev is None:
             return None
         if uptime and last_uptime and (uptime < last_uptime or (
@@ -129,7 +141,7 @@ class StepGate:
                 and in_window(counter - prev[0], t_s - last_t, CYCLE_S) \
                 and self._young(frame, uptime):
             self.prev, self._prev_seq, self.uptime = prev, prev_seq, last_uptime  # held
-            self._prev_t = last_t
+            self._prev_t, self._prev_origin_t = last_t, origin_t
             self._held = (frame, seq, uptime, t_s)
             return None
         periods = self._seq - prev_seq
@@ -143,19 +155,39 @@ class StepGate:
         d_left, d_right = ((left - prev[1] + half) & mask) - half, (
             (right - prev[2] + half) & mask) - half
         bound = self.bound
-        if abs(d_left) <= periods * bound[0] and abs(d_right) <= periods * bound[1]:
+        if (abs(d_left) <= periods * bound[0] and abs(d_right) <= periods * bound[1]) or (
+                origin_t >= 0.0 and self._doubted(periods, t_s - origin_t, d_left, d_right)):
             if self._refused:
                 self._refused = []
             return d_left, d_right
         self.prev, self._prev_seq, self.uptime = prev, prev_seq, last_uptime  # refused: kept
-        self._prev_t = last_t
+        self._prev_t, self._prev_origin_t = last_t, origin_t
         consistent = bool(self._refused) and self._plausible(self._refused[-1], frame)
         self._refused = [*self._refused, frame] if consistent else [frame]
         if len(self._refused) < RESYNC_FRAMES:
             return None
         first, self._refused, self.prev, self.uptime = self._refused[0], [], frame, uptime
+        self._prev_origin_t = self._origin_t
         self._restarted(seq, t_s, by_uptime=False)
         return self._delta(first, frame)
+
+    def _hear(self, t_s: float) -> None:
+        """A frame heard at bus time ``t_s``: within half a period of the frame before, it is of
+        that one's burst and shares its doubt; else its own burst, doubted from the frame
+        before when a period and a half or more of silence lies between them."""
+        gap_s = t_s - self._heard_t
+        if gap_s >= HALF_CYCLE_S:
+            self._origin_t = self._heard_t if gap_s >= DOUBTED_GAP_S else -1.0
+        self._heard_t = t_s
+
+    def _doubted(self, periods: int, since_s: float, d_left: int, d_right: int) -> bool:
+        """Whether a step the bound refused over ``periods`` lies within it over the periods
+        counted from the frame heard before the last accepted frame's burst (``since_s``
+        before this one: that frame's sample may lie the silence before it back;
+        ``step_periods.doubted_bound_periods``, the firmware's ``sampledoubt``)."""
+        widened = periods + RING * max(0, math.floor(
+            (round(since_s / CYCLE_S) - periods) / RING + 0.5))
+        return abs(d_left) <= widened * self.bound[0] and abs(d_right) <= widened * self.bound[1]
 
     def _ambiguous(self, seq: int, span_s: tuple[float, float], *, hole: bool,
                    taken: tuple[int, int]) -> tuple[int, int]:
@@ -197,6 +229,7 @@ class StepGate:
         self._held, self._refused = None, []
         self._restarted(seq, held_t, by_uptime=True)
         self.prev, self._prev_seq, self.uptime, self._prev_t = frame, self._seq, uptime, t_s
+        self._prev_origin_t = self._origin_t
         return self._delta(first, frame)
 
     def _restarted(self, seq: int, t_s: float, *, by_uptime: bool,
