@@ -60,7 +60,7 @@ def halves_by_tick(frames: FrameArrays, accepted: npt.NDArray[np.bool_]) -> tupl
     for name, value, extra in HALVES:
         d = decoder.decode(frames, name)
         keep = crc_holds(frames, decoder, name, d["index"])  # every pose sent (``crc_holds``)
-        ticks, late = _named_as_sent(frames, track, d, keep, accepted, boots)
+        ticks, late = _named_as_sent(frames, track, d, keep, boots)
         half: Halves = {}
         # a resend names its predecessor's frame (one naming an earlier one after a gap of the
         # log's frames is no resend); a late frame is no predecessor
@@ -76,13 +76,12 @@ def halves_by_tick(frames: FrameArrays, accepted: npt.NDArray[np.bool_]) -> tupl
 
 
 def _named_as_sent(frames: FrameArrays, track: EncoderTrack, d: dict[str, Any],
-                   keep: npt.NDArray[np.bool_], accepted: npt.NDArray[np.bool_],
+                   keep: npt.NDArray[np.bool_],
                    boots: IntArray) -> tuple[IntArray, npt.NDArray[np.bool_]]:
     """The tick each kept pose frame of ``d`` (one message decoded) names, a late one's from
     where it was sent (``replay_late``), and which were late."""
     rows = d["index"][keep].astype(np.int64)
-    at, at_s = sent_at(frames, track, rows, d["COUNTER"][keep].astype(np.int64),
-                       accepted[rows], boots)
+    at, at_s = sent_at(frames, track, rows, d["COUNTER"][keep].astype(np.int64), boots)
     return track.named(at, d["ENC_COUNTER"][keep].astype(np.int64), at_s), at != rows
 
 
@@ -103,14 +102,13 @@ def onboard_by_tick(frames: FrameArrays, accepted: npt.NDArray[np.bool_]) -> dic
     return paired(*halves_by_tick(frames, accepted))
 
 
-def x_pose_ticks(frames: FrameArrays, accepted: npt.NDArray[np.bool_], track: EncoderTrack,
-                 decoder: BulkDecoder) -> IntArray:
+def x_pose_ticks(frames: FrameArrays, track: EncoderTrack, decoder: BulkDecoder) -> IntArray:
     """The tick of the encoder frame each ODOM_POSE_X frame with a right CRC names (-1: none
     the log's accepted encoder sequence places, ``EncoderTrack.named``): every pose the log's
     firmware sent, to say which were compared and why the others were not."""
     d = decoder.decode(frames, "ODOM_POSE_X")
     keep = crc_holds(frames, decoder, "ODOM_POSE_X", d["index"])
-    return _named_as_sent(frames, track, d, keep, accepted, boot_summaries(frames, decoder))[0]
+    return _named_as_sent(frames, track, d, keep, boot_summaries(frames, decoder))[0]
 
 
 def versus_log(
@@ -144,7 +142,7 @@ def versus_log(
     track = EncoderTrack.of(log, log_accepted, decoder)
     mid = not from_power_up and starts_mid_drive(log, log_accepted, old, track)
     holes = recorder_holes(log)
-    named = x_pose_ticks(log, log_accepted, track, decoder)
+    named = x_pose_ticks(log, track, decoder)
     facts: dict[str, Any] = {"logged": len(named), "log_starts_mid_drive": mid, "holes": holes,
                              "max_resent_position_diff_m": max(
                                  resent_position_diff_m(old), lone.resent_lsb * POSITION_LSB_M)}

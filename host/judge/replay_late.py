@@ -15,14 +15,18 @@ late one was compared with the replayed pose of a frame 16 periods later:
   yet "departed" by 156 mrad and 11.7 mm at 3 such frames, and the stall's fit kept a halt a
   tick early (277 of 301 poses identical, not 298): UNJUDGED.
 
-A late frame is known by its own E2E COUNTER: one the host's check refused whose COUNTER lies 1
-to ``MAX_BEHIND`` sends behind that of the latest accepted frame of its message, logged less
-than ``MAX_BEHIND + 1`` pose periods before it (a firmware that sent on lost whole sends in a
-bus-off or a stall steps *forward*, and its silence lasted longer), with no boot summary (an
-ODOM_STATUS summary at UPTIME 0: a new firmware's COUNTER starts again at 0) between the two.
-It was sent as many pose periods before that frame as it is behind it; it is named from the
-latest accepted encoder frame logged by then. A frame whose partner half or twist was on time
-was sent then too; one that is not late is named where it was logged, as before.
+A late frame is known by its own E2E COUNTER: one whose COUNTER lies ``MIN_BEHIND`` to
+``MAX_BEHIND`` sends behind that of the latest frame of its message sent on (the head: each
+frame whose COUNTER steps forward by up to ``MIN_BEHIND``, or by more no faster than the pose
+period allows: a frame 160 ms late or more looks a step forward, too soon), logged less than
+``MAX_BEHIND + 1`` pose periods after it (a firmware that lost whole sends in a bus-off or a
+stall steps *forward*, and its silence lasted longer), with no boot summary (an ODOM_STATUS
+summary at UPTIME 0: a new firmware's COUNTER starts again at 0) between the two. It was sent as
+many pose periods before the head as it is behind it, and is named from the latest accepted
+encoder frame logged by then. The host's E2E verdict is no head: under ``delay=0.3:50`` (pmir
+circle 20) it took 350 of 1000 ODOM_POSE_X frames, and a frame 130 ms after the last of them was
+read as late (``tests/test_replay_trust.py``). Less late than ``MIN_BEHIND`` sends, a frame is
+named where it was logged, as before: its name resolves right there.
 """
 
 from __future__ import annotations
@@ -39,6 +43,8 @@ from odocan.sim import contract
 IntArray = npt.NDArray[np.int64]
 FloatArray = npt.NDArray[np.float64]
 MAX_BEHIND = 7  # sends behind the latest: below half the 4-bit COUNTER's lap, never ambiguous
+MIN_BEHIND = 4  # sends behind (80 ms): less late, the name resolves right where it was logged
+LAP_HALF = 8  # half the 4-bit COUNTER's lap
 
 
 def boot_summaries(frames: FrameArrays, decoder: BulkDecoder) -> IntArray:
@@ -54,27 +60,31 @@ def boot_summaries(frames: FrameArrays, decoder: BulkDecoder) -> IntArray:
 
 
 def sent_at(frames: FrameArrays, track: EncoderTrack, rows: IntArray, counter: IntArray,
-            accepted: npt.NDArray[np.bool_], boots: IntArray) -> tuple[IntArray, FloatArray]:
+            boots: IntArray) -> tuple[IntArray, FloatArray]:
     """The log position and bus time each pose frame at ``rows`` (one message, log order, its
-    E2E ``counter`` and the host's verdict ``accepted`` of each) names its encoder frame from:
-    its own, or a late one's sending (module docstring)."""
+    E2E ``counter``) names its encoder frame from: its own, or a late one's sending (module
+    docstring)."""
     times = np.asarray(frames.timestamp_s, dtype=np.float64)
     at, at_s = rows.astype(np.int64).copy(), times[rows].copy()
     period_s = contract.cycle_time_s("ODOM_POSE_X")
-    head: int | None = None  # the latest accepted frame of the message (its number in rows)
+    head: int | None = None  # the latest frame of the message sent on (its number in rows)
     for k in range(len(rows)):
-        if accepted[k]:
+        if head is None:
             head = k
             continue
-        if head is None:
-            continue
-        behind = int((counter[head] - counter[k]) & ENC_COUNTER_MASK)
-        since_s = at_s[k] - times[rows[head]]
+        step = int((counter[k] - counter[head]) & ENC_COUNTER_MASK)
+        since_s = float(at_s[k] - times[rows[head]])
         booted = bool(((boots > rows[head]) & (boots < rows[k])).any())
-        if not 1 <= behind <= MAX_BEHIND or since_s >= (MAX_BEHIND + 1) * period_s or booted:
-            continue
-        sent_s = float(times[rows[head]]) - behind * period_s
-        latest = int(np.searchsorted(track.timestamp_s, sent_s, side="right")) - 1
-        at[k] = int(track.index[latest]) + 1 if latest >= 0 else 0
-        at_s[k] = sent_s
+        if booted or since_s >= (MAX_BEHIND + 1) * period_s:
+            head = k  # a new firmware's COUNTER, or one that came after a silence
+        elif step == 0:
+            continue  # the same frame again (a duplicate)
+        elif step <= LAP_HALF:  # sent on: a short step (after late frames), or a long one
+            if step <= MIN_BEHIND or since_s >= (step - 1.5) * period_s:  # as late as it steps
+                head = k
+        elif LAP_HALF + LAP_HALF - step >= MIN_BEHIND:
+            sent_s = float(times[rows[head]]) - (2 * LAP_HALF - step) * period_s
+            latest = int(np.searchsorted(track.timestamp_s, sent_s, side="right")) - 1
+            at[k] = int(track.index[latest]) + 1 if latest >= 0 else 0
+            at_s[k] = sent_s
     return at, at_s
