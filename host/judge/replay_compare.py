@@ -27,6 +27,7 @@ from odocan.host.judge.analysis import HEADING_LSB_RAD, POSITION_LSB_M, Toleranc
 from odocan.host.judge.posehalves import BAM, HALVES
 from odocan.host.judge.powerup import starts_at_power_up
 from odocan.host.judge.replay_jumps import JumpModel, Jumps, LogSteps, offset_jumps
+from odocan.host.judge.replay_late import boot_summaries, sent_at
 from odocan.host.judge.replay_lone import (
     Anchoring,
     LoneFigures,
@@ -54,22 +55,34 @@ def halves_by_tick(frames: FrameArrays, accepted: npt.NDArray[np.bool_]) -> tupl
     tick the first sent naming it, then each other one sent naming it (a resend)."""
     decoder = BulkDecoder(contract.database())
     track = EncoderTrack.of(frames, accepted, decoder)
+    boots = boot_summaries(frames, decoder)
     halves = []
     for name, value, extra in HALVES:
         d = decoder.decode(frames, name)
         keep = crc_holds(frames, decoder, name, d["index"])  # every pose sent (``crc_holds``)
-        ticks = track.named(d["index"][keep], d["ENC_COUNTER"][keep].astype(np.int64),
-                            d["timestamp_s"][keep])
+        ticks, late = _named_as_sent(frames, track, d, keep, boots)
         half: Halves = {}
-        previous = -1  # a resend names its predecessor's frame (one naming an earlier one
-        for tick, v, e in zip(ticks.tolist(), d[value][keep].tolist(), d[extra][keep].tolist(),
-                              strict=True):  # after a gap of the log's frames is no resend)
+        # a resend names its predecessor's frame (one naming an earlier one after a gap of the
+        # log's frames is no resend); a late frame is no predecessor
+        previous = -1
+        for tick, v, e, was_late in zip(ticks.tolist(), d[value][keep].tolist(),
+                                        d[extra][keep].tolist(), late.tolist(), strict=True):
             sent = half.setdefault(tick, []) if tick >= 0 else []
             if (not sent or tick == previous) and (int(v), int(e)) not in sent:
                 sent.append((int(v), int(e)))
-            previous = tick
+            previous = previous if was_late else tick
         halves.append(half)
     return halves[0], halves[1]
+
+
+def _named_as_sent(frames: FrameArrays, track: EncoderTrack, d: dict[str, Any],
+                   keep: npt.NDArray[np.bool_],
+                   boots: IntArray) -> tuple[IntArray, npt.NDArray[np.bool_]]:
+    """The tick each kept pose frame of ``d`` (one message decoded) names, a late one's from
+    where it was sent (``replay_late``), and which were late."""
+    rows = d["index"][keep].astype(np.int64)
+    at, at_s = sent_at(frames, track, rows, d["COUNTER"][keep].astype(np.int64), boots)
+    return track.named(at, d["ENC_COUNTER"][keep].astype(np.int64), at_s), at != rows
 
 
 def paired(px: Halves, py: Halves) -> dict[int, list[tuple[int, int, int]]]:
@@ -95,8 +108,7 @@ def x_pose_ticks(frames: FrameArrays, track: EncoderTrack, decoder: BulkDecoder)
     firmware sent, to say which were compared and why the others were not."""
     d = decoder.decode(frames, "ODOM_POSE_X")
     keep = crc_holds(frames, decoder, "ODOM_POSE_X", d["index"])
-    return track.named(d["index"][keep], d["ENC_COUNTER"][keep].astype(np.int64),
-                       d["timestamp_s"][keep])
+    return _named_as_sent(frames, track, d, keep, boot_summaries(frames, decoder))[0]
 
 
 def versus_log(

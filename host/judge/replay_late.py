@@ -1,0 +1,90 @@
+"""Where a late pose frame of a log was sent, to name its encoder frame from there
+(``replay_compare.halves_by_tick``'s naming; issue #11).
+
+A pose frame names the encoder frame its firmware last took by a 4-bit ENC_COUNTER, which the
+judges resolve against the latest accepted encoder frame logged before the pose, within half a
+COUNTER lap (``EncoderTrack.named``). A bus that delays frames logs a pose frame late: delayed
+by 8 to 16 encoder periods, its ENC_COUNTER resolves a lap off. The replay compares every pose
+its firmware sent with a right CRC (``replay_track.crc_holds``: a reboot's first two too), so a
+late one was compared with the replayed pose of a frame 16 periods later:
+
+* kobuki random 700, 8 s, ``busoff=1.5:0.2,delay=0.1:150,stall=3.1:0.3`` (run and analyze
+  PASS): ODOM_POSE_X of 4.281 s (COUNTER 7, ENC_COUNTER 11) logged 150 ms late at 4.431 s
+  named the frame of 4.43 s instead of 4.27 s; the replayed firmware, its stall halted right
+  and every encoder frame taken as the recording one took it, was byte-identical to the log,
+  yet "departed" by 156 mrad and 11.7 mm at 3 such frames, and the stall's fit kept a halt a
+  tick early (277 of 301 poses identical, not 298): UNJUDGED.
+
+A late frame is known by its own E2E COUNTER: one whose COUNTER lies ``MIN_BEHIND`` to
+``MAX_BEHIND`` sends behind that of the latest frame of its message sent on (the head: each
+frame whose COUNTER steps forward by up to ``MIN_BEHIND``, or by more no faster than the pose
+period allows: a frame 160 ms late or more looks a step forward, too soon), logged less than
+``MAX_BEHIND + 1`` pose periods after it (a firmware that lost whole sends in a bus-off or a
+stall steps *forward*, and its silence lasted longer), with no boot summary (an ODOM_STATUS
+summary at UPTIME 0: a new firmware's COUNTER starts again at 0) between the two. It was sent as
+many pose periods before the head as it is behind it, and is named from the latest accepted
+encoder frame logged by then. The host's E2E verdict is no head: under ``delay=0.3:50`` (pmir
+circle 20) it took 350 of 1000 ODOM_POSE_X frames, and a frame 130 ms after the last of them was
+read as late (``tests/test_replay_trust.py``). Less late than ``MIN_BEHIND`` sends, a frame is
+named where it was logged, as before: its name resolves right there.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+
+from odocan.host.io.logs import FrameArrays
+from odocan.host.judge.replay_track import EncoderTrack
+from odocan.host.protocol.busfacts import ENC_COUNTER_MASK
+from odocan.host.protocol.decode import BulkDecoder, DecodeError
+from odocan.sim import contract
+
+IntArray = npt.NDArray[np.int64]
+FloatArray = npt.NDArray[np.float64]
+MAX_BEHIND = 7  # sends behind the latest: below half the 4-bit COUNTER's lap, never ambiguous
+MIN_BEHIND = 4  # sends behind (80 ms): less late, the name resolves right where it was logged
+LAP_HALF = 8  # half the 4-bit COUNTER's lap
+
+
+def boot_summaries(frames: FrameArrays, decoder: BulkDecoder) -> IntArray:
+    """The log positions of the ODOM_STATUS summaries at UPTIME 0 (a firmware's boot)."""
+    try:
+        page = decoder.decode_page(frames, "ODOM_STATUS", 0)
+    except DecodeError:
+        return np.zeros(0, dtype=np.int64)
+    if "UPTIME" not in page:
+        return np.zeros(0, dtype=np.int64)
+    boots: IntArray = np.asarray(page["index"], dtype=np.int64)[np.asarray(page["UPTIME"]) == 0]
+    return boots
+
+
+def sent_at(frames: FrameArrays, track: EncoderTrack, rows: IntArray, counter: IntArray,
+            boots: IntArray) -> tuple[IntArray, FloatArray]:
+    """The log position and bus time each pose frame at ``rows`` (one message, log order, its
+    E2E ``counter``) names its encoder frame from: its own, or a late one's sending (module
+    docstring)."""
+    times = np.asarray(frames.timestamp_s, dtype=np.float64)
+    at, at_s = rows.astype(np.int64).copy(), times[rows].copy()
+    period_s = contract.cycle_time_s("ODOM_POSE_X")
+    head: int | None = None  # the latest frame of the message sent on (its number in rows)
+    for k in range(len(rows)):
+        if head is None:
+            head = k
+            continue
+        step = int((counter[k] - counter[head]) & ENC_COUNTER_MASK)
+        since_s = float(at_s[k] - times[rows[head]])
+        booted = bool(((boots > rows[head]) & (boots < rows[k])).any())
+        if booted or since_s >= (MAX_BEHIND + 1) * period_s:
+            head = k  # a new firmware's COUNTER, or one that came after a silence
+        elif step == 0:
+            continue  # the same frame again (a duplicate)
+        elif step <= LAP_HALF:  # sent on: a short step (after late frames), or a long one
+            if step <= MIN_BEHIND or since_s >= (step - 1.5) * period_s:  # as late as it steps
+                head = k
+        elif LAP_HALF + LAP_HALF - step >= MIN_BEHIND:
+            sent_s = float(times[rows[head]]) - (2 * LAP_HALF - step) * period_s
+            latest = int(np.searchsorted(track.timestamp_s, sent_s, side="right")) - 1
+            at[k] = int(track.index[latest]) + 1 if latest >= 0 else 0
+            at_s[k] = sent_s
+    return at, at_s
