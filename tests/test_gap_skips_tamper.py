@@ -4,13 +4,14 @@ never hide a wrong pose; one judge: ``host.judge.livegapskips``).
 kobuki random seed 24, ``stall=2:0.5,stall=6:1.5,busoff=4:0.3``, +10 mm on ODOM_POSE_X's X from
 the first pose after the bus-off (4.32 s; ``tests/log_edit.raise_raw``, re-signed by cantools).
 The pages around the silence count exactly the log's frames received, one refused (REPEATED)
-that the host took: ``analyze`` bounds the gap by the merge error of the frames around it
-(``gapskips``, 0.04 mm) and FAILs the tampered log; the monitor and the bridge placed their
-reference at the gap's end within ``gapbound``'s 121.9 mm, absorbed the 10 mm and PASSed it
-(0 POSE WRONG, 0.07 mm beyond the allowance). Now the pages lower the live placement to the same
-allowance: every judge FAILs it by the position, and PASSes the drive untampered. The firmware
-is checked right on the drive (``tests/fw_watch``: every step within 1/1000 LSB of its float64
-arc), so a FAIL of the untampered drive would blame a correct one.
+by the firmware and by the host's E2E check alike: ``analyze`` proves frames 301..508 taken as
+the log's (``gapseen``, by checked), gives the gap no allowance and FAILs the tampered log; the
+monitor and the bridge placed their reference at the gap's end within ``gapbound``'s 136.5 mm,
+absorbed the 10 mm and PASSed it (0 POSE WRONG, 0.07 mm beyond the allowance): the frames their
+hold of the bus-off's new-cycle frame gave back were never counted by the live pages
+(``SettleHold.unheard``). Now every judge FAILs it by the position, and PASSes the drive
+untampered. The firmware is checked right on the drive (``tests/fw_watch``: every step within
+1/1000 LSB of its float64 arc), so a FAIL of the untampered drive would blame a correct one.
 
 The same drive with ODOM_TWIST DISTANCE +10 mm from the bus-off's end (bytes 6..7, u16, 1 mm):
 ``analyze`` allowed the firmware's path to grow by the gap's path bound above the merged step
@@ -82,19 +83,15 @@ def test_plus_10_mm_after_the_bus_off_fails_analyze(
     assert wrong == []
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "issue #11: PASSes live again once merged with e2elap82 (livegaps alone: both live judges "
-    "9.90 mm beyond; merged: 0.07 mm, as on main): the live E2E now holds the bus-off's "
-    "new-cycle frame for the firmware's page and refuses it as REPEATED as the firmware did "
-    "(e2e_held.new_cycle_pending), so the pages prove m = 0 refusals the host took: the gap "
-    "is a gap_missed proof, whose step bound StallPlacer.withdraw keeps (budget only), not a "
-    "skips run (gapseen builds skips for m > 0 only) that livegapskips lowers; analyze FAILs "
-    "it (9.94 mm beyond). The fix: a gap proven missed takes gapskips' m = 0 allowance in its "
-    "step bound too, live and whole alike (needs a full run: every live judge's bounds)"))
 def test_plus_10_mm_after_the_bus_off_fails_live_as_analyze(
         busoff_drive: tuple[Path, Path]) -> None:
     """Before: the monitor and the bridge PASSed it (0.07 mm beyond, 9.99 mm absorbed by the
-    gap's 121.9 mm); ``analyze`` FAILed it (9.94 mm beyond)."""
+    gap's 136.5 mm); ``analyze`` FAILed it (9.94 mm beyond). The live E2E holds the bus-off's
+    new-cycle frame (``livesettle``) and gave the frames held back with their verdicts unheard
+    by the live gapseen (``livegapseen.heard_encoder``), so every page after the hold counted
+    108 encoder frames too few and no window over the bus-off was proven. Heard once each
+    (``SettleHold.unheard``), the pages prove frames 301..508 taken as the log's, as the whole
+    log does: the gap's allowance withdrawn, both live judges 9.93 mm beyond."""
     for latched, beyond_m in _live_verdicts(busoff_drive[1], "kobuki", "exact"):
         assert latched
         assert beyond_m > BEYOND_M
