@@ -17,7 +17,8 @@ The same drive with ODOM_TWIST DISTANCE +10 mm from the bus-off's end (bytes 6..
 ``analyze`` allowed the firmware's path to grow by the gap's path bound above the merged step
 (``distance.gap_extra_m``: 181.8 mm, it may have taken the gap's frames one by one) and PASSed it
 (0 mm excess); the pages prove it took none of them (``gapskips.took_none``): no path above
-there, FAIL by 9.99 mm whole and streamed. The live DISTANCE judge still PASSes it (pinned).
+there, FAIL by 9.99 mm whole and streamed. The live DISTANCE judge PASSed it (0 mm excess: it
+kept the bound); its twists after a gap now wait for the pages (``livedistgaps``): FAIL, 9.99 mm.
 
 Pinned (strict xfail): pmir straight 411 ``delay=0.4:70,busoff=3:0.4``, untampered, FAILs the
 live judges, on main too (``analyze`` PASSes it, 0.07 mm): a held frame the live E2E accepted.
@@ -128,16 +129,22 @@ def test_distance_plus_10_mm_after_the_bus_off_fails_whole_and_streamed(
     capsys.readouterr()
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "the live DISTANCE judge (monitor, bridge) PASSes it, 0 mm excess: livedistance.on_encoders "
-    "adds distance.gap_extra_m (181.8 mm here) at every gap and nothing lowers it; the skip "
-    "proof needs the FRAME_TOTALS page after the ENC_E2E page after the run, and a proof that "
-    "comes after a twist past the gap was judged cannot lower the allowance without tightening "
-    "the samples judged before it (the twists would have to wait for it, as livechoice does)"))
+def test_the_untampered_distance_passes_live(busoff_drive: tuple[Path, Path]) -> None:
+    """The bounds the pages withdraw (``livedistgaps``) blame no correct firmware."""
+    monitor, bridge, _ = _live(load("kobuki"), "exact", busoff_drive[0])
+    for judge in (monitor.distance, bridge.distance):
+        assert judge.as_dict()["passed"]
+        assert judge.withdrawn_m > 0.1  # the bus-off's bound was withdrawn: judged without it
+
+
 def test_distance_plus_10_mm_after_the_bus_off_fails_live(distance_raised: Path) -> None:
+    """Before: both live judges PASSed it, 0 mm excess (``livedistance`` added the gap's bound
+    above, ``distance.gap_extra_m``, and nothing lowered it); now the twists after the gap wait
+    for its pages (``livedistgaps``), which prove it took none of the gap's frames: 9.99 mm."""
     monitor, bridge, _ = _live(load("kobuki"), "exact", distance_raised)
-    assert not monitor.distance.as_dict()["passed"]
-    assert not bridge.distance.as_dict()["passed"]
+    for judge in (monitor.distance, bridge.distance):
+        assert not judge.as_dict()["passed"]
+        assert judge.as_dict()["max_excess_m"] > 9e-3
 
 
 @pytest.mark.xfail(strict=True, reason=(

@@ -47,6 +47,7 @@ from odocan.host.judge.distance import (
     firmware_m_per_count,
     gap_extra_m,
 )
+from odocan.host.judge.livedistgaps import HeldGaps
 from odocan.host.judge.livepose import RestartLog, StepGate
 from odocan.host.judge.liveresent import may_alias_live
 from odocan.host.judge.liveskip import WAIT_FRAMES, LiveSkips
@@ -82,6 +83,8 @@ class LiveDistance:
         self.wrong_lives = 0  # lives whose intervals did not meet (latched)
         self.worst_excess_m = 0.0
         self.judged_at_end = 0  # twists judged at the watch's end, their page not heard
+        self._held = HeldGaps()  # gaps whose bound above the pages may withdraw (livedistgaps)
+        self.withdrawn_m = 0.0  # the gaps' bounds above the pages withdrew (m)
         self.new_life()
 
     def reconfigure(self, geometry: Geometry, counter_bits: int) -> None:
@@ -106,8 +109,10 @@ class LiveDistance:
 
     def new_life(self) -> None:
         """A reboot: the firmware's DISTANCE restarts; so does the judgement (offset free)."""
+        self._held.gaps.clear()  # no page of the old life comes now: their bounds kept
         if getattr(self, "_waiting", None):  # the old life's twists judged with what is known
             self._take_waiting(math.inf)
+        self._held = HeldGaps()
         self._frames: dict[int, tuple[int, int, int, float]] = {}  # seq: units, n, c, up
         self._sums: tuple[int, int, int, float] = (0, 0, 0, 0.0)
         self._gate: StepGate | None = None
@@ -156,13 +161,17 @@ class LiveDistance:
         units, n, c, up = self._sums
         frames = self._frames
         if periods > 1 and frames:
-            up += gap_extra_m(self.robot, self.max_wheel_speed_mm_s, periods, ds_m)  # >= 0
+            extra_m = gap_extra_m(self.robot, self.max_wheel_speed_mm_s, periods, ds_m)  # >= 0
+            up += extra_m
+            self._held.add(seq, extra_m, t_s)  # the twists from here wait for the pages
         sums = self._sums = (units + round(ds_m * UNITS_PER_M), n + 1,
                              c + abs(d_left) + abs(d_right), up)
         frames[seq] = sums
         frames.pop(seq - KEPT_FRAMES, None)
         if seq >= self._union.want:  # a span's end: the frame after a page (liveskip's)
             self._union.on_frame(seq, sums[0])
+        if self._held.gaps:  # a gap's proof may have come (livedistgaps)
+            self._settle(tracker, seq, False)
         if self._waiting and self._waiting[0][0] <= seq - WAIT_FRAMES:  # no page came for them
             self._take_waiting(seq - WAIT_FRAMES)
 
@@ -239,10 +248,42 @@ class LiveDistance:
         self.samples += 1
         self._queued += 1
 
+    def _settle(self, tracker: PoseTracker, seq: int, ends: bool) -> None:
+        """The gaps held decided (``livedistgaps.HeldGaps.settle``): a proven one's bound above
+        withdrawn from the path at its frame and after (the twists waiting, the frames kept,
+        the sums), then the twists it held judged."""
+        decided = self._held.settle(tracker.placer.seen, tracker.placer.reprimed_frames, seq,
+                                    ends)
+        for b, extra_m in decided:
+            if extra_m > 0.0:
+                self._lower(b, extra_m)
+        if decided:
+            self._take_waiting(self._held.upto)
+
+    def _lower(self, b: int, extra_m: float) -> None:
+        """The bound ``extra_m`` above of the gap into encoder frame ``b`` withdrawn: no twist
+        naming ``b`` or later was judged (they waited for it)."""
+        self.withdrawn_m += extra_m
+        units, n, c, up = self._sums
+        self._sums = (units, n, c, up - extra_m)
+        frames = self._frames
+        for seq in [seq for seq in frames if seq >= b]:
+            f_units, f_n, f_c, f_up = frames[seq]
+            frames[seq] = (f_units, f_n, f_c, f_up - extra_m)
+        less_mm = 1e3 * extra_m
+        self._waiting = [(e, e_units, takes if e < b else [
+            (judge, lo, hi, up_mm - less_mm) for judge, lo, hi, up_mm in takes])
+                         for e, e_units, takes in self._waiting]
+
     def _take_waiting(self, upto: float) -> None:
         """Judge the twists waiting whose frame is ``upto`` or before, in order, with the
         allowance below known at their frame: the union of the merged spans (``liveunion``)
-        and ``liveskip``'s defects."""
+        and ``liveskip``'s defects; not from a twist naming a gap's frame or later while the
+        gap waits for its pages (``livedistgaps``)."""
+        self._held.upto = max(self._held.upto, upto)
+        held = self._held.first()
+        if held is not None:
+            upto = min(upto, held - 1)
         k = 0
         while k < len(self._waiting) and self._waiting[k][0] <= upto:
             e, units, takes = self._waiting[k]
@@ -257,12 +298,15 @@ class LiveDistance:
             k += 1
         del self._waiting[:k]
 
-    def finish(self) -> int:
+    def finish(self, tracker: PoseTracker | None = None) -> int:
         """The watch ends (no later page comes): the twists still waiting for the page after
         their frame judged with the spans known, as ``new_life`` judges an old life's and
         ``analyze`` the twists after a log's last page; how many there were (before, they were
         never judged: a DISTANCE wrong in the watch's last 0.6-1.8 s passed)."""
         waiting = len(self._waiting)
+        if tracker is not None and self._held.gaps:  # the pages kept prove what they can
+            self._settle(tracker, tracker.enc_seq, True)
+        self._held.gaps.clear()
         self._take_waiting(math.inf)
         self.judged_at_end += waiting
         return waiting

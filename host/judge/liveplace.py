@@ -244,6 +244,11 @@ class StallPlacer:
             self._gaps = [gap for gap in self._gaps if gap[0] != seq]
         return self.dark.restarted(seq, by_uptime, self.seen)  # a new start (livedark)
 
+    @property
+    def reprimed_frames(self) -> frozenset[int]:
+        """The latest counter restarts re-primed on (``gapseen.Seen``'s ``reprimed``)."""
+        return frozenset(self._reprimed)
+
     def gap_at(self, seq: int) -> Gap | None:
         """The gap (since the last placement) that ends at encoder frame ``seq``, if any."""
         return next((gap for gap in self._gaps if gap[0] == seq), None)
