@@ -98,6 +98,22 @@ def test_plus_10_mm_after_the_bus_off_fails_live_as_analyze(
         assert beyond_m > BEYOND_M
 
 
+def test_the_live_report_gives_the_allowance_its_verdict_used(
+        busoff_drive: tuple[Path, Path], tmp_path: Path,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """``reference_breaks``' ``gap_offset_allowance_m`` live is the bound the pages left the
+    gap's placement (``BreakSummary.rebound``), ``analyze``'s: before, the one at its placement
+    (136.6 mm where both judged within 0.118 mm), and 0 mm asked beyond it where 9.88 was."""
+    assert analyze(busoff_drive[1], "never", tmp_path / "whole.json") == 1
+    capsys.readouterr()
+    whole = json.loads((tmp_path / "whole.json").read_text())["reference_breaks"]
+    monitor, bridge, _ = _live(load("kobuki"), "exact", busoff_drive[1])
+    for live in (monitor.tracker.placer.watch_breaks(), bridge.tracker.placer.watch_breaks()):
+        assert live["gap_offset_allowance_m"] == pytest.approx(
+            whole["gap_offset_allowance_m"], rel=1e-9)
+        assert live["max_offset_beyond_allowance_m"] > BEYOND_M
+
+
 def _distance_excess_m(report: Path) -> float:
     return float(json.loads(report.read_text())["onboard_distance_vs_reference"]["max_excess_m"])
 
