@@ -6,7 +6,8 @@ Per accepted encoder frame the firmware's step (its own ``livepose.StepGate``: r
 counter restarts) adds |dS| rounded to 2^-40 m to an exact int sum, as the whole-log judge does,
 with the same slack (``distance.base_slack``: the wire's 0.5 mm, 2^-39 m a frame, 2^-48 m a
 count) and the same gap allowance above (the firmware may have taken a gap's frames one by one:
-``distance.gap_extra_m``). Below, the fine path over the union of the spans whose frames the
+``distance.gap_extra_m``; withdrawn where the pages prove it took none of them, the twists
+after a gap waiting for them: ``host.judge.livedistgaps``). Below, the fine path over the union of the spans whose frames the
 firmware may have merged, each frame once (``host.judge.liveunion``, as ``analyze``'s
 ``distance.merged_path_m``): a stall the tracker tells (the last sample's frame to the first
 judged after it); a stall before the first pose (``livefirst``: from the frame the firmware
