@@ -2,24 +2,23 @@
 frame, beside ``host.judge.tracking.PoseTracker`` (whose numbering of the encoder frames and
 periods between them it reads, and whose stalls it follows).
 
-Per accepted encoder frame the firmware's step (its own ``livepose.StepGate``: refusals,
-counter restarts) adds |dS| rounded to 2^-40 m to an exact int sum, as the whole-log judge does,
-with the same slack (``distance.base_slack``: the wire's 0.5 mm, 2^-39 m a frame, 2^-48 m a
-count) and the same gap allowance above (the firmware may have taken a gap's frames one by one:
-``distance.gap_extra_m``; withdrawn where the pages prove it took none of them, the twists
-after a gap waiting for them: ``host.judge.livedistgaps``). Below, the fine path over the union of the spans whose frames the
-firmware may have merged, each frame once (``host.judge.liveunion``, as ``analyze``'s
-``distance.merged_path_m``): a stall the tracker tells (the last sample's frame to the first
-judged after it); a stall before the first pose (``livefirst``: from the frame the firmware
-could first have primed on, from the life's first frame once that left: looser by the path
-between); an ODOM_STATUS page whose ENC_E2E_LOST grew (the page before's latest frame to its
-own); a span where ENC_E2E_OK grew by more than ``skipdefect.MAX_RUN`` less than the frames the
-host took. Where it grew by fewer less (a jittered capture: the host's E2E took frames the
-firmware refused), ``skipdefect``'s defect allowance, as ``analyze`` gives it. A twist is judged
-once the page after its frame is heard (``host.judge.liveskip``), with the spans known then.
-Summed span by span (before), a 3 s stall mid-drive let DISTANCE fall 3.09 m from the last
-twist before it to the first judged after, where ``analyze`` lets it fall 1.52 m: a DISTANCE
-2.3 m short PASSed live.
+Per accepted encoder frame the firmware's step (its own ``livepose.StepGate``: refusals, counter
+restarts) adds |dS| rounded to 2^-40 m to an exact int sum, as the whole-log judge does, with the
+same slack (``distance.base_slack``: the wire's 0.5 mm, 2^-39 m a frame, 2^-48 m a count) and the
+same gap allowance above (the firmware may have taken a gap's frames one by one:
+``distance.gap_extra_m``; withdrawn where the pages prove it took none of them, the twists after a
+gap waiting for them: ``host.judge.livedistgaps``). Below, the fine path over the union of the spans
+whose frames the firmware may have merged, each frame once (``host.judge.liveunion``, as
+``analyze``'s ``distance.merged_path_m``): a stall the tracker tells (the last sample's frame to the
+first judged after it); a stall before the first pose (``livefirst``: from the frame the firmware
+could first have primed on, from the life's first frame once that left: looser by the path between);
+an ODOM_STATUS page whose ENC_E2E_LOST grew (the page before's latest frame to its own); a span
+where ENC_E2E_OK grew by more than ``skipdefect.MAX_RUN`` less than the frames the host took. Where
+it grew by fewer less (a jittered capture: the host's E2E took frames the firmware refused),
+``skipdefect``'s defect allowance, as ``analyze`` gives it. A twist is judged once the page after
+its frame is heard (``host.judge.liveskip``), with the spans known then. Summed span by span
+(before), a 3 s stall mid-drive let DISTANCE fall 3.09 m from the last twist before it to the first
+judged after, where ``analyze`` lets it fall 1.52 m: a DISTANCE 2.3 m short PASSed live.
 
 A sample (ODOM_TWIST) names its encoder frame by the tracker's rule for a pose half
 (``samples.match_encoder`` over its window: the sender's steps, the age bound, the held and
