@@ -47,7 +47,7 @@ from odocan.host.judge.distance import (
     firmware_m_per_count,
     gap_extra_m,
 )
-from odocan.host.judge.livedistgaps import HeldGaps
+from odocan.host.judge.livedistgaps import HeldGaps, exact_bound_m
 from odocan.host.judge.livepose import RestartLog, StepGate
 from odocan.host.judge.liveresent import may_alias_live
 from odocan.host.judge.liveskip import WAIT_FRAMES, LiveSkips
@@ -135,7 +135,7 @@ class LiveDistance:
         self._zero = Feasible(0.0, 0.0)  # the same samples judged from 0 at the first frame
         self._wrong = False
         self._skips = LiveSkips()  # ENC_E2E_OK grown by less than the frames taken (liveskip)
-        # twists waiting for the page after their frame: frame, its path, (judge, lo, hi, up) mm
+        # twists waiting for the page after their frame: frame, its path, (judge, lo, hi mm, up m)
         self._waiting: list[tuple[int, int, list[tuple[Feasible, float, float, float]]]] = []
         self._queued = self._judged = 0  # twists queued, judged (``_lossy``)
         self.first_seq: int | None = None
@@ -161,7 +161,8 @@ class LiveDistance:
         units, n, c, up = self._sums
         frames = self._frames
         if periods > 1 and frames:
-            extra_m = gap_extra_m(self.robot, self.max_wheel_speed_mm_s, periods, ds_m)  # >= 0
+            extra_m = exact_bound_m(gap_extra_m(self.robot, self.max_wheel_speed_mm_s, periods,
+                                                ds_m))  # >= 0, withdrawn exactly (livedistgaps)
             up += extra_m
             self._held.add(seq, extra_m, t_s)  # the twists from here wait for the pages
         sums = self._sums = (units + round(ds_m * UNITS_PER_M), n + 1,
@@ -240,10 +241,10 @@ class LiveDistance:
         base = WIRE_SLACK_MM + 1e3 * (n * STEP_SLACK_M + c * COUNT_SLACK_M)
         takes = []
         if self._feasible is not self._zero:  # a power-up proven later (a page held back)
-            takes.append((self._zero, r - base, r + base, 1e3 * up))
+            takes.append((self._zero, r - base, r + base, up))
         r0 = self._r0 or 0.0
         r = r0 + (r - r0) - WIRE_MM * round((r - r0) / WIRE_MM)
-        takes.append((self._feasible, r - base, r + base, 1e3 * up))
+        takes.append((self._feasible, r - base, r + base, up))
         self._waiting.append((e, units, takes))  # judged once a page covers its frame (liveskip)
         self.samples += 1
         self._queued += 1
@@ -270,9 +271,8 @@ class LiveDistance:
         for seq in [seq for seq in frames if seq >= b]:
             f_units, f_n, f_c, f_up = frames[seq]
             frames[seq] = (f_units, f_n, f_c, f_up - extra_m)
-        less_mm = 1e3 * extra_m
         self._waiting = [(e, e_units, takes if e < b else [
-            (judge, lo, hi, up_mm - less_mm) for judge, lo, hi, up_mm in takes])
+            (judge, lo, hi, up_m - extra_m) for judge, lo, hi, up_m in takes])
                          for e, e_units, takes in self._waiting]
 
     def _take_waiting(self, upto: float) -> None:
@@ -293,8 +293,8 @@ class LiveDistance:
             since, grown = self._merged
             self._merged = (units, grown + self._union.grown_units(since, e, units))
             down_mm = 1e3 * (self._merged[1] / UNITS_PER_M + self._skips.allowance_m(e))
-            for judge, lo, hi, up_mm in takes:
-                judge.take_one(lo, hi, up_mm, down_mm)
+            for judge, lo, hi, up_m in takes:
+                judge.take_one(lo, hi, 1e3 * up_m, down_mm)
             k += 1
         del self._waiting[:k]
 

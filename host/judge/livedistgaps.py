@@ -20,12 +20,23 @@ gaps held (more: the oldest decided with its bound).
 
 from __future__ import annotations
 
+import math
+
 from odocan.host.judge.gapskips import took_none
 from odocan.host.judge.livegapseen import LiveSeen
 from odocan.host.judge.liveskip import WAIT_FRAMES
 
+UNIT_M = 2.0**-40  # a gap's bound rounded up to this (m): sums of them are exact floats
 HOLD_FRAMES = WAIT_FRAMES  # frames after a gap its proof is waited for (3 page rotations)
 KEPT_GAPS = 64  # gaps held at once
+
+
+def exact_bound_m(extra_m: float) -> float:
+    """A gap's bound above (m) rounded up to a whole ``UNIT_M``: the path's allowance above,
+    their sum, is then exact (below 8 km), and a bound withdrawn leaves the twists after it at
+    the very allowance of those before (the sum less it: a float's rounding left 3.6e-18 m, an
+    empty interval, DISTANCE WRONG of a correct firmware). inf stays inf."""
+    return extra_m if math.isinf(extra_m) else math.ceil(extra_m / UNIT_M) * UNIT_M
 
 
 class HeldGaps:
@@ -43,7 +54,7 @@ class HeldGaps:
     def add(self, seq: int, extra_m: float, t_s: float) -> None:
         """A gap into encoder frame ``seq`` (bus time ``t_s``) whose bound ``extra_m`` above was
         added to the path from there (none held when 0)."""
-        if extra_m > 0.0:
+        if 0.0 < extra_m < math.inf:  # (inf less inf: no number; kept)
             self.gaps.append((seq, extra_m, t_s))
             if len(self.gaps) > KEPT_GAPS:
                 del self.gaps[0]
