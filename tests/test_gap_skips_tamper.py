@@ -89,10 +89,11 @@ def test_plus_10_mm_after_the_bus_off_fails_live_as_analyze(
     """Before: the monitor and the bridge PASSed it (0.07 mm beyond, 9.99 mm absorbed by the
     gap's 136.5 mm); ``analyze`` FAILed it (9.94 mm beyond). The live E2E holds the bus-off's
     new-cycle frame (``livesettle``) and gave the frames held back with their verdicts unheard
-    by the live gapseen (``livegapseen.heard_encoder``), so every page after the hold counted
-    108 encoder frames too few and no window over the bus-off was proven. Heard once each
-    (``SettleHold.unheard``), the pages prove frames 301..508 taken as the log's, as the whole
-    log does: the gap's allowance withdrawn, both live judges 9.93 mm beyond."""
+    by the live gapseen (``livegapseen.heard_encoder``), so the pages after the hold counted 49
+    encoder frames too few (4.8 s), then 109 (5.4 s), and no window over the bus-off was
+    proven. Heard once each (``SettleHold.unheard``), the pages prove frames 301..508 taken as
+    the log's, as the whole log does: the gap's allowance withdrawn, both live judges 9.93 mm
+    beyond."""
     for latched, beyond_m in _live_verdicts(busoff_drive[1], "kobuki", "exact"):
         assert latched
         assert beyond_m > BEYOND_M

@@ -82,7 +82,7 @@ class SettleHold:
         it (heard when it came, then held; the others waited unheard). The live gapseen counts
         each encoder frame once, in bus order with the pages (``livegapseen.heard_encoder``):
         the frames of a hold left uncounted made every page after it count too few (kobuki 24,
-        ``busoff=4:0.3``: 108 frames), and no window over the bus-off was proven (issue #11)."""
+        ``busoff=4:0.3``: 109 by 5.4 s), and no window over the bus-off was proven (issue #11)."""
         return verdict is None or msg is not self.opener
 
     def quiet(self, now_s: float) -> bool:
