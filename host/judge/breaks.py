@@ -160,6 +160,17 @@ class BreakSummary:
             self.max_gap_absorbed_m, self.gap_allowance_m = asked_m, limit_m
         self.max_beyond_m = max(self.max_beyond_m, asked_m - limit_m)
 
+    def rebound(self, asked_m: float, gap: bool, limit_m: float) -> None:
+        """A placement that asked ``asked_m`` (after a gap: ``gap``) made again within its bound
+        lowered to ``limit_m`` (the pages withdrew a part's allowance after it was placed:
+        ``liveplace.StallPlacer.withdraw``): the report gives the bound the verdict used, not
+        the one at its placement, and what it asked beyond that."""
+        if gap and asked_m == self.max_gap_absorbed_m:
+            self.gap_allowance_m = min(self.gap_allowance_m, limit_m)
+        elif not gap and asked_m == self.max_absorbed_m:
+            self.allowance_m = min(self.allowance_m, limit_m)
+        self.max_beyond_m = max(self.max_beyond_m, asked_m - limit_m)
+
     def as_dict(self) -> dict[str, Any]:
         """The report's ``reference_breaks``."""
         return {

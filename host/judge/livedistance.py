@@ -2,23 +2,23 @@
 frame, beside ``host.judge.tracking.PoseTracker`` (whose numbering of the encoder frames and
 periods between them it reads, and whose stalls it follows).
 
-Per accepted encoder frame the firmware's step (its own ``livepose.StepGate``: refusals,
-counter restarts) adds |dS| rounded to 2^-40 m to an exact int sum, as the whole-log judge does,
-with the same slack (``distance.base_slack``: the wire's 0.5 mm, 2^-39 m a frame, 2^-48 m a
-count) and the same gap allowance above (the firmware may have taken a gap's frames one by one:
-``distance.gap_extra_m``). Below, the fine path over the union of the spans whose frames the
-firmware may have merged, each frame once (``host.judge.liveunion``, as ``analyze``'s
-``distance.merged_path_m``): a stall the tracker tells (the last sample's frame to the first
-judged after it); a stall before the first pose (``livefirst``: from the frame the firmware
-could first have primed on, from the life's first frame once that left: looser by the path
-between); an ODOM_STATUS page whose ENC_E2E_LOST grew (the page before's latest frame to its
-own); a span where ENC_E2E_OK grew by more than ``skipdefect.MAX_RUN`` less than the frames the
-host took. Where it grew by fewer less (a jittered capture: the host's E2E took frames the
-firmware refused), ``skipdefect``'s defect allowance, as ``analyze`` gives it. A twist is judged
-once the page after its frame is heard (``host.judge.liveskip``), with the spans known then.
-Summed span by span (before), a 3 s stall mid-drive let DISTANCE fall 3.09 m from the last
-twist before it to the first judged after, where ``analyze`` lets it fall 1.52 m: a DISTANCE
-2.3 m short PASSed live.
+Per accepted encoder frame the firmware's step (its own ``livepose.StepGate``: refusals, counter
+restarts) adds |dS| rounded to 2^-40 m to an exact int sum, as the whole-log judge does, with the
+same slack (``distance.base_slack``: the wire's 0.5 mm, 2^-39 m a frame, 2^-48 m a count) and the
+same gap allowance above (the firmware may have taken a gap's frames one by one:
+``distance.gap_extra_m``; withdrawn where the pages prove it took none of them, the twists after a
+gap waiting for them: ``host.judge.livedistgaps``). Below, the fine path over the union of the spans
+whose frames the firmware may have merged, each frame once (``host.judge.liveunion``, as
+``analyze``'s ``distance.merged_path_m``): a stall the tracker tells (the last sample's frame to the
+first judged after it); a stall before the first pose (``livefirst``: from the frame the firmware
+could first have primed on, from the life's first frame once that left: looser by the path between);
+an ODOM_STATUS page whose ENC_E2E_LOST grew (the page before's latest frame to its own); a span
+where ENC_E2E_OK grew by more than ``skipdefect.MAX_RUN`` less than the frames the host took. Where
+it grew by fewer less (a jittered capture: the host's E2E took frames the firmware refused),
+``skipdefect``'s defect allowance, as ``analyze`` gives it. A twist is judged once the page after
+its frame is heard (``host.judge.liveskip``), with the spans known then. Summed span by span
+(before), a 3 s stall mid-drive let DISTANCE fall 3.09 m from the last twist before it to the first
+judged after, where ``analyze`` lets it fall 1.52 m: a DISTANCE 2.3 m short PASSed live.
 
 A sample (ODOM_TWIST) names its encoder frame by the tracker's rule for a pose half
 (``samples.match_encoder`` over its window: the sender's steps, the age bound, the held and
@@ -47,6 +47,7 @@ from odocan.host.judge.distance import (
     firmware_m_per_count,
     gap_extra_m,
 )
+from odocan.host.judge.livedistgaps import HeldGaps, exact_bound_m
 from odocan.host.judge.livepose import RestartLog, StepGate
 from odocan.host.judge.liveresent import may_alias_live
 from odocan.host.judge.liveskip import WAIT_FRAMES, LiveSkips
@@ -82,6 +83,8 @@ class LiveDistance:
         self.wrong_lives = 0  # lives whose intervals did not meet (latched)
         self.worst_excess_m = 0.0
         self.judged_at_end = 0  # twists judged at the watch's end, their page not heard
+        self._held = HeldGaps()  # gaps whose bound above the pages may withdraw (livedistgaps)
+        self.withdrawn_m = 0.0  # the gaps' bounds above the pages withdrew (m)
         self.new_life()
 
     def reconfigure(self, geometry: Geometry, counter_bits: int) -> None:
@@ -106,8 +109,10 @@ class LiveDistance:
 
     def new_life(self) -> None:
         """A reboot: the firmware's DISTANCE restarts; so does the judgement (offset free)."""
+        self._held.gaps.clear()  # no page of the old life comes now: their bounds kept
         if getattr(self, "_waiting", None):  # the old life's twists judged with what is known
             self._take_waiting(math.inf)
+        self._held = HeldGaps()
         self._frames: dict[int, tuple[int, int, int, float]] = {}  # seq: units, n, c, up
         self._sums: tuple[int, int, int, float] = (0, 0, 0, 0.0)
         self._gate: StepGate | None = None
@@ -130,7 +135,7 @@ class LiveDistance:
         self._zero = Feasible(0.0, 0.0)  # the same samples judged from 0 at the first frame
         self._wrong = False
         self._skips = LiveSkips()  # ENC_E2E_OK grown by less than the frames taken (liveskip)
-        # twists waiting for the page after their frame: frame, its path, (judge, lo, hi, up) mm
+        # twists waiting for the page after their frame: frame, its path, (judge, lo, hi mm, up m)
         self._waiting: list[tuple[int, int, list[tuple[Feasible, float, float, float]]]] = []
         self._queued = self._judged = 0  # twists queued, judged (``_lossy``)
         self.first_seq: int | None = None
@@ -156,13 +161,18 @@ class LiveDistance:
         units, n, c, up = self._sums
         frames = self._frames
         if periods > 1 and frames:
-            up += gap_extra_m(self.robot, self.max_wheel_speed_mm_s, periods, ds_m)  # >= 0
+            extra_m = exact_bound_m(gap_extra_m(self.robot, self.max_wheel_speed_mm_s, periods,
+                                                ds_m))  # >= 0, withdrawn exactly (livedistgaps)
+            up += extra_m
+            self._held.add(seq, extra_m, t_s)  # the twists from here wait for the pages
         sums = self._sums = (units + round(ds_m * UNITS_PER_M), n + 1,
                              c + abs(d_left) + abs(d_right), up)
         frames[seq] = sums
         frames.pop(seq - KEPT_FRAMES, None)
         if seq >= self._union.want:  # a span's end: the frame after a page (liveskip's)
             self._union.on_frame(seq, sums[0])
+        if self._held.gaps:  # a gap's proof may have come (livedistgaps)
+            self._settle(tracker, seq, False)
         if self._waiting and self._waiting[0][0] <= seq - WAIT_FRAMES:  # no page came for them
             self._take_waiting(seq - WAIT_FRAMES)
 
@@ -231,18 +241,49 @@ class LiveDistance:
         base = WIRE_SLACK_MM + 1e3 * (n * STEP_SLACK_M + c * COUNT_SLACK_M)
         takes = []
         if self._feasible is not self._zero:  # a power-up proven later (a page held back)
-            takes.append((self._zero, r - base, r + base, 1e3 * up))
+            takes.append((self._zero, r - base, r + base, up))
         r0 = self._r0 or 0.0
         r = r0 + (r - r0) - WIRE_MM * round((r - r0) / WIRE_MM)
-        takes.append((self._feasible, r - base, r + base, 1e3 * up))
+        takes.append((self._feasible, r - base, r + base, up))
         self._waiting.append((e, units, takes))  # judged once a page covers its frame (liveskip)
         self.samples += 1
         self._queued += 1
 
+    def _settle(self, tracker: PoseTracker, seq: int, ends: bool) -> None:
+        """The gaps held decided (``livedistgaps.HeldGaps.settle``): a proven one's bound above
+        withdrawn from the path at its frame and after (the twists waiting, the frames kept,
+        the sums), then the twists it held judged."""
+        decided = self._held.settle(tracker.placer.seen, tracker.placer.reprimed_frames, seq,
+                                    ends)
+        for b, extra_m in decided:
+            if extra_m > 0.0:
+                self._lower(b, extra_m)
+        if decided:
+            self._take_waiting(self._held.upto)
+
+    def _lower(self, b: int, extra_m: float) -> None:
+        """The bound ``extra_m`` above of the gap into encoder frame ``b`` withdrawn: no twist
+        naming ``b`` or later was judged (they waited for it)."""
+        self.withdrawn_m += extra_m
+        units, n, c, up = self._sums
+        self._sums = (units, n, c, up - extra_m)
+        frames = self._frames
+        for seq in [seq for seq in frames if seq >= b]:
+            f_units, f_n, f_c, f_up = frames[seq]
+            frames[seq] = (f_units, f_n, f_c, f_up - extra_m)
+        self._waiting = [(e, e_units, takes if e < b else [
+            (judge, lo, hi, up_m - extra_m) for judge, lo, hi, up_m in takes])
+                         for e, e_units, takes in self._waiting]
+
     def _take_waiting(self, upto: float) -> None:
         """Judge the twists waiting whose frame is ``upto`` or before, in order, with the
         allowance below known at their frame: the union of the merged spans (``liveunion``)
-        and ``liveskip``'s defects."""
+        and ``liveskip``'s defects; not from a twist naming a gap's frame or later while the
+        gap waits for its pages (``livedistgaps``)."""
+        self._held.upto = max(self._held.upto, upto)
+        held = self._held.first()
+        if held is not None:
+            upto = min(upto, held - 1)
         k = 0
         while k < len(self._waiting) and self._waiting[k][0] <= upto:
             e, units, takes = self._waiting[k]
@@ -252,17 +293,20 @@ class LiveDistance:
             since, grown = self._merged
             self._merged = (units, grown + self._union.grown_units(since, e, units))
             down_mm = 1e3 * (self._merged[1] / UNITS_PER_M + self._skips.allowance_m(e))
-            for judge, lo, hi, up_mm in takes:
-                judge.take_one(lo, hi, up_mm, down_mm)
+            for judge, lo, hi, up_m in takes:
+                judge.take_one(lo, hi, 1e3 * up_m, down_mm)
             k += 1
         del self._waiting[:k]
 
-    def finish(self) -> int:
+    def finish(self, tracker: PoseTracker | None = None) -> int:
         """The watch ends (no later page comes): the twists still waiting for the page after
         their frame judged with the spans known, as ``new_life`` judges an old life's and
         ``analyze`` the twists after a log's last page; how many there were (before, they were
         never judged: a DISTANCE wrong in the watch's last 0.6-1.8 s passed)."""
         waiting = len(self._waiting)
+        if tracker is not None and self._held.gaps:  # the pages kept prove what they can
+            self._settle(tracker, tracker.enc_seq, True)
+        self._held.gaps.clear()
         self._take_waiting(math.inf)
         self.judged_at_end += waiting
         return waiting

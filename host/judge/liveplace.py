@@ -129,7 +129,7 @@ class StallPlacer:
         self._reprimed: tuple[int, ...] = ()  # the latest counter restarts re-primed on
         self._parts: list[Part] = []  # the placements' parts whose allowance pages may withdraw
         # the latest placements: frame, the offset its sample asked (from the reference then),
-        # the step it made, the budget then (m)
+        # the step it made, the budget then, its step's bound, its offset asked (m), by a gap
         self._history: list[list[float]] = []
         self.losses: LiveAllowance | None = None  # the tracker's: samples judged again
         self._owed = (0.0, 0.0)  # the offset withdrawn, not applied yet (m)
@@ -244,6 +244,11 @@ class StallPlacer:
             self._gaps = [gap for gap in self._gaps if gap[0] != seq]
         return self.dark.restarted(seq, by_uptime, self.seen)  # a new start (livedark)
 
+    @property
+    def reprimed_frames(self) -> frozenset[int]:
+        """The latest counter restarts re-primed on (``gapseen.Seen``'s ``reprimed``)."""
+        return frozenset(self._reprimed)
+
     def gap_at(self, seq: int) -> Gap | None:
         """The gap (since the last placement) that ends at encoder frame ``seq``, if any."""
         return next((gap for gap in self._gaps if gap[0] == seq), None)
@@ -322,7 +327,7 @@ class StallPlacer:
                                   self.placements)
         self._history = [*self._history[1 - PARTS_KEPT:], [
             pose.seq, want_x - px, want_y - py, self._shift[0] - px, self._shift[1] - py,
-            self._budget_m, step_m]]
+            self._budget_m, step_m, math.hypot(want_x, want_y), float(bool(gaps))]]
         self._narrow(pose, (want_x, want_y), reference)
         return self._shift[0] - sx, self._shift[1] - sy
 
@@ -417,7 +422,8 @@ class StallPlacer:
         reference moves by it at the next sample (``shift``)."""
         less_x, less_y = 0.0, 0.0  # how much less the placements so far moved the reference
         for k, placed in enumerate(self._history):
-            seq, asked_x, asked_y, old_x, old_y, budget_m, step_m = placed
+            seq, asked_x, asked_y, old_x, old_y, budget_m, step_m, want_m, by_gap = placed
+            self.placements.rebound(want_m, by_gap > 0.0, budget_m + self.position_tolerance_m)
             asked_x, asked_y = asked_x - less_x, asked_y - less_y
             new_x, new_y = clamp_offset(asked_x, asked_y, min(
                 budget_m + self.position_tolerance_m,

@@ -66,13 +66,24 @@ class SettleHold:
         # the latest frames judged, and whether taken: a hold's context (``_context``)
         self.recent: deque[tuple[can.Message, bool]] = deque(maxlen=CONTEXT_FRAMES)
         self._page: tuple[int, int, int, int] | bool | None = False  # False: not read yet
+        self.opener: can.Message | None = None  # the frame that opened the latest hold
 
     def open(self, msg: can.Message, now_s: float) -> None:
         """The encoder frame ``msg`` (heard at local ``now_s``) was held: hold from it."""
         self._start = self._e2e.last_taken(self.can_id)
+        self.opener = msg
         self.held = [(msg, now_s)]
         self.until_s = msg.timestamp + HOLD_S
         self.holds += 1
+
+    def unheard(self, msg: can.Message, verdict: bool | None) -> bool:
+        """Whether a frame fed to the judge with ``verdict`` was not heard before: every frame
+        fed without one, and every frame a hold gives back with one but the frame that opened
+        it (heard when it came, then held; the others waited unheard). The live gapseen counts
+        each encoder frame once, in bus order with the pages (``livegapseen.heard_encoder``):
+        the frames of a hold left uncounted made every page after it count too few (kobuki 24,
+        ``busoff=4:0.3``: 109 by 5.4 s), and no window over the bus-off was proven (issue #11)."""
+        return verdict is None or msg is not self.opener
 
     def quiet(self, now_s: float) -> bool:
         """Frames are held and none came for ``HOLD_S`` of local time before ``now_s`` (s): the

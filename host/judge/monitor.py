@@ -197,8 +197,8 @@ class BusMonitor:
         if self.tracker.wrongs.origin_s is None:  # the verdict's times count from here
             self.tracker.wrongs.origin_s = timestamp_s
         message = self._by_key.get(frame_key(msg.arbitration_id, msg.is_extended_id))
-        if verdict is None and message is not None:  # heard once (a held frame comes again)
-            heard_encoder(self.tracker, message, data)  # livegapseen: gapchecked's count
+        if message is not None and self.settle.unheard(msg, verdict):  # heard once, in bus
+            heard_encoder(self.tracker, message, data)  # order: livegapseen, gapchecked's count
         summary = self._summary(message, data) if message is not None else None
         if summary is not None:  # before its E2E check, which a reboot or a second source fails
             self._watch_source(*summary, counter=data[1] & ENC_COUNTER_MASK)

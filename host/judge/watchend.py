@@ -26,5 +26,5 @@ def end_watch(tracker: PoseTracker, distance: LiveDistance) -> None:
     """The watch ends, no later frame comes: everything still waiting judged (module
     docstring)."""
     end_of_watch(tracker)
-    distance.finish()
+    distance.finish(tracker)
     tracker.wrongs.finish(tracker.allowance_m)

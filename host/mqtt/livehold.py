@@ -18,8 +18,10 @@ from typing import TYPE_CHECKING
 
 import can
 
+from odocan.host.judge.livegapseen import heard_encoder
 from odocan.host.judge.livesettle import CONTEXT_FRAMES, SettleHold
 from odocan.host.mqtt.liveplan import Plan, Publication
+from odocan.host.protocol.busfacts import ENC_MESSAGE
 
 if TYPE_CHECKING:
     from odocan.host.mqtt.telemetry import RobotTelemetry
@@ -63,10 +65,13 @@ class BridgeHold:
         self._context()
         published: list[Publication] = []
         forced = telemetry.forced_plans(self)
+        encoders = telemetry.db.get_message_by_name(ENC_MESSAGE)
 
         def feed(msg: can.Message, now_s: float, verdict: bool | None) -> None:
             t_s, can_id, data = msg.timestamp, msg.arbitration_id, bytes(msg.data)
             self.verdict = verdict
+            if verdict is not None and self.settle.unheard(msg, verdict):  # (the usual plans
+                heard_encoder(telemetry.tracker, encoders, data)  # hear it: liveplan)
             plan = (telemetry.plans if verdict is None else forced).get(can_id)
             published.extend(plan(t_s, data) if plan is not None
                              else telemetry.feed_fields(t_s, can_id, data, False))
