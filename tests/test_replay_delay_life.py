@@ -20,6 +20,12 @@ Found by the thirty-first outside sweep, run and analyze PASSing each drive, rep
   the accepted frames alone was set 4.9 ms early, the late frames fed a tick early, the rebooted
   firmware primed a tick early and its poses named other frames than the recording one's. The
   grid is read from every encoder frame now (``replay_arrival._on_time_origin_s``).
+* kobuki square 813 and pmir random 812, 9 s, ``delay=0.1:120`` (one fault): FAIL, 16.7 and
+  17.0 mm, none of 433 poses identical. The first WHEEL_ENCODERS E2E counts page, sent at
+  0.101 s and logged 120 ms late, was counted back from the encoder frame before where it was
+  logged: the power-up's prime read 12 frames late (0.13 s for 0.01 s), out of the fit's reach.
+  The page is now placed where it was sent, after the summary of the COUNTER before its own
+  (``replay_late.status_pages_sent_at``): every pose identical (439 and 437).
 
 The firmware is proven right by the tests' watch (``tests.fw_watch``), not by the judges; the
 tampered log is made with python-can and cantools (``tests.log_edit``).
@@ -42,6 +48,8 @@ DRIVES = {
     "pmir-717": ("pmir", "square", 717, 10, "delay=0.3:150,reboot=1.5:0.3", 2.5),
     "kobuki-674": ("kobuki", "figure8", 674, 9, "reboot=1.8:0.2,stall=5.6:0.2,delay=0.3:55",
                    3.0),  # after the reboot
+    "kobuki-813": ("kobuki", "square", 813, 9, "delay=0.1:120", 1.0),
+    "pmir-812": ("pmir", "random", 812, 9, "delay=0.1:120", 1.0),
 }
 # the same drives raised from after their stall: still never a PASS (exit 1), but UNJUDGED
 AFTER_STALL = {"kobuki-700": 3.8, "kobuki-674": 6.2}

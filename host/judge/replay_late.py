@@ -88,3 +88,41 @@ def sent_at(frames: FrameArrays, track: EncoderTrack, rows: IntArray, counter: I
             at[k] = int(track.index[latest]) + 1 if latest >= 0 else 0
             at_s[k] = sent_s
     return at, at_s
+
+
+
+def status_pages_sent_at(frames: FrameArrays, decoder: BulkDecoder,
+                         positions: IntArray) -> IntArray:
+    """The log position each rotating ODOM_STATUS page at ``positions`` was sent at: its
+    firmware sends each cycle's summary (page 0, E2E COUNTER c - 1) and then the page (COUNTER
+    c) in the same tick, so a page logged after a later summary (a delaying bus held it back)
+    was sent right after the latest summary of COUNTER c - 1 logged before it, within two
+    cycles; else where it was logged. ``reboots.counted_start`` counts the firmware's
+    WHEEL_ENCODERS E2E counts back from the latest encoder frame before the page: from where it
+    was logged, a page 120 ms late counted 12 frames late. Kobuki square 813, 9 s,
+    ``delay=0.1:120``: the counts page of 0.101 s logged at 0.221 s put the power-up's prime at
+    0.13 s for 0.01 s; none of the fit's candidates (``replay_lives.fit_first_prime``: 0.13 s
+    and 8 frames before) was the frame the firmware primed on, none of 433 poses compared
+    identical and the replay FAILed the correct firmware by 16.7 mm."""
+    sent = np.asarray(positions, dtype=np.int64).copy()
+    try:
+        summary = decoder.decode_page(frames, "ODOM_STATUS", 0)
+        rows = decoder.select(frames, "ODOM_STATUS").astype(np.int64)
+        counters = decoder.decode(frames, "ODOM_STATUS")["COUNTER"].astype(np.int64)
+    except (DecodeError, KeyError):
+        return sent
+    if "COUNTER" not in summary:
+        return sent
+    times = np.asarray(frames.timestamp_s, dtype=np.float64)
+    window_s = 2 * contract.cycle_time_s("ODOM_STATUS")
+    at = np.asarray(summary["index"], dtype=np.int64)
+    counter = np.asarray(summary["COUNTER"], dtype=np.int64)
+    for k, position in enumerate(sent.tolist()):
+        mine = np.flatnonzero(rows == position)
+        if len(mine) == 0:
+            continue
+        wanted = int((counters[mine[0]] - 1) & ENC_COUNTER_MASK)
+        before = at[(at < position) & (counter == wanted)
+                    & (times[at] > times[position] - window_s)]
+        sent[k] = int(before[-1]) + 1 if len(before) else position
+    return sent

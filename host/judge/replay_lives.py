@@ -50,6 +50,7 @@ from odocan.host.judge.replay_boots import boot_starts
 from odocan.host.judge.replay_compare import departures, versus_log
 from odocan.host.judge.replay_events import replayed_positions
 from odocan.host.judge.replay_jumps import JumpModel
+from odocan.host.judge.replay_late import status_pages_sent_at
 from odocan.host.judge.replay_resume import stalls_resume_excess_m
 from odocan.host.judge.replay_sent import bus_off_silences, new_error_bits, sent_times_s
 from odocan.host.judge.replay_track import EncoderTrack
@@ -150,8 +151,10 @@ def first_power_up(frames: FrameArrays, decoder: BulkDecoder,
     choices = dict(message.get_signal_by_name("STATE").choices or {})
     state = str(choices.get(int(page["STATE"][row]), ""))
     position = int(good[0])
+    where, ok, lost = encoder_count_pages(frames, decoder)  # each page where it was sent
+    sent = status_pages_sent_at(frames, decoder, where)
     counted = page_counted_start(position, len(frames), (track.index, track.counter),
-                                 encoder_count_pages(frames, decoder))
+                                 (sent, ok, lost))
     if "COUNTER" in page and not holds_first_cycle(int(page["COUNTER"][row])):
         # not the boot summary (lost): the firmware powered up a cycle or more before it
         return None if counted is None or counted <= int(track.index[0]) else (counted, position)
