@@ -1,0 +1,109 @@
+"""A boot summary the bus held back 150 ms dates the reboot when it was sent, not when it was
+heard (issue #11: a FAIL must never blame a correct firmware; ``host.judge.bootnamed.ran_on_to``).
+
+kobuki random 720 and pmir random 727, 9 s, ``busoff=1.5:0.4,delay=0.2:150,reboot=4.0:0.2``:
+the firmware rebooted at 4.20 s (its power-up pose, ODOM_POSE_X COUNTER 0 X 0, heard at 4.201 s
+after the old life's COUNTER 7: the sequence restarted, not wrapped), its poses COUNTER 1..6
+counted on from it, and its boot summary (ODOM_STATUS COUNTER 0, UPTIME 0) was held back and
+heard at 4.351 s. The host took the power-up pose only up to 80 ms before the summary, dated
+the reboot at 4.35 s and judged the new life's first poses as the old life's after a stall:
+run and both analyses FAILed the correct firmware (720: "the pose at 4.210 s 62.27 mm beyond
+any the firmware can resume at", 4.47 mm; 727: 853.5 mm, DISTANCE 802 mm off); the live judge
+was 37.9 mm beyond its allowance on 720.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import can
+import pytest
+
+from odocan.host.judge.monitor import BusMonitor
+from odocan.sim.robot import load
+from tests.fw_watch import Watch
+from tests.judges_cli import STREAMS, analyze, fails_by_position, watched_run
+from tests.log_edit import raise_raw
+
+POSE_X = (2, 4)  # ODOM_POSE_X's X: bytes 2..5, signed, 0.1 mm
+TAMPER_X_LSB = 100  # 10 mm
+FAULTS = "busoff=1.5:0.4,delay=0.2:150,reboot=4.0:0.2"
+DURATION_S = 9
+AFTER_REBOOT_S = 4.5  # after the held-back boot summary (4.351 s)
+DRIVES = {"kobuki-720": ("kobuki", 720), "pmir-727": ("pmir", 727)}
+LIVE_ELSEWHERE = (
+    "pmir 727's live judge is 175.2 mm beyond its allowance at 6.68 s, 2.3 s after the reboot, "
+    "the same before and after this fix (its power-up pose's ENC_COUNTER 5 is not among the "
+    "live window's last frames, so the held rule does not apply; the error comes from the "
+    "re-primes after 5.49 s): another cause")
+Drive = tuple[str, Path, Watch, int]
+
+
+_RECORDED: dict[str, Drive] = {}
+
+
+def _recorded(name: str, factory: pytest.TempPathFactory) -> Drive:
+    """``name``'s drive, recorded once per module under the tests' watch."""
+    if name not in _RECORDED:
+        robot, seed = DRIVES[name]
+        log = factory.mktemp(name) / "drive.log"
+        watch, code = watched_run(log, robot, "random", seed, DURATION_S, FAULTS)
+        _RECORDED[name] = (name, log, watch, code)
+    return _RECORDED[name]
+
+
+@pytest.fixture(scope="module", params=sorted(DRIVES))
+def drive(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory) -> Drive:
+    return _recorded(str(request.param), tmp_path_factory)
+
+
+def _live_beyond_m(log: Path, robot: str) -> float:
+    """The monitor's judge fed ``log`` frame by frame: its position error beyond its allowance."""
+    monitor = BusMonitor(load(robot))
+    with can.LogReader(str(log)) as reader:
+        for msg in reader:
+            monitor.feed(msg, now_s=msg.timestamp)
+    return monitor.tracker.max_beyond_allowance_m
+
+
+def test_the_firmware_integrates_the_frames_it_took(drive: Drive) -> None:
+    _, _, watch, _ = drive
+    assert watch.steps > 300, watch.steps
+    assert watch.within_a_thousandth_lsb(), (watch.worst_m, watch.worst_rad)
+
+
+def test_run_and_both_analyzes_pass_the_correct_firmware(
+        drive: Drive, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    _, log, _, code = drive
+    codes = [code, *(analyze(log, s, tmp_path / f"{s}.json") for s in STREAMS)]
+    out = capsys.readouterr().out
+    assert codes == [0, 0, 0], out[-2500:]
+
+
+@pytest.mark.parametrize("name", [
+    "kobuki-720",
+    pytest.param("pmir-727", marks=pytest.mark.xfail(strict=True, reason=LIVE_ELSEWHERE))])
+def test_the_live_judge_passes_the_correct_firmware(
+        name: str, tmp_path_factory: pytest.TempPathFactory) -> None:
+    """Within the 0.1 mm tolerance (720: 37.9 mm beyond before)."""
+    _, log, _, _ = _recorded(name, tmp_path_factory)
+    beyond_m = _live_beyond_m(log, DRIVES[name][0])
+    assert beyond_m <= 1e-4, beyond_m
+
+
+@pytest.mark.parametrize("stream", STREAMS)
+def test_plus_10_mm_after_the_reboot_fails_by_the_position(
+        drive: Drive, stream: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    _, log, _, _ = drive
+    tampered = tmp_path / "t.log"
+    assert raise_raw(log, tampered, "ODOM_POSE_X", POSE_X, TAMPER_X_LSB, AFTER_REBOOT_S) > 50
+    wrong = [w for w in fails_by_position(tampered, tmp_path) if w.startswith(f"--stream {stream}")]
+    capsys.readouterr()
+    assert wrong == []
+
+
+def test_plus_10_mm_after_the_reboot_fails_the_live_judge(drive: Drive, tmp_path: Path) -> None:
+    name, log, _, _ = drive
+    tampered = tmp_path / "t.log"
+    assert raise_raw(log, tampered, "ODOM_POSE_X", POSE_X, TAMPER_X_LSB, AFTER_REBOOT_S) > 50
+    assert _live_beyond_m(tampered, DRIVES[name][0]) > 5e-3
