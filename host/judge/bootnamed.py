@@ -49,7 +49,7 @@ frame then. One rule for the whole log (``reboots``), the streamed
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -348,15 +348,20 @@ class LivePowerUp:
             return
         self.chain = (counter, enc_counter)
 
-    def sequence(self, counter: int) -> None:
-        """Every ODOM_POSE_X heard (its CRC holding): its E2E ``counter``, whether the next
-        power-up pose restarts the sequence or wraps it (``ran_on_to``)."""
+    def on_pose(self, counter: int, signals: Callable[[], dict[str, Any]], t_s: float,
+                rows: Sequence[Sequence[float]]) -> None:
+        """Every ODOM_POSE_X heard (its CRC holding, whatever its sequence) at bus time ``t_s``:
+        its E2E ``counter`` (whether the next power-up pose restarts the sequence or wraps it:
+        ``ran_on_to``), and ``heard_raw`` of its ``signals()`` when it is wanted: COUNTER 0,
+        the first after a summary (``waits_next``) or one on a power-up pose's run."""
         self.previous, self.last = self.last, counter
+        if counter == 0 or self.waits_next or self.chain is not None:
+            self.heard_raw(signals(), t_s, rows)
 
-    @property
-    def follows(self) -> bool:
-        """Whether the next pose is wanted to tell a held-back summary's run (``ran_on_to``)."""
-        return self.chain is not None
+    def life_from_s(self, told_s: float) -> float:
+        """Where the life a reboot told from bus time ``told_s`` began: its power-up pose's bus
+        time when its summary was held back (``named_seq`` took it by ``ran_on_to``)."""
+        return told_s if self.held_s is None else min(told_s, self.held_s)
 
     def heard_raw(self, signals: dict[str, Any], t_s: float,
                   rows: Sequence[Sequence[float]]) -> None:
