@@ -74,6 +74,7 @@ Framed = tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]
 ENCODER_MESSAGE = "WHEEL_ENCODERS"
 # a held-back summary's power-up pose (``ran_on_to``): within one lap of the pose COUNTER
 HELD_WINDOW_S = (busfacts.ENC_COUNTER_MASK + 1) * busfacts.POSE_PERIOD_S
+POSES_KEPT = 2 * (busfacts.ENC_COUNTER_MASK + 1)  # a stream's carried poses: two laps
 ENC_FRAMES_PER_POSE = (busfacts.POSE_CYCLE_MS // busfacts.POSE_FRAMES_PER_CYCLE
                        // busfacts.ENC_CYCLE_MS)  # 2: encoder frames from one pose to the next
 
@@ -131,6 +132,21 @@ def pose_enc_rows(frames: FrameArrays, decoder: BulkDecoder, offset: int = 0) ->
     return (rows["index"][keep].astype(np.int64) + offset,
             rows["timestamp_s"][keep].astype(np.float64), rows["COUNTER"][keep].astype(np.int64),
             rows["ENC_COUNTER"][keep].astype(np.int64))
+
+
+def pose_rows_none() -> PoseRows:
+    """No pose (a stream's start: ``carried_rows``)."""
+    return (np.zeros(0, np.int64), np.zeros(0, np.float64), np.zeros(0, np.int64),
+            np.zeros(0, np.int64))
+
+
+def carried_rows(kept: PoseRows, heard: PoseRows) -> PoseRows:
+    """The latest ``POSES_KEPT`` poses of ``kept`` followed by those ``heard`` since (a stream's
+    next chunk: a held-back summary's run, ``ran_on_to``, is shorter than one lap)."""
+    return (np.concatenate((kept[0][-POSES_KEPT:], heard[0])),
+            np.concatenate((kept[1][-POSES_KEPT:], heard[1])),
+            np.concatenate((kept[2][-POSES_KEPT:], heard[2])),
+            np.concatenate((kept[3][-POSES_KEPT:], heard[3])))
 
 
 def counts_on(counter: int, enc_steps: int) -> bool:
@@ -262,20 +278,23 @@ def heard_encoders(every: tuple[FrameArrays, npt.NDArray[np.int64]], decoder: Bu
 
 def named_start(poses: PowerUpPoses, encoders: tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]],
                 position: int, t_s: float, after: PoseRows | None = None,
-                heard: Framed | None = None) -> tuple[int, int] | None:
+                heard: Framed | None = None, run: PoseRows | None = None
+                ) -> tuple[int, int, int] | None:
     """The encoder frame the firmware whose boot summary (UPTIME 0) is at log ``position``, bus
-    time ``t_s``, primed on, as its power-up pose names it, and that pose's ENC_COUNTER (module
-    docstring); None when no power-up pose precedes it in the window, the log lacks the frame it
-    names, or (``after``: the log's poses) the first pose after the summary does not count on
-    from it (``first_after``; a stream tells that later). ``heard``: ``named_frame``'s."""
-    pose = pose_before(poses, position, t_s, after)
+    time ``t_s``, primed on, as its power-up pose names it, and the ENC_COUNTER and COUNTER the
+    first pose after the summary counts on from (that pose's and 0, or a held-back summary's
+    last run pose's: ``ran_on_to``; module docstring); None when no power-up pose precedes it in
+    the window, the log lacks the frame it names, or (``after``: the log's poses) the first pose
+    after the summary does not count on from it (``first_after``; a stream tells that later,
+    its poses so far in ``run``). ``heard``: ``named_frame``'s."""
+    pose = pose_before(poses, position, t_s, after if run is None else run)
     if pose is None or restarted_after(poses, position, t_s):
         return None
     base_counter, base_enc = pose[2]
     if after is not None and not first_after(after, position, t_s, base_enc, base_counter):
         return None
     frame = named_frame(encoders, pose[0], pose[1], heard)
-    return None if frame is None else (frame, pose[1])
+    return None if frame is None else (frame, base_enc, base_counter)
 
 
 def restarted_after(poses: PowerUpPoses, position: int, t_s: float) -> bool:
