@@ -9,7 +9,9 @@ heard at 4.351 s. The host took the power-up pose only up to 80 ms before the su
 the reboot at 4.35 s and judged the new life's first poses as the old life's after a stall:
 run and both analyses FAILed the correct firmware (720: "the pose at 4.210 s 62.27 mm beyond
 any the firmware can resume at", 4.47 mm; 727: 853.5 mm, DISTANCE 802 mm off); the live judge
-was 37.9 mm beyond its allowance on 720.
+and the bridge were 37.9 mm beyond their allowance on 720. The streamed split
+(``stream_lives``) tells it chunk by chunk, and the monitor and the bridge withdraw the new life's
+poses from its power-up pose (``bootnamed.LivePowerUp``).
 """
 
 from __future__ import annotations
@@ -22,8 +24,10 @@ import pytest
 from odocan.host.io.logs import iter_log, read_log
 from odocan.host.judge.monitor import BusMonitor
 from odocan.host.judge.reboots import split_lives
+from odocan.host.judge.reference import Geometry
 from odocan.host.judge.stream_e2e import StreamE2E
 from odocan.host.judge.stream_lives import StreamLives
+from odocan.host.mqtt.telemetry import RobotTelemetry
 from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.protocol.decode import BulkDecoder
 from odocan.sim.robot import load
@@ -38,10 +42,11 @@ DURATION_S = 9
 AFTER_REBOOT_S = 4.5  # after the held-back boot summary (4.351 s)
 DRIVES = {"kobuki-720": ("kobuki", 720), "pmir-727": ("pmir", 727)}
 LIVE_ELSEWHERE = (
-    "pmir 727's live judge is 175.2 mm beyond its allowance at 6.68 s, 2.3 s after the reboot, "
-    "the same before and after this fix (its power-up pose's ENC_COUNTER 5 is not among the "
-    "live window's last frames, so the held rule does not apply; the error comes from the "
-    "re-primes after 5.49 s): another cause")
+    "pmir 727's live judges (monitor and bridge) are 175.2 mm beyond their allowance, first at "
+    "6.68 s, 2.3 s after the reboot and within it until then, the same before and after this "
+    "fix (the power-up pose's ENC_COUNTER 5 is not among the live window's last frames, so "
+    "the held rule names nothing there); the cause is later (re-primes from 5.49 s, a summary "
+    "of 6.601 s saying 46 frames lost, 67 rejected), not traced here")
 Drive = tuple[str, Path, Watch, int]
 
 
@@ -63,13 +68,18 @@ def drive(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFacto
     return _recorded(str(request.param), tmp_path_factory)
 
 
-def _live_beyond_m(log: Path, robot: str) -> float:
-    """The monitor's judge fed ``log`` frame by frame: its position error beyond its allowance."""
-    monitor = BusMonitor(load(robot))
+def _live_beyond_m(log: Path, robot: str) -> tuple[float, float]:
+    """The monitor's and the bridge's judges fed ``log`` frame by frame: their position errors
+    beyond their allowances."""
+    profile = load(robot)
+    monitor = BusMonitor(profile)
+    bridge = RobotTelemetry("r1", Geometry.of(profile), "exact",
+                            counter_bits=profile.counter_bits)
     with can.LogReader(str(log)) as reader:
         for msg in reader:
             monitor.feed(msg, now_s=msg.timestamp)
-    return monitor.tracker.max_beyond_allowance_m
+            bridge.feed(msg)
+    return monitor.tracker.max_beyond_allowance_m, bridge.tracker.max_beyond_allowance_m
 
 
 def test_the_firmware_integrates_the_frames_it_took(drive: Drive) -> None:
@@ -91,10 +101,10 @@ def test_run_and_both_analyzes_pass_the_correct_firmware(
     pytest.param("pmir-727", marks=pytest.mark.xfail(strict=True, reason=LIVE_ELSEWHERE))])
 def test_the_live_judge_passes_the_correct_firmware(
         name: str, tmp_path_factory: pytest.TempPathFactory) -> None:
-    """Within the 0.1 mm tolerance (720: 37.9 mm beyond before)."""
+    """The monitor and the bridge, within the 0.1 mm tolerance (720: 37.9 mm beyond before)."""
     _, log, _, _ = _recorded(name, tmp_path_factory)
     beyond_m = _live_beyond_m(log, DRIVES[name][0])
-    assert beyond_m <= 1e-4, beyond_m
+    assert max(beyond_m) <= 1e-4, beyond_m
 
 
 def test_the_new_life_starts_before_the_power_up_pose(drive: Drive) -> None:
@@ -138,4 +148,5 @@ def test_plus_10_mm_after_the_reboot_fails_the_live_judge(drive: Drive, tmp_path
     name, log, _, _ = drive
     tampered = tmp_path / "t.log"
     assert raise_raw(log, tampered, "ODOM_POSE_X", POSE_X, TAMPER_X_LSB, AFTER_REBOOT_S) > 50
-    assert _live_beyond_m(tampered, DRIVES[name][0]) > 5e-3
+    beyond_m = _live_beyond_m(tampered, DRIVES[name][0])
+    assert min(beyond_m) > 5e-3, beyond_m
