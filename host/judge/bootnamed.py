@@ -43,8 +43,19 @@ was the old firmware's, 2..6 frames before the new one primed: a robot standing 
 set moving, its MCU reset (a brown-out at motor start). Naming the old pose's frame put the
 robot's first steps into the reference, never into the firmware's pose: a correct firmware
 FAILed by 8..24 mm (issue #11, ``tests/test_reboot_lost_powerup.py``); the other rules name the
-frame then. One rule for the whole log (``reboots``), the streamed
-(``stream_lives``) and the live judges (``tracking.PoseTracker.power_up``).
+frame then.
+
+A summary the bus held back further (``--faults delay=0.2:150``: heard 150 ms after its tick)
+leaves the power-up pose outside that window: it is taken up to one pose COUNTER lap
+(``HELD_WINDOW_S``, 320 ms) before the summary when its life's poses ran on to the summary
+(``ran_on_to``): the pose heard before it is not COUNTER 15 (the sequence restarted there, not an
+old life's lap at (0, 0, 0)), at least one pose came between it and the summary, and each of
+them counts on from it, its COUNTER rising; the first pose after the summary then counts on
+from the last of them. Dated by the summary, the new life's poses of those 150 ms were judged
+the old life's after a stall: a correct firmware FAILed by 4.47 mm (kobuki random 720) and
+853.5 mm (pmir random 727; ``tests/test_boot_held.py``). One rule for the whole log
+(``reboots``), the streamed (``stream_lives``) and the live judges
+(``tracking.PoseTracker.power_up``).
 """
 
 from __future__ import annotations
