@@ -142,28 +142,3 @@ def test_skips_are_dropped_only_where_that_meets_the_count() -> None:
     # the strict reading off the count too: the skips stand
     assert by_page_skips(meets, settled, settled, ENC_POS, evidence, PAGES) is settled
     assert by_page_skips(meets, settled, strict, ENC_POS, evidence, None) is settled
-
-
-# --- a neighbour: the boot summary held back 150 ms (another cause, not fixed here) ---------
-
-BOOT_HELD = (
-    "kobuki random 720, same faults: the firmware (watched: every step within 1/1000 LSB) "
-    "rebooted at 4.20 s (its first pose, ODOM_POSE_X COUNTER 0 X=0, heard at 4.201 s), but "
-    "the boot summary (ODOM_STATUS COUNTER 0, UPTIME 0, INIT) was held back 150 ms and heard "
-    "at 4.351 s; the host dates the reboot there (fitted at 4.35 s), judges the new life's "
-    "poses of 4.20-4.35 s as the old life's after a stall: 'the pose at 4.210 s 62.27 mm "
-    "beyond any the firmware can resume at', 4.47 mm / 2351.8 mrad off the reference: run "
-    "and both analyses FAIL (pmir 727 the same way: 892.9 mm, DISTANCE 802 mm). "
-    "The summary came after the new life's COUNTER 3 (4.301 s): the reboot should be dated "
-    "by when it was sent, not by when it was heard")
-
-
-@pytest.mark.xfail(strict=True, reason=BOOT_HELD)
-def test_720_a_boot_summary_held_back_dates_the_reboot(
-        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    log = tmp_path / "drive.log"
-    watch, code = watched_run(log, ROBOT, SCENARIO, 720, DURATION_S, FAULTS)
-    assert watch.within_a_thousandth_lsb(), (watch.worst_m, watch.worst_rad)
-    codes = [code, *(analyze(log, s, tmp_path / f"{s}.json") for s in STREAMS)]
-    out = capsys.readouterr().out
-    assert codes == [0, 0, 0], out[-2500:]

@@ -43,13 +43,24 @@ was the old firmware's, 2..6 frames before the new one primed: a robot standing 
 set moving, its MCU reset (a brown-out at motor start). Naming the old pose's frame put the
 robot's first steps into the reference, never into the firmware's pose: a correct firmware
 FAILed by 8..24 mm (issue #11, ``tests/test_reboot_lost_powerup.py``); the other rules name the
-frame then. One rule for the whole log (``reboots``), the streamed
-(``stream_lives``) and the live judges (``tracking.PoseTracker.power_up``).
+frame then.
+
+A summary the bus held back further (``--faults delay=0.2:150``: heard 150 ms after its tick)
+leaves the power-up pose outside that window: it is taken up to one pose COUNTER lap
+(``HELD_WINDOW_S``, 320 ms) before the summary when its life's poses ran on to the summary
+(``ran_on_to``): the pose heard before it is not COUNTER 15 (the sequence restarted there, not an
+old life's lap at (0, 0, 0)), at least one pose came between it and the summary, and each of
+them counts on from it, its COUNTER rising; the first pose after the summary then counts on
+from the last of them. Dated by the summary, the new life's poses of those 150 ms were judged
+the old life's after a stall: a correct firmware FAILed by 4.47 mm (kobuki random 720) and
+853.5 mm (pmir random 727; ``tests/test_boot_held.py``). One rule for the whole log
+(``reboots``), the streamed (``stream_lives``) and the live judges
+(``tracking.PoseTracker.power_up``).
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -72,6 +83,9 @@ PoseRows = tuple[npt.NDArray[np.int64], npt.NDArray[np.float64], npt.NDArray[np.
 # (log positions, COUNTERs) of the encoder frames whose CRC holds (``heard_encoders``)
 Framed = tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]
 ENCODER_MESSAGE = "WHEEL_ENCODERS"
+# a held-back summary's power-up pose (``ran_on_to``): within one lap of the pose COUNTER
+HELD_WINDOW_S = (busfacts.ENC_COUNTER_MASK + 1) * busfacts.POSE_PERIOD_S
+POSES_KEPT = 2 * (busfacts.ENC_COUNTER_MASK + 1)  # a stream's carried poses: two laps
 ENC_FRAMES_PER_POSE = (busfacts.POSE_CYCLE_MS // busfacts.POSE_FRAMES_PER_CYCLE
                        // busfacts.ENC_CYCLE_MS)  # 2: encoder frames from one pose to the next
 
@@ -131,6 +145,21 @@ def pose_enc_rows(frames: FrameArrays, decoder: BulkDecoder, offset: int = 0) ->
             rows["ENC_COUNTER"][keep].astype(np.int64))
 
 
+def pose_rows_none() -> PoseRows:
+    """No pose (a stream's start: ``carried_rows``)."""
+    return (np.zeros(0, np.int64), np.zeros(0, np.float64), np.zeros(0, np.int64),
+            np.zeros(0, np.int64))
+
+
+def carried_rows(kept: PoseRows, heard: PoseRows) -> PoseRows:
+    """The latest ``POSES_KEPT`` poses of ``kept`` followed by those ``heard`` since (a stream's
+    next chunk: a held-back summary's run, ``ran_on_to``, is shorter than one lap)."""
+    return (np.concatenate((kept[0][-POSES_KEPT:], heard[0])),
+            np.concatenate((kept[1][-POSES_KEPT:], heard[1])),
+            np.concatenate((kept[2][-POSES_KEPT:], heard[2])),
+            np.concatenate((kept[3][-POSES_KEPT:], heard[3])))
+
+
 def counts_on(counter: int, enc_steps: int) -> bool:
     """Whether a pose of E2E COUNTER ``counter`` naming a frame ``enc_steps`` ENC_COUNTER steps
     (mod 16) after the one a power-up pose named is of that pose's life (module docstring)."""
@@ -138,28 +167,67 @@ def counts_on(counter: int, enc_steps: int) -> bool:
     return counter > 0 and most <= busfacts.ENC_COUNTER_MASK and enc_steps <= most
 
 
-def first_after(rows: PoseRows, position: int, t_s: float, named_enc: int) -> bool | None:
+def first_after(rows: PoseRows, position: int, t_s: float, named_enc: int,
+                base_counter: int = 0) -> bool | None:
     """``counts_on`` of the first pose of ``rows`` after the summary at log ``position``, bus
-    time ``t_s``, from a power-up pose that named ENC_COUNTER ``named_enc``: False when it came
-    ``BOOT_WINDOW_S`` after the summary or later; None when ``rows`` end before it."""
+    time ``t_s``, from a pose of COUNTER ``base_counter`` (0: the power-up pose; a held-back
+    summary's, the last before it: ``ran_on_to``) that named ENC_COUNTER ``named_enc``: False
+    when it came ``BOOT_WINDOW_S`` after the summary or later; None when ``rows`` end before
+    it."""
     at, times, counters, encs = rows
     k = int(np.searchsorted(at, position, side="right"))
     if k == len(at):
         return None
     if not 0.0 <= float(times[k]) - t_s < BOOT_WINDOW_S:
         return False
-    return counts_on(int(counters[k]), (int(encs[k]) - named_enc) & busfacts.ENC_COUNTER_MASK)
+    return counts_on(int(counters[k]) - base_counter,
+                     (int(encs[k]) - named_enc) & busfacts.ENC_COUNTER_MASK)
 
 
-def pose_before(poses: PowerUpPoses, position: int, t_s: float) -> tuple[int, int] | None:
+def pose_before(poses: PowerUpPoses, position: int, t_s: float,
+                rows: PoseRows | None = None) -> tuple[int, int, tuple[int, int]] | None:
     """The power-up pose a summary at log ``position`` and bus time ``t_s`` follows: the latest
-    of ``poses`` before it, heard less than ``BOOT_WINDOW_S`` before it (its position and
-    ENC_COUNTER); None when none, or when that latest one reads no power-up pose."""
+    of ``poses`` before it, heard less than ``BOOT_WINDOW_S`` before it, or (``rows``: every
+    pose heard) less than ``HELD_WINDOW_S`` when its life's poses ran on to the summary
+    (``ran_on_to``: the summary held back); its position, ENC_COUNTER and the (COUNTER,
+    ENC_COUNTER) the first pose after the summary counts on from (``first_after``). None when
+    none, or when that latest one reads no power-up pose."""
     at, times, named = poses
     k = int(np.searchsorted(at, position)) - 1
-    if k < 0 or not 0.0 <= t_s - float(times[k]) < BOOT_WINDOW_S or named[k] == NO_WORD:
+    if k < 0 or named[k] == NO_WORD:
         return None
-    return int(at[k]), int(named[k])
+    ago_s, base = t_s - float(times[k]), (0, int(named[k]))
+    if not 0.0 <= ago_s < BOOT_WINDOW_S:
+        held = (None if rows is None or not 0.0 <= ago_s < HELD_WINDOW_S
+                else ran_on_to(rows, int(at[k]), position, int(named[k])))
+        if held is None:
+            return None
+        base = held
+    return int(at[k]), int(named[k]), base
+
+
+def ran_on_to(rows: PoseRows, pose: int, position: int, named_enc: int) -> tuple[int, int] | None:
+    """Whether the power-up pose at log ``pose`` (naming ENC_COUNTER ``named_enc``) began a
+    life whose poses ran on to the summary at ``position`` (module docstring, a summary held
+    back): the pose heard before it does not wrap to it (COUNTER not 15: its sequence
+    restarted there, not an old life's lap at (0, 0, 0)), and at least one pose came between
+    it and the summary, each counting on from it with its COUNTER rising (``counts_on``). The
+    COUNTER and ENC_COUNTER of the last of them (the first pose after the summary counts on
+    from it: ``first_after``); None when not."""
+    at, _, counters, encs = rows
+    k = int(np.searchsorted(at, pose))
+    if k == 0 or k == len(at) or at[k] != pose:
+        return None
+    if int(counters[k - 1]) == busfacts.ENC_COUNTER_MASK:
+        return None
+    last = (0, named_enc)
+    for j in range(k + 1, int(np.searchsorted(at, position))):
+        counter, enc = int(counters[j]), int(encs[j])
+        if counter <= last[0] or not counts_on(
+                counter, (enc - named_enc) & busfacts.ENC_COUNTER_MASK):
+            return None
+        last = (counter, enc)
+    return None if last[0] == 0 else last
 
 
 def named_frame(encoders: tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]], pose: int,
@@ -221,19 +289,23 @@ def heard_encoders(every: tuple[FrameArrays, npt.NDArray[np.int64]], decoder: Bu
 
 def named_start(poses: PowerUpPoses, encoders: tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]],
                 position: int, t_s: float, after: PoseRows | None = None,
-                heard: Framed | None = None) -> tuple[int, int] | None:
+                heard: Framed | None = None, run: PoseRows | None = None
+                ) -> tuple[int, int, int] | None:
     """The encoder frame the firmware whose boot summary (UPTIME 0) is at log ``position``, bus
-    time ``t_s``, primed on, as its power-up pose names it, and that pose's ENC_COUNTER (module
-    docstring); None when no power-up pose precedes it in the window, the log lacks the frame it
-    names, or (``after``: the log's poses) the first pose after the summary does not count on
-    from it (``first_after``; a stream tells that later). ``heard``: ``named_frame``'s."""
-    pose = pose_before(poses, position, t_s)
+    time ``t_s``, primed on, as its power-up pose names it, and the ENC_COUNTER and COUNTER the
+    first pose after the summary counts on from (that pose's and 0, or a held-back summary's
+    last run pose's: ``ran_on_to``; module docstring); None when no power-up pose precedes it in
+    the window, the log lacks the frame it names, or (``after``: the log's poses) the first pose
+    after the summary does not count on from it (``first_after``; a stream tells that later,
+    its poses so far in ``run``). ``heard``: ``named_frame``'s."""
+    pose = pose_before(poses, position, t_s, after if run is None else run)
     if pose is None or restarted_after(poses, position, t_s):
         return None
-    if after is not None and not first_after(after, position, t_s, pose[1]):
+    base_counter, base_enc = pose[2]
+    if after is not None and not first_after(after, position, t_s, base_enc, base_counter):
         return None
-    frame = named_frame(encoders, *pose, heard)
-    return None if frame is None else (frame, pose[1])
+    frame = named_frame(encoders, pose[0], pose[1], heard)
+    return None if frame is None else (frame, base_enc, base_counter)
 
 
 def restarted_after(poses: PowerUpPoses, position: int, t_s: float) -> bool:
@@ -266,7 +338,12 @@ class LivePowerUp:
     def __init__(self) -> None:
         self.latest: tuple[float, int | None, int] | None = None  # bus time s, named seq, ENC
         self.told: tuple[float, int] | None = None  # the summary that took it: bus time s, ENC
+        self.told_counter = 0  # the COUNTER its first pose after counts on from (``first_after``)
         self.counted: bool | None = None  # its first pose after (``first_after``); None: none yet
+        self.previous = -1  # the COUNTER of the pose heard before the latest (``ran_on_to``)
+        self.last = -1  # the COUNTER of the latest pose heard
+        self.chain: tuple[int, int] | None = None  # the latest power-up pose's run (``ran_on_to``)
+        self.held_s: float | None = None  # a held-back summary's power-up pose: its bus time s
 
     def heard(self, counter: int, x: float, heading: float, enc_counter: int, t_s: float,
               rows: Sequence[Sequence[float]]) -> None:
@@ -277,14 +354,44 @@ class LivePowerUp:
         if self.told is not None and self.counted is None:  # the first pose after the summary
             summary_s, named_enc = self.told
             self.counted = 0.0 <= t_s - summary_s < BOOT_WINDOW_S and counts_on(
-                counter, (enc_counter - named_enc) & busfacts.ENC_COUNTER_MASK)
+                counter - self.told_counter, (enc_counter - named_enc) & busfacts.ENC_COUNTER_MASK)
+        self._run_on(counter, enc_counter)
         if counter != 0:
             return
+        self.chain = None
         if not is_powerup_pose(counter, x, heading):
             self.latest = (t_s, None, enc_counter)
             return
+        if 0 <= self.previous != busfacts.ENC_COUNTER_MASK:  # restarted, not wrapped
+            self.chain = (0, enc_counter)
         tail = [row for row in list(rows)[-NAMED_SPAN:] if int(row[2]) == enc_counter]
         self.latest = (t_s, int(tail[-1][0]) if tail else None, enc_counter)
+
+    def _run_on(self, counter: int, enc_counter: int) -> None:
+        """``ran_on_to`` live: a pose after the latest power-up pose counts on from it, or ends
+        its run."""
+        if self.chain is None or self.latest is None or counter == 0:
+            return
+        if counter <= self.chain[0] or not counts_on(
+                counter, (enc_counter - self.latest[2]) & busfacts.ENC_COUNTER_MASK):
+            self.chain = None
+            return
+        self.chain = (counter, enc_counter)
+
+    def on_pose(self, counter: int, signals: Callable[[], dict[str, Any]], t_s: float,
+                rows: Sequence[Sequence[float]]) -> None:
+        """Every ODOM_POSE_X heard (its CRC holding, whatever its sequence) at bus time ``t_s``:
+        its E2E ``counter`` (whether the next power-up pose restarts the sequence or wraps it:
+        ``ran_on_to``), and ``heard_raw`` of its ``signals()`` when it is wanted: COUNTER 0,
+        the first after a summary (``waits_next``) or one on a power-up pose's run."""
+        self.previous, self.last = self.last, counter
+        if counter == 0 or self.waits_next or self.chain is not None:
+            self.heard_raw(signals(), t_s, rows)
+
+    def life_from_s(self, told_s: float) -> float:
+        """Where the life a reboot told from bus time ``told_s`` began: its power-up pose's bus
+        time when its summary was held back (``named_seq`` took it by ``ran_on_to``)."""
+        return told_s if self.held_s is None else min(told_s, self.held_s)
 
     def heard_raw(self, signals: dict[str, Any], t_s: float,
                   rows: Sequence[Sequence[float]]) -> None:
@@ -297,11 +404,17 @@ class LivePowerUp:
         """The encoder frame (seq) the power-up pose heard less than ``BOOT_WINDOW_S`` before
         a boot summary heard at bus time ``summary_s`` names; None when none. Its word holds
         once the first pose after the summary counts on from it (``corroborated``)."""
-        self.told, self.counted = None, None
-        if self.latest is None or not 0.0 <= summary_s - self.latest[0] < BOOT_WINDOW_S:
+        self.told, self.counted, self.told_counter, self.held_s = None, None, 0, None
+        if self.latest is None:
             return None
+        ago_s, base = summary_s - self.latest[0], (0, self.latest[2])
+        if not 0.0 <= ago_s < BOOT_WINDOW_S:  # a held-back summary's (``ran_on_to``)
+            if (self.chain is None or self.chain[0] == 0 or self.latest[1] is None
+                    or not 0.0 <= ago_s < HELD_WINDOW_S):
+                return None
+            base, self.held_s = self.chain, self.latest[0]
         if self.latest[1] is not None:
-            self.told = (summary_s, self.latest[2])
+            self.told, self.told_counter = (summary_s, base[1]), base[0]
         return self.latest[1]
 
     @property

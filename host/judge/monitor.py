@@ -413,7 +413,8 @@ class BusMonitor:
         detail += ": " + src.start_new_life(self.tracker, self.e2e, self.db, uptime_s, state, seq)
         self.distance.new_life()
         self.first_after.new_life()
-        since_s = self.sources.life_from_s - SAME_TICK_S  # its first ticks' (bootticks)
+        # its first ticks' (bootticks; its power-up pose's, its summary held back: bootnamed)
+        since_s = self.tracker.powerup.life_from_s(self.sources.life_from_s) - SAME_TICK_S
         self.tracker.withdraw_from(since_s)  # its poses vs the old reference
         # its first pose is no resume (livestallfirst): from its boot, UPTIME's whole seconds
         self.first_after.withdraw_from(min(since_s, self._bus_time_s - uptime_s - 1.0))

@@ -397,9 +397,9 @@ def pose_frame(watch: SourceWatch, message: Message, data: bytes, e2e: Any, t_s:
         if counter is not None and message.name == POSE_MESSAGE:
             watch.hear_pose(t_s, counter)
             hear_pose_frame(watch, message.name, data, t_s, tracker)  # two pose streams
-            if tracker is not None and (counter == 0 or tracker.powerup.waits_next):
-                tracker.powerup.heard_raw(_plain_decoder(message)(data), t_s,
-                                          tracker.window.rows)
+            if tracker is not None:  # (bootnamed)
+                tracker.powerup.on_pose(counter, lambda: _plain_decoder(message)(data), t_s,
+                                        tracker.window.rows)
         elif counter is not None:
             watch.hear_status(t_s, counter)
     elif message.name == TWIST_MESSAGE:  # its DISTANCE, read when a pose may tell a reboot

@@ -27,7 +27,7 @@ import numpy.typing as npt
 
 from odocan.host.io.frames import concat_frames, empty_frames
 from odocan.host.io.logs import FrameArrays
-from odocan.host.judge import heldboot
+from odocan.host.judge import bootnamed, heldboot
 from odocan.host.judge.bootnamed import (
     PowerUpPoses,
     carried_on,
@@ -90,8 +90,8 @@ class _Boot:
     start: int  # from the summary (``reboots.summary_start``)
     state: str = ""  # its STATE
     named: int | None = None  # named by its power-up pose (``bootnamed.named_start``)
-    naming: tuple[int, int] | None = None  # ... and its ENC_COUNTER, until the first pose after
-    # the summary tells whether it counts on from it (``bootnamed.first_after``)
+    naming: tuple[int, int, int] | None = None  # ... and the ENC_COUNTER and COUNTER the first
+    # pose after the summary counts on from, until it tells (``bootnamed.first_after``)
     paged: bool = False  # its first count page was heard (its start from it: ``counted``)
     counted: int | None = None  # ``primed.counted_start`` of that page
     talked_s: float | None = None  # its last ODOM_STATUS (CRC holding) before its first pose
@@ -143,6 +143,7 @@ class StreamLives:
     # to the next summary; the chunk's events after it wait with it (``_deferred``)
     _deferred: list[tuple[int, _Boot | tuple[int, int]]] = field(default_factory=list)
     _naming: list[_Boot] = field(default_factory=list)  # reboots whose ``naming`` is not told
+    _poses: bootnamed.PoseRows = field(default_factory=bootnamed.pose_rows_none)  # ran_on_to
     _ahead_fall: bool = False  # the ``_ahead`` posed needs a twist's DISTANCE fallen
     _late: bool = False  # ... continued with none yet: the next summary reads a late one
     _falls: tuple[Falls, Carried | None] = field(  # the twists whose DISTANCE fell, the
@@ -160,6 +161,8 @@ class StreamLives:
                        np.concatenate((self._every[1], rows["index"] + self._offset)))
         self._powerups = carried_on(self._powerups,
                                     powerup_poses(chunk, self.decoder, self._offset))
+        self._poses = bootnamed.carried_rows(self._poses, pose_enc_rows(chunk, self.decoder,
+                                                                        self._offset))
         falls, twist = second_evidence(chunk, self.decoder, TWIST_COUNTERS, self._falls[1])
         self._falls = (joined(self._falls[0], falls), twist)  # rare: all kept
         events = sorted(self._deferred + self._boot_events(chunk) + self._page_events(chunk),
@@ -189,17 +192,15 @@ class StreamLives:
                        np.concatenate((self._alive[1], chunk.timestamp_s[at])))
 
     def _corroborate(self, chunk: FrameArrays) -> None:
-        """The reboots whose power-up pose named a frame (``_Boot.naming``) and the chunk's first
-        pose after their summary: ``named`` when it counts on from that pose; none when it does
-        not, or the chunk ends ``BOOT_WINDOW_S`` after the summary with no pose after it
-        (``bootnamed.first_after``, the whole log's rule); else told by a later chunk."""
+        """``_Boot.naming``'s reboots, the chunk's first pose after the summary: ``named`` when it
+        counts on, else none, or none in ``BOOT_WINDOW_S`` (``bootnamed.first_after``)."""
         if not self._naming:
             return
         rows = pose_enc_rows(chunk, self.decoder, self._offset)
         end_s = float(chunk.timestamp_s[-1]) if len(chunk) else -np.inf
         for boot in self._naming:
             assert boot.naming is not None
-            counted = first_after(rows, boot.position, boot.t_s, boot.naming[1])
+            counted = first_after(rows, boot.position, boot.t_s, *boot.naming[1:])
             if counted is None and end_s - boot.t_s < BOOT_WINDOW_S:
                 continue
             boot.named, boot.naming = (boot.naming[0] if counted else None), None
@@ -430,7 +431,7 @@ class StreamLives:
                 self._every[1], self._every[0].timestamp_s), tick_s)
         heard = heard_encoders(self._every, self.decoder) if uptime_s == 0 else None
         named = None if heard is None else named_start(
-            self._powerups, (self._encoders, self._counters), at, t_s, heard=heard)
+            self._powerups, (self._encoders, self._counters), at, t_s, heard=heard, run=self._poses)
         boot = _Boot(at, uptime_s, t_s, before, start, name, naming=named,
                      held=tick_s is not None)
         self._tracking.append(boot)

@@ -274,9 +274,8 @@ class RobotTelemetry(CommandFollowing):
             if (counter := pose_heard(data, self._pose_ids.data_ids)) is not None:
                 self.sources.hear_pose(t_s, counter)
                 hear_pose_frame(self.sources, route.name, data, t_s, self.tracker)  # two poses
-                if counter == 0 or self.tracker.powerup.waits_next:  # (bootnamed)
-                    self.tracker.powerup.heard_raw(route.signals(data), t_s,
-                                                   self.tracker.window.rows)
+                self.tracker.powerup.on_pose(counter, lambda: route.signals(data), t_s,
+                                             self.tracker.window.rows)  # (bootnamed)
             return
         if route.status_page is None:
             return
@@ -305,7 +304,8 @@ class RobotTelemetry(CommandFollowing):
         boot_frame(self.tracker, self.e2e, (uptime_s, state, seq, t_s), self._on_encoders)
         start_new_life(self.tracker, self.e2e, self.db, uptime_s, state, seq)
         self.distance.new_life()
-        since_s = self.sources.life_from_s - SAME_TICK_S  # its first ticks' (bootticks)
+        # its first ticks' (bootticks; its power-up pose's, its summary held back: bootnamed)
+        since_s = self.tracker.powerup.life_from_s(self.sources.life_from_s) - SAME_TICK_S
         self.tracker.withdraw_from(since_s)  # its poses vs the old reference
         self.twist.new_life(since_s)  # its first ticks' twists: the new one's
         self.set_pose.forget(since_s)  # what the new firmware ACKed: kept
