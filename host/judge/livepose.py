@@ -81,6 +81,11 @@ class StepGate:
         self._prev_t = 0.0  # its bus time (s)
         self._told = told
         self._held: Held | None = None  # a restart's first frame, until the next confirms it
+        # ``step_periods.doubted_bound_periods``' base: per frame heard, the bus time of the
+        # frame before the first of its back-to-back group (None: nothing to doubt); the latest
+        # heard frame's and the last accepted one's
+        self._heard: tuple[float, float | None] | None = None
+        self._prev_doubt: float | None = None
 
     def rebound(self, geometry: Geometry) -> None:
         """Gate the next frames with ``geometry``'s speed bound (the firmware's, from its PROFILE
@@ -114,6 +119,8 @@ class StepGate:
         if self.bits < WIRE_BITS and ((left | right) & WIRE_MASK) >> self.bits:
             return None  # beyond the counters' width: refused outright (lossgate.beyond_width)
         frame = (counter, left, right)
+        doubt = self._doubt_base(t_s)
+        prev_doubt, self._prev_doubt = self._prev_doubt, doubt
         if self._held is not None and self._confirms(self._held, frame, uptime):
             return self._confirmed(self._held, frame, uptime, t_s)
         self._held = None  # refused, if one was held: this frame is judged on its own
@@ -129,7 +136,7 @@ class StepGate:
                 and in_window(counter - prev[0], t_s - last_t, CYCLE_S) \
                 and self._young(frame, uptime):
             self.prev, self._prev_seq, self.uptime = prev, prev_seq, last_uptime  # held
-            self._prev_t = last_t
+            self._prev_t, self._prev_doubt = last_t, prev_doubt
             self._held = (frame, seq, uptime, t_s)
             return None
         periods = self._seq - prev_seq
@@ -143,12 +150,14 @@ class StepGate:
         d_left, d_right = ((left - prev[1] + half) & mask) - half, (
             (right - prev[2] + half) & mask) - half
         bound = self.bound
-        if abs(d_left) <= periods * bound[0] and abs(d_right) <= periods * bound[1]:
+        if (abs(d_left) <= periods * bound[0] and abs(d_right) <= periods * bound[1]) or (
+                prev_doubt is not None and self._doubted(periods, t_s - prev_doubt, d_left,
+                                                         d_right)):
             if self._refused:
                 self._refused = []
             return d_left, d_right
         self.prev, self._prev_seq, self.uptime = prev, prev_seq, last_uptime  # refused: kept
-        self._prev_t = last_t
+        self._prev_t, self._prev_doubt = last_t, prev_doubt
         consistent = bool(self._refused) and self._plausible(self._refused[-1], frame)
         self._refused = [*self._refused, frame] if consistent else [frame]
         if len(self._refused) < RESYNC_FRAMES:
@@ -156,6 +165,32 @@ class StepGate:
         first, self._refused, self.prev, self.uptime = self._refused[0], [], frame, uptime
         self._restarted(seq, t_s, by_uptime=False)
         return self._delta(first, frame)
+
+    def _doubt_base(self, t_s: float) -> float | None:
+        """The doubt base of a frame heard at bus time ``t_s`` (``_heard``): that of the frame
+        heard before it when within half a period of it (taken in one tick), else that frame's
+        bus time when it came a period and a half or more before (this frame may have waited
+        out the silence), else None (``step_periods.doubted_bound_periods``)."""
+        heard, base = self._heard, None
+        if heard is not None:
+            gap_s = t_s - heard[0]
+            base = heard[1] if gap_s < 0.5 * CYCLE_S else heard[0] if gap_s >= 1.5 * CYCLE_S \
+                else None
+        self._heard = (t_s, base)
+        return base
+
+    def _doubted(self, periods: int, since_s: float, d_left: int, d_right: int) -> bool:
+        """The firmware's second chance for a step its bound refused (firmware/sampledoubt.py
+        ``doubted_periods``; the whole log's ``step_periods.doubted_bound_periods``): the step
+        from the last accepted frame, whose sample may lie as far back as the frame before its
+        silence (``since_s`` ago), is plausible over ``periods`` widened by the whole COUNTER
+        laps nearest that time (issue #11, rule 5: kobuki figure8 seed 843,
+        ``delay=0.1:200``: a firmware locked on the late frames took the on-time COUNTER 8 at
+        4.88 s, 13 periods after the late 7 it took at 4.75 s, 14 after the late 9; the live
+        gate refused it over 17 periods and re-primed at 4.90 s, 136.9 mm off it)."""
+        beyond = math.floor((round(since_s / CYCLE_S) - periods) / RING + 0.5)
+        wide = periods + RING * max(0, beyond)
+        return abs(d_left) <= wide * self.bound[0] and abs(d_right) <= wide * self.bound[1]
 
     def _ambiguous(self, seq: int, span_s: tuple[float, float], *, hole: bool,
                    taken: tuple[int, int]) -> tuple[int, int]:
