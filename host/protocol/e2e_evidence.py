@@ -229,20 +229,19 @@ def send_readings(timestamp_s: npt.NDArray[np.float64], counter: IntArray,
     unread: list[bool] = []
     top_counter, top_s = -1, 0.0  # the latest-sent frame heard so far (-1: none yet)
     silence = 0.0  # periods beyond its COUNTER step before the latest-sent frame's run
-    for t_s, c in zip(timestamp_s.tolist(), counter.tolist(), strict=True):
+    stamps, counters = timestamp_s.tolist(), counter.tolist()
+    for k, (t_s, c) in enumerate(zip(stamps, counters, strict=True)):
         if top_counter >= 0:
-            step = (c - top_counter) & ENC_COUNTER_MASK
-            x = (t_s - top_s) / period_s
-            sends = step + COUNTER_MODULO * math.floor((x - step + COUNTER_MODULO // 2)
-                                                       / COUNTER_MODULO)
+            sends, x = _sends(t_s - top_s, c - top_counter, period_s)
             if not sends > 0:  # sent before (or a repeat of) a frame already heard: late
                 ordered.append(False)
                 sent.append(min(t_s, top_s + sends * period_s))
                 unread.append(False)
                 continue
             lead = sends - x
-            if lapped(lead, silence):  # left where heard: the latest-sent frame kept
-                ordered.append(True)
+            if lapped(lead, silence) and k + 1 < len(stamps) and _on_cadence(
+                    *_sends(stamps[k + 1] - top_s, counters[k + 1] - top_counter, period_s)):
+                ordered.append(True)  # left where heard: the latest-sent frame kept
                 sent.append(t_s)
                 unread.append(True)
                 continue
@@ -253,6 +252,23 @@ def send_readings(timestamp_s: npt.NDArray[np.float64], counter: IntArray,
         unread.append(False)
         top_counter, top_s = c, t_s
     return ordered, sent, unread
+
+
+def _sends(dt_s: float, step: int, period_s: float) -> tuple[int, float]:
+    """The sends a frame ``step`` COUNTERs (mod 16) and ``dt_s`` after another lies after it
+    (``send_readings``: the nearest to the gap's periods), and that gap in periods."""
+    x = dt_s / period_s
+    step &= ENC_COUNTER_MASK
+    return step + COUNTER_MODULO * math.floor((x - step + COUNTER_MODULO // 2)
+                                              / COUNTER_MODULO), x
+
+
+def _on_cadence(sends: int, x: float) -> bool:
+    """A frame ``sends`` after the latest-sent one, ``x`` periods after it, on time: the frame
+    before it that read lapped was one late among frames on time, not the first of a new run (a
+    rebooted sender's COUNTER starting again, frames a bus-off held), whose frames after it all
+    read lapped from the frame before the run, and which is read in order as before."""
+    return sends > 0 and sends - x < LATE_CYCLES
 
 
 def lapped(ahead: float, silence: float) -> bool:
