@@ -57,11 +57,12 @@ from odocan.host.protocol.busfacts import ENC_COUNTER_LAP, ENC_COUNTER_MASK, POS
 from odocan.host.protocol.decode import BulkDecoder
 from odocan.host.protocol.e2e import e2e_messages
 from odocan.host.protocol.e2e_crc import crc8h2f_p02
+from odocan.host.protocol.e2e_evidence import HALF_PERIOD as HALF_PERIOD
+from odocan.host.protocol.e2e_evidence import LATE_CYCLES as LATE_CYCLES
+from odocan.host.protocol.e2e_evidence import lapped
 
-LATE_CYCLES = 1.5  # a frame heard this many send periods after its COUNTER's send: held back
 RUN_STEPS = 3  # a late run's next frame: at most this many sends on (the others lost)
 STAMP_S = 1e-6  # a log's stamp resolution (candump's): lateness read to it
-HALF_PERIOD = 0.5  # a run's silence and a frame's lead agree within this (periods)
 SLOT_FRAMES = 4 * ENC_COUNTER_LAP  # frames looked back for a send heard (a lap's lateness, x4)
 
 IntArray = npt.NDArray[np.int64]
@@ -197,18 +198,6 @@ class LateScan:
             self.silence = max(gap, 0.0)  # after a silence; or on time after a late run
         self.sent_top = (t_s, c)
         return True, t_s, False
-
-
-def lapped(ahead: float, silence: float) -> bool:
-    """Whether a frame read in order ``ahead`` periods sooner than its COUNTER step from the
-    latest-sent frame puts its send (those before it read ``ahead`` periods late, were it on
-    time) is rather held back half a COUNTER lap or more (lap - ``ahead`` periods): the
-    COUNTER cannot tell the two; the run of that latest-sent frame can. Held back ``ahead``
-    periods, it started after a silence that long beyond its COUNTER step (``silence``); at
-    the sender's cadence since a frame on time, it was on time (delay=0.1:200 read so: a
-    frame 10 periods late, 6 ahead of the on-time one before it, moved every on-time frame
-    after it 120 ms back, to the wrong encoder frames)."""
-    return ahead >= LATE_CYCLES and abs(silence - ahead) > HALF_PERIOD
 
 
 def _send_heard(t: list[float], c: list[int], late: list[bool], k: int,

@@ -75,6 +75,8 @@ S_OK, S_LOST, S_REPEATED, S_WRONG, S_CRC = range(5)
 # frame on the bus before a send that the firmware drained after it).
 NEAR_FRAMES = 14
 RACE_FRAMES = 2  # frames before a send that the firmware may have drained only after it
+LATE_CYCLES = 1.5  # a frame heard this many send periods after its COUNTER's send: held back
+HALF_PERIOD = 0.5  # a run's silence and a frame's lead agree within this (periods)
 _MAX_WINDOW = ENC_COUNTER_MASK  # 15: Profile 2's widest window, a lap less one
 SILENCE_CYCLES = 1.5  # the recorder heard nothing (a bus is never that quiet in a drive)
 BURST_S = 40e-6  # then stamped what it held this close (closer than a bus delivers frames)
@@ -145,6 +147,10 @@ def pose_evidence(frames: FrameArrays, enc_pos: npt.NDArray[np.intp],
         if len(at) < 2:
             continue
         counter = (frames.data[at, 1] & ENC_COUNTER_MASK).astype(np.int64)
+        unread = send_readings(frames.timestamp_s[at], counter, POSE_PERIOD_S)[2]
+        if any(unread):  # held back a lap's half or more: its place and send prove nothing
+            keep = ~np.asarray(unread, dtype=bool)
+            at, counter = at[keep], counter[keep]
         named = (frames.data[at, 1] >> 4).astype(np.int64)
         before = np.searchsorted(enc_pos[good], at)  # good encoder frames before each pose
         since = _sent_places(frames.timestamp_s[at], counter, before,
@@ -191,6 +197,13 @@ def heard_in_order(timestamp_s: npt.NDArray[np.float64], counter: IntArray,
 
 def sent_times(timestamp_s: npt.NDArray[np.float64], counter: IntArray,
                period_s: float) -> tuple[list[bool], list[float]]:
+    """``send_readings``' first two lists."""
+    ordered, sent, _ = send_readings(timestamp_s, counter, period_s)
+    return ordered, sent
+
+
+def send_readings(timestamp_s: npt.NDArray[np.float64], counter: IntArray,
+                  period_s: float) -> tuple[list[bool], list[float], list[bool]]:
     """Whether each frame of one periodic sender (bus order; ``counter``: its E2E COUNTERs,
     ``period_s`` its send period) was sent after every frame of it heard before it: False for
     a frame held back on the bus behind a later send (``pose_evidence``). The sends between it
@@ -200,24 +213,75 @@ def sent_times(timestamp_s: npt.NDArray[np.float64], counter: IntArray,
     no gap by 8 periods: a frame taken late for that only proves nothing). A frame late behind
     sends that were all late too, or lost, is not told: it counts as in order, as before.
     The second list: when each was sent, its bus time if in order, else that of the latest
-    sent before it heard, less the sends between (that one taken as heard when sent)."""
+    sent before it heard, less the sends between (that one taken as heard when sent).
+
+    The third: the frames not read at all (``lapped``; as ``host.judge.latenames.LateScan``): a
+    frame held back half a COUNTER lap or more reads as sent ahead of the sender's cadence,
+    and every on-time frame after it as late. Left in order where heard, it moves nothing
+    (issue #11, rule 5: kobuki, figure8, seed 843, ``delay=0.1:200``: an ODOM_POSE_Y held
+    back 10 sends read 7 ahead, the on-time ones after it late by 4 to 6 sends, and a late
+    one naming the firmware's ENC_COUNTER 15 of 4.51 s proved the on-time encoder frame 15 of
+    4.63 s taken, which the firmware had refused (its window locked on the late ones): the
+    host took 10 frames the firmware refused, re-primed twice where it did not, and FAILed
+    it at 288.6 mm off the reference, 0.25 mm off the truth)."""
     ordered: list[bool] = []
     sent: list[float] = []
+    unread: list[bool] = []
     top_counter, top_s = -1, 0.0  # the latest-sent frame heard so far (-1: none yet)
-    for t_s, c in zip(timestamp_s.tolist(), counter.tolist(), strict=True):
+    silence = 0.0  # periods beyond its COUNTER step before the latest-sent frame's run
+    stamps, counters = timestamp_s.tolist(), counter.tolist()
+    for k, (t_s, c) in enumerate(zip(stamps, counters, strict=True)):
         if top_counter >= 0:
-            step = (c - top_counter) & ENC_COUNTER_MASK
-            x = (t_s - top_s) / period_s
-            sends = step + COUNTER_MODULO * math.floor((x - step + COUNTER_MODULO // 2)
-                                                       / COUNTER_MODULO)
+            sends, x = _sends(t_s - top_s, c - top_counter, period_s)
             if not sends > 0:  # sent before (or a repeat of) a frame already heard: late
                 ordered.append(False)
                 sent.append(min(t_s, top_s + sends * period_s))
+                unread.append(False)
                 continue
+            lead = sends - x
+            if lapped(lead, silence) and k + 1 < len(stamps) and _on_cadence(
+                    *_sends(stamps[k + 1] - top_s, counters[k + 1] - top_counter, period_s)):
+                ordered.append(True)  # left where heard: the latest-sent frame kept
+                sent.append(t_s)
+                unread.append(True)
+                continue
+            if x - sends >= LATE_CYCLES or lead >= LATE_CYCLES:
+                silence = max(x - sends, 0.0)  # after a silence; or on time after a late run
         ordered.append(True)
         sent.append(t_s)
+        unread.append(False)
         top_counter, top_s = c, t_s
-    return ordered, sent
+    return ordered, sent, unread
+
+
+def _sends(dt_s: float, step: int, period_s: float) -> tuple[int, float]:
+    """The sends a frame ``step`` COUNTERs (mod 16) and ``dt_s`` after another lies after it
+    (``send_readings``: the nearest to the gap's periods), and that gap in periods."""
+    x = dt_s / period_s
+    step &= ENC_COUNTER_MASK
+    return step + COUNTER_MODULO * math.floor((x - step + COUNTER_MODULO // 2)
+                                              / COUNTER_MODULO), x
+
+
+def _on_cadence(sends: int, x: float) -> bool:
+    """A frame ``sends`` after the latest-sent one, ``x`` periods after it, on time: the frame
+    before it that read lapped was one late among frames on time, not the first of a new run (a
+    rebooted sender's COUNTER starting again, frames a bus-off held), whose frames after it all
+    read lapped from the frame before the run, and which is read in order as before."""
+    return sends > 0 and sends - x < LATE_CYCLES
+
+
+def lapped(ahead: float, silence: float) -> bool:
+    """Whether a frame read in order ``ahead`` periods sooner than its COUNTER step from the
+    latest-sent frame puts its send (those before it read ``ahead`` periods late, were it on
+    time) is rather held back half a COUNTER lap or more (lap - ``ahead`` periods): the
+    COUNTER cannot tell the two; the run of that latest-sent frame can. Held back ``ahead``
+    periods, it started after a silence that long beyond its COUNTER step (``silence``); at
+    the sender's cadence since a frame on time, it was on time (delay=0.1:200 read so: a
+    frame 10 periods late, 6 ahead of the on-time one before it, moved every on-time frame
+    after it 120 ms back, to the wrong encoder frames). Moved here from
+    ``host.judge.latenames`` (which re-exports it) for ``send_readings``."""
+    return ahead >= LATE_CYCLES and abs(silence - ahead) > HALF_PERIOD
 
 
 def _only_named(enc_counter: IntArray, good: npt.NDArray[np.intp], lo: int, hi: int,
