@@ -175,17 +175,12 @@ def test_the_pmir_bus_off_delay_drive_passes_live_untampered(tmp_path: Path) -> 
         assert not wrong
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "live false FAIL, not a gap's allowance: kobuki random 3 delay=0.3:55,busoff=5:0.2 "
-    "untampered (analyze PASS): monitor and bridge POSE WRONG 116.6 mm, on main too; the live "
-    "E2E took the held COUNTER 0 frame (5.203 s, counts 36842/64706, older than frame 352) as "
-    "frame 354 after the bus-off's 29-period gap, as the firmware did (the pages prove frames "
-    "7..448 taken as the log's), then its step gate refused the firmware's step into frame 355 "
-    "(-931/-1730 counts, 113 mm of path) that analyze's reference takes: the pose is placed "
-    "116.6 mm off, and the live DISTANCE 113.48 mm beyond once the pages withdraw the gap's "
-    "210.7 mm bound above (livedistgaps; main: PASS, the bound hid it). The live step judging's "
-    "(doubted periods, held frames), not the pages'"))
 def test_the_kobuki_bus_off_delay_drive_passes_live_untampered(tmp_path: Path) -> None:
+    """kobuki random 3, ``delay=0.3:55,busoff=5:0.2``, untampered: the live E2E takes the held
+    COUNTER 0 frame (5.203 s) as frame 354 after the bus-off's 29-period gap, as the firmware
+    did; its step gate refused the firmware's step into frame 355 (113 mm of path): POSE WRONG
+    116.6 mm on main, and DISTANCE 113.48 mm beyond once the pages withdrew the gap's bound
+    (livedistgaps). The live doubted-period rule (``StepGate._doubted``) takes that step: PASS."""
     log = tmp_path / "drive.log"
     watch, code = watched_run(log, "kobuki", "random", 3, 9, "delay=0.3:55,busoff=5:0.2")
     assert code == 0
