@@ -36,7 +36,7 @@ import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.replay_track import EncoderTrack
-from odocan.host.protocol.busfacts import ENC_COUNTER_MASK
+from odocan.host.protocol.busfacts import ENC_COUNTER_LAP, ENC_COUNTER_MASK
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.sim import contract
 
@@ -44,7 +44,7 @@ IntArray = npt.NDArray[np.int64]
 FloatArray = npt.NDArray[np.float64]
 MAX_BEHIND = 7  # sends behind the latest: below half the 4-bit COUNTER's lap, never ambiguous
 MIN_BEHIND = 4  # sends behind (80 ms): less late, the name resolves right where it was logged
-LAP_HALF = 8  # half the 4-bit COUNTER's lap
+HALF_LAP = ENC_COUNTER_LAP // 2  # 8: half the 4-bit COUNTER's lap
 
 
 def boot_summaries(frames: FrameArrays, decoder: BulkDecoder) -> IntArray:
@@ -79,11 +79,11 @@ def sent_at(frames: FrameArrays, track: EncoderTrack, rows: IntArray, counter: I
             head = k  # a new firmware's COUNTER, or one that came after a silence
         elif step == 0:
             continue  # the same frame again (a duplicate)
-        elif step <= LAP_HALF:  # sent on: a short step (after late frames), or a long one
+        elif step <= HALF_LAP:  # sent on: a short step (after late frames), or a long one
             if step <= MIN_BEHIND or since_s >= (step - 1.5) * period_s:  # as late as it steps
                 head = k
-        elif LAP_HALF + LAP_HALF - step >= MIN_BEHIND:
-            sent_s = float(times[rows[head]]) - (2 * LAP_HALF - step) * period_s
+        elif ENC_COUNTER_LAP - step >= MIN_BEHIND:
+            sent_s = float(times[rows[head]]) - (ENC_COUNTER_LAP - step) * period_s
             latest = int(np.searchsorted(track.timestamp_s, sent_s, side="right")) - 1
             at[k] = int(track.index[latest]) + 1 if latest >= 0 else 0
             at_s[k] = sent_s
