@@ -32,37 +32,23 @@ import can
 import numpy as np
 import pytest
 
-from odocan.firmware import encoders as fw_encoders
-from odocan.firmware.e2e import E2EStatus
-from odocan.host.io.logs import read_log
 from odocan.host.judge.analysis import HEADING_LSB_RAD, POSITION_LSB_M
 from odocan.host.judge.monitor import BusMonitor
-from odocan.host.protocol.dbcplan import default_plan
-from odocan.host.protocol.decode import frame_keys
-from odocan.host.protocol.e2e import check_frames, e2e_messages
 from odocan.host.protocol.e2e_evidence import send_readings
 from odocan.sim.robot import load
+from tests.fw_e2e import firmware_verdicts, host_disagreements
 from tests.judges_cli import POSE_X, TEN_MM_LSB, both_analyses, correct_drive, fails_by_position
 from tests.log_edit import raise_raw
 
 DRIVE = ("kobuki", "figure8", 843, 9, "delay=0.1:200")
-TAKEN = (E2EStatus.OK, E2EStatus.OKSOMELOST)
 
 
 @pytest.fixture(scope="module")
 def drive(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, list[bool]]:
     """The drive, recorded by the watched Python firmware (run exits 0: it FAILed before), and
     whether the firmware's E2E receiver took each WHEEL_ENCODERS frame, in bus order."""
-    verdicts: list[bool] = []
-    on_frame = fw_encoders.EncoderInput.on_frame
-
-    def recorded(self: fw_encoders.EncoderInput, data: bytes) -> None:
-        on_frame(self, data)
-        verdicts.append(self.rx.status in TAKEN)
-
     log = tmp_path_factory.mktemp("stale") / "drive.log"
-    with pytest.MonkeyPatch.context() as monkeypatch:
-        monkeypatch.setattr(fw_encoders.EncoderInput, "on_frame", recorded)
+    with firmware_verdicts() as verdicts:
         correct_drive(log, *DRIVE)
     return log, verdicts
 
@@ -72,15 +58,9 @@ def test_the_host_takes_the_encoder_frames_the_firmware_took(
     """``check_frames`` takes exactly the frames the firmware's receiver took (it took the 10
     on-time frames of 4.63 to 4.72 s the firmware refused)."""
     log, firmware = drive
-    frames = read_log(log)
-    _, accepted = check_frames(frames)
-    encoder = next(m for m in e2e_messages(default_plan()).values()
-                   if m.name == "WHEEL_ENCODERS")
-    at = np.flatnonzero(frame_keys(frames) == encoder.key)
-    assert len(at) == len(firmware) > 800
+    encoder_frames, wrong = host_disagreements(log, firmware)
+    assert encoder_frames == len(firmware) > 800
     assert sum(firmware) < len(firmware) - 100  # the delay makes it refuse many
-    wrong = [(round(float(frames.timestamp_s[i]), 4), int(frames.data[i, 1]) & 15)
-             for i, took in zip(at.tolist(), firmware, strict=True) if bool(accepted[i]) != took]
     assert wrong == []
 
 

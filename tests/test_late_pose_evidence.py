@@ -19,33 +19,18 @@ import can
 import numpy as np
 import pytest
 
-from odocan.firmware import encoders as fw_encoders
-from odocan.firmware.e2e import E2EStatus
 from odocan.host.cli.app import main
-from odocan.host.io.logs import read_log
 from odocan.host.judge.analysis import HEADING_LSB_RAD, POSITION_LSB_M
 from odocan.host.judge.monitor import BusMonitor
-from odocan.host.protocol.dbcplan import default_plan
-from odocan.host.protocol.decode import frame_keys
-from odocan.host.protocol.e2e import check_frames, e2e_messages
 from odocan.host.protocol.e2e_evidence import heard_in_order, sent_times
 from odocan.sim.robot import load
-
-TAKEN = (E2EStatus.OK, E2EStatus.OKSOMELOST)
+from tests.fw_e2e import firmware_verdicts, host_disagreements
 
 
 def _firmware_verdicts(log: Path, seed: int, faults: str) -> list[bool]:
     """Run the Python firmware; whether its E2E receiver took each WHEEL_ENCODERS frame it
     checked, in the order it checked them (the bus order)."""
-    verdicts: list[bool] = []
-    on_frame = fw_encoders.EncoderInput.on_frame
-
-    def watched(self: fw_encoders.EncoderInput, data: bytes) -> None:
-        on_frame(self, data)
-        verdicts.append(self.rx.status in TAKEN)
-
-    with pytest.MonkeyPatch.context() as monkeypatch:
-        monkeypatch.setattr(fw_encoders.EncoderInput, "on_frame", watched)
+    with firmware_verdicts() as verdicts:
         main(["run", "--robot", "kobuki", "--duration", "4", "--seed", str(seed), "--faults",
               faults, "--firmware", "python", "--log", str(log)])
     return verdicts
@@ -60,15 +45,9 @@ def test_the_host_takes_the_encoder_frames_the_firmware_took(
     log = tmp_path / "drive.log"
     firmware = _firmware_verdicts(log, seed, faults)
     capsys.readouterr()
-    frames = read_log(log)
-    _, accepted = check_frames(frames)
-    encoder = next(m for m in e2e_messages(default_plan()).values()
-                   if m.name == "WHEEL_ENCODERS")
-    at = np.flatnonzero(frame_keys(frames) == encoder.key)
-    assert len(at) == len(firmware) > 300
+    encoder_frames, wrong = host_disagreements(log, firmware)
+    assert encoder_frames == len(firmware) > 300
     assert sum(firmware) < len(firmware) - 100  # the delay makes it refuse many
-    wrong = [(round(float(frames.timestamp_s[i]), 4), int(frames.data[i, 1]) & 15)
-             for i, took in zip(at.tolist(), firmware, strict=True) if bool(accepted[i]) != took]
     assert wrong == []
 
 
