@@ -4,9 +4,12 @@ import sys
 
 try:
     from odocan.host.cli import main
-except KeyboardInterrupt:  # Ctrl-C as the command line's package loads: one line, no traceback
+
+    code = main()
+except KeyboardInterrupt:  # Ctrl-C as the command line's package loads, or as ``main`` is entered
+    # (a signal is checked on a function's first instruction): one line, no traceback
     print("interrupted (SIGINT): odocan stopped before it finished (while starting)",
           file=sys.stderr)
-    sys.exit(130)
+    code = 130
 
-sys.exit(main())
+sys.exit(code)

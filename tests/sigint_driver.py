@@ -5,13 +5,16 @@ at one exact moment (test_early_sigint.py):
 - ``pyrun``: raised as the firmware is chosen (before the log opens) inside a ``PyRun_String``,
   as it is when it lands in a Cython module's initialisation (numpy.random's runs one);
 - ``teardown``: raised once ``main`` has returned its exit code, before the interpreter exits;
-- ``import``: raised as ``odocan/__main__.py`` imports the command line.
+- ``import``: raised as ``odocan/__main__.py`` imports the command line;
+- ``entry``: raised as ``main`` is entered (the signal checked on its first instruction);
+- ``environ``: raised by ``main``'s first line (where CI's full run met one at 20 ms).
 """
 
 from __future__ import annotations
 
 import builtins
 import ctypes
+import os
 import runpy
 import signal
 import sys
@@ -64,5 +67,26 @@ def _import(argv: list[str]) -> None:
     runpy.run_module("odocan", run_name="__main__", alter_sys=True)
 
 
+def _interrupted(*args: Any, **kwargs: Any) -> Any:
+    raise KeyboardInterrupt
+
+
+def _entry(argv: list[str]) -> None:
+    from odocan.host import cli
+
+    setattr(cli, "main", _interrupted)  # noqa: B010 (what __main__.py imports: mypy)
+    sys.argv[1:] = argv
+    runpy.run_module("odocan", run_name="__main__", alter_sys=True)
+
+
+def _environ(argv: list[str]) -> None:
+    import odocan.host.cli  # noqa: F401 (loaded first: its own imports may set a default too)
+
+    setattr(os.environ, "setdefault", _interrupted)  # noqa: B010 (a method: mypy)
+    sys.argv[1:] = argv
+    runpy.run_module("odocan", run_name="__main__", alter_sys=True)
+
+
 if __name__ == "__main__":
-    {"pyrun": _pyrun, "teardown": _teardown, "import": _import}[sys.argv[1]](sys.argv[2:])
+    {"pyrun": _pyrun, "teardown": _teardown, "import": _import, "entry": _entry,
+     "environ": _environ}[sys.argv[1]](sys.argv[2:])

@@ -30,8 +30,8 @@ def main(argv: list[str] | None = None) -> int:
     """The ``odocan`` command (``odocan.host.cli.app.main``). Called as the program (no
     ``argv``: the console script, ``python -m odocan``), nothing after the command's exit
     code changes it (``_ended``)."""
-    os.environ.setdefault(*BLAS_THREADS)
-    try:
+    try:  # a Ctrl-C at the first line is odocan's too: one line, no traceback (CI met one there)
+        os.environ.setdefault(*BLAS_THREADS)
         from odocan.host.cli.app import main as app_main
     except KeyboardInterrupt:  # Ctrl-C while the command line loads: one line, no traceback
         code = _said(STARTING, EXIT_SIGINT)
