@@ -22,6 +22,14 @@ beyond any window the firmware's E2E can have reached: such a pair never followe
 the firmware, and tells no restart (``host.judge.ctrlrestart.window_periods``, the whole-log and
 streamed references' rule; the live one's ``in_window``). Now 0.049 mm, PASS.
 
+Its tamper, +10 mm from 5.3 s (0.3 s after the stall), PASSed every analyze (0.079 mm beyond):
+from COUNTER 15 on the host's numbers run a lap ahead of the sender's, and the frames it took
+after it were all held back, so the refused on-time frames were numbered from a held one (5.5
+periods late) a lap behind the host's numbers, and the gaps at 5.145, 5.195 and 5.285 s, which
+they fill, kept ``gapbound``'s allowance (12.4 mm). A frame is never early: one numbered more
+than half a lap before the least late of the 64 before it gained a lap
+(``host.judge.gapfill.lapped_numbers``). Now FAIL, 9.80 mm beyond (the live judge: 9.54 mm).
+
 kobuki circle 652, 9 s, ``busoff=3.1:0.3,stall=5.5:0.2,delay=0.3:55``: run and analyze pinned
 (strict xfail, ``UNFIXED``: DISTANCE); the live judge PASSes its pose (POSE WRONG 194.5 mm before
 it counted the firmware's doubted periods: ``tests/test_live_doubt.py``).
@@ -37,6 +45,7 @@ import numpy as np
 import pytest
 
 from odocan.host.judge.ctrlrestart import ctrl_restarts, in_window, window_periods
+from odocan.host.judge.gapfill import lapped_numbers, late_seq, on_time_anchors
 from odocan.host.judge.livelatestatus import StatusOrder, held_back
 from odocan.host.judge.monitor import BusMonitor
 from odocan.sim.robot import load
@@ -205,25 +214,31 @@ def test_a_restart_is_told_only_within_the_firmware_s_window() -> None:
     assert window_periods(np.array([0.0, 0.005, 0.02, 1.0]), 0.01).tolist() == [1, 2, 3, 16]
 
 
-TAMPER_645_RIGHT_AFTER = (
-    "pmir 645 +10 mm from 5.3 s (0.3 s after the stall) PASSes: the first pose raised names the "
-    "frame at 5.285 s, whose placement steps from the one at 5.095 s within 27.9 mm (6493 mm "
-    "summed since the start), the gaps of 2 and 3 periods at 5.145, 5.195 and 5.285 s (3.19, "
-    "12.35, 12.37 mm: gapbound's worst split within pmir's 4 m/s): 0.075 mm beyond. Their "
-    "frames are in the log (held 55 ms), but the host's sequence runs 16 numbers ahead of the "
-    "sender's since it took COUNTER 15 (held, 5.005 s) as 11 ahead of COUNTER 4 (5.000 s), so "
-    "gapfill's numbers of the held frames miss them; no page pair proves what the firmware "
-    "received (OVERFLOWED_FRAMES grew in the 4.7 s stall, the first ENC_E2E page after it is "
-    "at 5.256 s: no gapreceived run). From 6.0 s on the tamper FAILs by 9.8 mm")
+def test_refused_frames_are_numbered_as_the_host_numbered_the_lap() -> None:
+    """pmir 645's numbering in small: COUNTER 0..4 on time, then COUNTER 15 held back 5.5
+    periods taken as 11 ahead (number 15, a lap ahead of the sender's -1), then COUNTER 5 on
+    time, refused: it is number 21 of the host's numbering (before: 5, a lap behind, so the gap
+    it fills lacked it)."""
+    seq = np.array([0, 1, 2, 3, 4, 15])
+    time_s = np.array([0.0, 0.01, 0.02, 0.03, 0.04, 0.045])
+    counter = seq % 16
+    assert lapped_numbers(seq, time_s, 0.01).tolist() == [0] * 5 + [16]
+    anchor = on_time_anchors((seq, time_s, counter), 0.01)
+    # an on-time frame before the held one, numbered as the host numbers after it (a lap on)
+    assert int(anchor[0][-1]) - round(float(anchor[1][-1]) * 100) == 16
+    k = np.array([5])
+    at = (anchor[0][k], anchor[1][k], anchor[2][k])
+    assert late_seq(np.array([5]), np.array([0.05]), at, 0.01).tolist() == [21]
+    # a frame held back (the 15 at 0.215: sent at 0.15, 6.5 periods late) gains no lap
+    assert lapped_numbers(seq, np.array([0.0, 0.01, 0.02, 0.03, 0.04, 0.215]), 0.01
+                          ).tolist() == [0] * 6
 
 
 def test_645_plus_10_mm_right_after_the_stall_fails(
-        drive: tuple[str, Drive], tmp_path: Path, request: pytest.FixtureRequest,
-        capsys: pytest.CaptureFixture[str]) -> None:
+        drive: tuple[str, Drive], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     name, (log, _, _) = drive
     if name != "stall_uptime_back":
         pytest.skip("pmir 645's tamper")
-    request.applymarker(pytest.mark.xfail(strict=True, reason=TAMPER_645_RIGHT_AFTER))
     tampered = tmp_path / "t.log"
     assert raise_raw(log, tampered, "ODOM_POSE_X", POSE_X, TAMPER_X_LSB, 5.3) > 50
     wrong = fails_by_position(tampered, tmp_path)
