@@ -106,11 +106,16 @@ HOLD_AT_BUS_OFF = (
     "issue #11: kobuki random 448, +10 mm on ODOM_POSE_X from the first pose after the bus-off "
     "(5.221 s) PASSes both live judges (0.057 mm beyond) where both analyses FAIL it (6.12 mm "
     "beyond; seed 448's figure8, circle, square, straight alike, and 445's random, square, "
-    "straight): the live hold rule (livestall, held_on_time 321 -> 342) owes a stall "
-    "placement over the bus-off whose span holds a gap of the sender's sequence (sender_seq: "
-    "55 periods over 22 frames), so breaks.overlap_allowance_m adds 482.5 mm to that "
-    "placement's step bound (503 mm); analyze sees no hold there (0 stall placements) and "
-    "bounds the gap's placement by 4.04 mm. From 5.5 s on the tamper FAILs live")
+    "straight): the live hold rule (livestall: livewindow.held_on_time 321 -> 342, samples "
+    "at 4.816 and 5.321 s) asks no evidence, so it owes a stall placement over the bus-off "
+    "whose span holds a gap of the sender's sequence (55 periods over 22 frames): "
+    "breaks.overlap_allowance_m gives it 482.5 mm of step bound (503 mm in all). analyze "
+    "asks stalls.hold_evidence (the frame named again, or the poses quiet over all but "
+    "SILENCE_CYCLES of the span, refused poses whose CRC holds counted as sent), finds none, "
+    "places no stall and bounds the gap's placement by 4.04 mm (without hold_evidence it too "
+    "PASSes, 0.097 mm). From 5.5 s on the tamper FAILs live")
+
+
 TAMPERED_AT_BUS_OFF = ("kobuki", "random", 448)
 
 
