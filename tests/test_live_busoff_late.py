@@ -113,7 +113,10 @@ HOLD_AT_BUS_OFF = (
     "asks stalls.hold_evidence (the frame named again, or the poses quiet over all but "
     "SILENCE_CYCLES of the span, refused poses whose CRC holds counted as sent), finds none, "
     "places no stall and bounds the gap's placement by 4.04 mm (without hold_evidence it too "
-    "PASSes, 0.097 mm). From 5.5 s on the tamper FAILs live")
+    "PASSes, 0.097 mm). A live hold evidence alone (tried: the poses quiet, or frame 321 "
+    "named again) leaves no hold there but still PASSes (0.057 mm): the gaps the live "
+    "numbering makes in the burst (frame 340 15 periods after 339, 341 8 after it) bound "
+    "the placement's step by 20.0 mm. From 5.5 s on the tamper FAILs live")
 
 
 TAMPERED_AT_BUS_OFF = ("kobuki", "random", 448)
