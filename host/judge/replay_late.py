@@ -17,11 +17,14 @@ late one was compared with the replayed pose of a frame 16 periods later:
 
 A late frame is known by its own E2E COUNTER: one whose COUNTER lies ``MIN_BEHIND`` to
 ``MAX_BEHIND`` sends behind that of the latest frame of its message sent on (the head: each
-frame whose COUNTER steps forward by up to ``MIN_BEHIND``, or by more no faster than the pose
-period allows: a frame 160 ms late or more looks a step forward, too soon), logged less than
+frame whose COUNTER steps forward by up to ``MIN_BEHIND``, or by up to ``HALF_LAP`` no faster
+than the pose period allows), or seems to step forward by more than ``MIN_BEHIND`` sooner than
+that (a frame ``HALF_LAP`` to 11 sends late, 150 to 220 ms: kobuki square 841, 9 s,
+``delay=0.1:200``, 54 of 450 ODOM_POSE_X 10 sends late, their COUNTER 6 ahead, named a lap off
+from where they were logged: the correct firmware's replay FAILed by 48 mm), logged less than
 ``MAX_BEHIND + 1`` pose periods after it (a firmware that lost whole sends in a bus-off or a
-stall steps *forward*, and its silence lasted longer), with no boot summary (an ODOM_STATUS
-summary at UPTIME 0: a new firmware's COUNTER starts again at 0) between the two. It was sent as
+stall steps *forward*, and its silence lasted longer), with no boot summary (``boot_summaries``:
+a new firmware's COUNTER starts again at 0) between the two. It was sent as
 many pose periods before the head as it is behind it, and is named from the latest accepted
 encoder frame logged by then. The host's E2E verdict is no head: under ``delay=0.3:50`` (pmir
 circle 20) it took 350 of 1000 ODOM_POSE_X frames, and a frame 130 ms after the last of them was
