@@ -107,7 +107,7 @@ class Life:
 def split_lives(frames: FrameArrays, decoder: BulkDecoder) -> list[Life]:
     """The log cut at every reboot (module docstring); one life when there is none."""
     everything = np.arange(len(frames), dtype=np.int64)
-    boots = _boot_summaries(frames, decoder)
+    boots = boot_summaries(frames, decoder)
     if not boots:
         return [Life(everything, boot=False)]
     _, accepted = check_frames(frames, decoder.db)  # the encoder frames a firmware takes
@@ -235,7 +235,7 @@ def two_sources(frames: FrameArrays, decoder: BulkDecoder) -> tuple[int, float] 
     return _watch_summaries(frames, decoder)[1]
 
 
-def _boot_summaries(
+def boot_summaries(
     frames: FrameArrays, decoder: BulkDecoder
 ) -> list[tuple[int, int, str, int]]:
     """(position, UPTIME s, STATE, previous UPTIME s) of each summary that starts a new
@@ -246,7 +246,7 @@ def _boot_summaries(
 def _watch_summaries(
     frames: FrameArrays, decoder: BulkDecoder
 ) -> tuple[list[tuple[int, int, str, int]], tuple[int, float] | None]:
-    """``_boot_summaries`` and ``two_sources`` from one pass of ``SourceWatch``."""
+    """``boot_summaries`` and ``two_sources`` from one pass of ``SourceWatch``."""
     try:
         page = decoder.decode_page(frames, "ODOM_STATUS", SUMMARY_PAGE)
         message = decoder.message("ODOM_STATUS")

@@ -17,11 +17,14 @@ late one was compared with the replayed pose of a frame 16 periods later:
 
 A late frame is known by its own E2E COUNTER: one whose COUNTER lies ``MIN_BEHIND`` to
 ``MAX_BEHIND`` sends behind that of the latest frame of its message sent on (the head: each
-frame whose COUNTER steps forward by up to ``MIN_BEHIND``, or by more no faster than the pose
-period allows: a frame 160 ms late or more looks a step forward, too soon), logged less than
+frame whose COUNTER steps forward by up to ``MIN_BEHIND``, or by up to ``HALF_LAP`` no faster
+than the pose period allows), or seems to step forward by more than ``MIN_BEHIND`` sooner than
+that (a frame ``HALF_LAP`` to 11 sends late, 150 to 220 ms: kobuki square 841, 9 s,
+``delay=0.1:200``, 54 of 450 ODOM_POSE_X 10 sends late, their COUNTER 6 ahead, named a lap off
+from where they were logged: the correct firmware's replay FAILed by 48 mm), logged less than
 ``MAX_BEHIND + 1`` pose periods after it (a firmware that lost whole sends in a bus-off or a
-stall steps *forward*, and its silence lasted longer), with no boot summary (an ODOM_STATUS
-summary at UPTIME 0: a new firmware's COUNTER starts again at 0) between the two. It was sent as
+stall steps *forward*, and its silence lasted longer), with no boot summary (``boot_summaries``:
+a new firmware's COUNTER starts again at 0) between the two. It was sent as
 many pose periods before the head as it is behind it, and is named from the latest accepted
 encoder frame logged by then. The host's E2E verdict is no head: under ``delay=0.3:50`` (pmir
 circle 20) it took 350 of 1000 ODOM_POSE_X frames, and a frame 130 ms after the last of them was
@@ -35,6 +38,7 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
+from odocan.host.judge.reboots import boot_summaries as reboot_summaries
 from odocan.host.judge.replay_track import EncoderTrack
 from odocan.host.protocol.busfacts import ENC_COUNTER_LAP, ENC_COUNTER_MASK
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
@@ -48,15 +52,15 @@ HALF_LAP = ENC_COUNTER_LAP // 2  # 8: half the 4-bit COUNTER's lap
 
 
 def boot_summaries(frames: FrameArrays, decoder: BulkDecoder) -> IntArray:
-    """The log positions of the ODOM_STATUS summaries at UPTIME 0 (a firmware's boot)."""
-    try:
-        page = decoder.decode_page(frames, "ODOM_STATUS", 0)
-    except DecodeError:
-        return np.zeros(0, dtype=np.int64)
-    if "UPTIME" not in page:
-        return np.zeros(0, dtype=np.int64)
-    boots: IntArray = np.asarray(page["index"], dtype=np.int64)[np.asarray(page["UPTIME"]) == 0]
-    return boots
+    """The log positions of the ODOM_STATUS summaries that start a new firmware
+    (``reboots.boot_summaries``: UPTIME going back, told from a summary held back by the bus).
+    Not every summary at UPTIME 0: UPTIME counts whole seconds, so each summary of a life's
+    first second says 0. Read as boots, they made the pose frame logged after each the head
+    (``sent_at``) even when it was a late one: kobuki random 840, 9 s, ``delay=0.1:200``, the
+    ODOM_POSE_Y of 0.101 s logged at 0.301 s became the head, the on-time frames after it read
+    as 11 sends late and named a lap early, and the correct firmware's replay FAILed by 15.1 mm
+    between gaps."""
+    return np.array([b[0] for b in reboot_summaries(frames, decoder)], dtype=np.int64)
 
 
 def sent_at(frames: FrameArrays, track: EncoderTrack, rows: IntArray, counter: IntArray,
@@ -79,10 +83,9 @@ def sent_at(frames: FrameArrays, track: EncoderTrack, rows: IntArray, counter: I
             head = k  # a new firmware's COUNTER, or one that came after a silence
         elif step == 0:
             continue  # the same frame again (a duplicate)
-        elif step <= HALF_LAP:  # sent on: a short step (after late frames), or a long one
-            if step <= MIN_BEHIND or since_s >= (step - 1.5) * period_s:  # as late as it steps
-                head = k
-        elif ENC_COUNTER_LAP - step >= MIN_BEHIND:
+        elif step <= HALF_LAP and (step <= MIN_BEHIND or since_s >= (step - 1.5) * period_s):
+            head = k  # sent on: a short step (after late frames), or a long one as late as it is
+        elif ENC_COUNTER_LAP - step >= MIN_BEHIND:  # behind, or a long step forward too soon
             sent_s = float(times[rows[head]]) - (ENC_COUNTER_LAP - step) * period_s
             latest = int(np.searchsorted(track.timestamp_s, sent_s, side="right")) - 1
             at[k] = int(track.index[latest]) + 1 if latest >= 0 else 0

@@ -353,7 +353,7 @@ class StreamLives:
             self._decide(None, limit=None)
 
     def _boot_events(self, chunk: FrameArrays) -> list[tuple[int, _Boot | tuple[int, int]]]:
-        """The chunk's reboots (``reboots._boot_summaries``), at their positions in the log."""
+        """The chunk's reboots (``reboots.boot_summaries``), at their positions in the log."""
         if not self._summaries:
             return []
         try:
