@@ -12,7 +12,7 @@ last COUNTER (``firmware.e2e``: reset on every accepted frame). A departure afte
 
 Found on kobuki random 700, 8 s, ``busoff=1.5:0.2,delay=0.1:150,stall=3.1:0.3`` and kobuki
 figure8 674, 9 s, ``reboot=1.8:0.2,stall=5.6:0.2,delay=0.3:55``: with ODOM_POSE_X raised 10 mm
-from 3.8 s (6.2 s), 17 (11) poses after the stall at 3.09 s (5.60 s) replayed identical and the
+from 3.8 s (6.2 s), 16 (9) poses from the stall at 3.09 s (5.60 s) on replayed identical, the
 rest 10 mm off, and the life was UNJUDGED ("which frames the recording board's receive FIFO
 kept is more than the log tells") where it is a FAIL. The firmware's own E2E pages
 (ENC_E2E_OK, ENC_E2E_LOST) cannot tell it: under ``delay`` the replayed firmware counts other
@@ -43,10 +43,12 @@ Poses = dict[int, list[tuple[int, int, int]]]
 def kept_stall(log: FrameArrays, log_accepted: np.ndarray[Any, np.dtype[np.bool_]],
                replayed: FrameArrays, halts: list[tuple[int, int]]) -> dict[str, Any] | None:
     """The stall the life's first differing pose follows, when the replay reproduced it (module
-    docstring): its ``halts`` index, the identical poses after it, and the largest position
-    difference (m, as they are) from it to the next stall or hole of the log; None when the
-    life's first differing pose comes before any stall, or too few identical poses after the
-    FIFO drained precede it. ``log``, ``replayed``: one life's frames, both from its first
+    docstring): its ``halts`` index, the identical poses from it to that pose, and the largest
+    position difference (m, as they are) from that pose to the next stall or hole of the log;
+    None when that pose comes before any stall, or fewer than ``REPRODUCED_POSES`` identical
+    poses precede it after the FIFO drained, or after a hole of the log between (the recording
+    firmware took frames there the replay is not fed: kobuki figure8 673, a hole of 35 ms as the
+    stall at 5.59 s ended). ``log``, ``replayed``: one life's frames, both from its first
     encoder frame; ``halts``: its stalls, [first, end) ticks counted from that frame."""
     old = onboard_by_tick(log, log_accepted)
     new = onboard_by_tick(replayed, check_frames(replayed)[1])
@@ -59,27 +61,26 @@ def kept_stall(log: FrameArrays, log_accepted: np.ndarray[Any, np.dtype[np.bool_
         return None
     k = before[-1]
     first, end = halts[k]
-    run = [t for t in common if first <= t < off[0]]
-    drained = [t for t in run if t >= end + HW_RX_FIFO_FRAMES]
-    if len(drained) < REPRODUCED_POSES:
+    holes = _hole_ticks(log, log_accepted)
+    # the latest stall or hole before the first differing pose, each shown reproduced
+    since = [end + HW_RX_FIFO_FRAMES] + [t for t in holes if first < t <= off[0]]
+    if any(len([t for t in common if s <= t < off[0]]) < REPRODUCED_POSES for s in since):
         return None
-    limit = min([h[0] for h in halts[k + 1:]] + _hole_ticks(log, log_accepted, first))
-    after = [t for t in common if first <= t < limit]
-    return {"stall": k, "identical_after": len(run), "compared_after": len(after),
-            "max_position_diff_m": _position_diff_m(old, new, after)}
+    limit = min([h[0] for h in halts[k + 1:]] + [t for t in holes if t > off[0]]
+                + [common[-1] + 1])
+    after = [t for t in common if off[0] <= t < limit]
+    return {"stall": k, "identical_after": len([t for t in common if first <= t < off[0]]),
+            "compared_after": len(after), "max_position_diff_m": _position_diff_m(old, new, after)}
 
 
-def _hole_ticks(log: FrameArrays, accepted: np.ndarray[Any, np.dtype[np.bool_]],
-                from_tick: int) -> list[int]:
-    """The ticks (of the encoder frame after each) of the log's holes at or after
-    ``from_tick``: the recording firmware took frames there the replay is not fed
-    (``replay_compare.recorder_holes``), so positions after one differ as they are."""
+def _hole_ticks(log: FrameArrays, accepted: np.ndarray[Any, np.dtype[np.bool_]]) -> list[int]:
+    """The ticks (of the encoder frame after each) of the log's holes: the recording firmware
+    took frames there the replay is not fed (``replay_compare.recorder_holes``), so positions
+    after one may differ as they are."""
     track = EncoderTrack.of(log, accepted, BulkDecoder(contract.database()))
     found = [int(h["before"]) for h in recorder_holes(log)]
     at = np.searchsorted(track.index, found, "right")
-    ticks = [int(track.tick[a]) for a in at.tolist() if a < len(track.tick)]
-    return [t for t in ticks if t >= from_tick] or [int(track.tick[-1]) + 1 if len(track.tick)
-                                                     else from_tick]
+    return [int(track.tick[a]) for a in at.tolist() if a < len(track.tick)]
 
 
 def _position_diff_m(old: Poses, new: Poses, ticks: list[int]) -> float:
