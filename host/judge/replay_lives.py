@@ -21,7 +21,9 @@ Each life is then compared with the log's on its own (``versus_log`` on both bus
 life's first encoder frame). A life that departs only after a stall, the part before it
 identical, is UNJUDGED from that stall (with the reason), not FAILed: which frames a real
 controller's FIFO kept (its acceptance filter, frames of other nodes the log may lack) is more
-than a log can tell. A life that departs before any stall FAILs.
+than a log can tell; unless its poses after the stall, identical for a while after the FIFO
+drained, show the replay reproduced it (``replay_stallkept``): then the departure after them is
+the log's own and FAILs. A life that departs before any stall FAILs.
 """
 
 from __future__ import annotations
