@@ -355,6 +355,10 @@ def departures(vs_log: dict[str, Any], tolerance: Tolerance) -> list[str]:
         reasons.append(f"after a stall its first pose lies {resume * 1e3:.4f} mm beyond any "
                        "its firmware can resume at from its pose before (stallresume: fine "
                        "steps to a frame its FIFO kept, one merged step, fine steps on)")
+    kept = vs_log.get("max_position_diff_after_kept_stall_m")
+    if kept is not None and kept > tolerance.position_m:
+        reasons.append(f"after a stall it reproduced its position differs from the log's by up "
+                       f"to {kept * 1e3:.4f} mm (tolerance {tolerance.position_m * 1e3:.4g} mm)")
     heading = vs_log["max_heading_diff_rad"]
     if heading is not None and heading > tolerance.heading_rad:
         reasons.append(f"its heading differs from the log's by up to {heading * 1e3:.4f} mrad "

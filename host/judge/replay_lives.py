@@ -21,7 +21,9 @@ Each life is then compared with the log's on its own (``versus_log`` on both bus
 life's first encoder frame). A life that departs only after a stall, the part before it
 identical, is UNJUDGED from that stall (with the reason), not FAILed: which frames a real
 controller's FIFO kept (its acceptance filter, frames of other nodes the log may lack) is more
-than a log can tell. A life that departs before any stall FAILs.
+than a log can tell; unless its poses after the stall, identical for a while after the FIFO
+drained, show the replay reproduced it (``replay_stallkept``): then the departure after them is
+the log's own and FAILs. A life that departs before any stall FAILs.
 """
 
 from __future__ import annotations
@@ -53,6 +55,7 @@ from odocan.host.judge.replay_jumps import JumpModel
 from odocan.host.judge.replay_late import status_pages_sent_at
 from odocan.host.judge.replay_resume import stalls_resume_excess_m
 from odocan.host.judge.replay_sent import bus_off_silences, new_error_bits, sent_times_s
+from odocan.host.judge.replay_stallkept import kept_stall
 from odocan.host.judge.replay_track import EncoderTrack
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.protocol.e2e import check_frames
@@ -241,7 +244,15 @@ def judge_lives(log: FrameArrays, accepted: npt.NDArray[np.bool_], replayed: Fra
                                 rebooted, jumps)
             if not departures(before, tolerance):
                 life["onboard_vs_log_before_stall"] = before
-                life["unjudged"] = _stalled_reason(k, life)
+                kept = kept_stall(log.select(span[0]), accepted[span[0]],
+                                  replayed.select(span[1]),
+                                  [(a - int(track.tick[first]), b - int(track.tick[first]))
+                                   for a, b in stalls])
+                if kept is None:
+                    life["unjudged"] = _stalled_reason(k, life)
+                else:  # reproduced: the departure after it is the log's (replay_stallkept)
+                    life["stall_kept"] = kept
+                    vs["max_position_diff_after_kept_stall_m"] = kept["max_position_diff_m"]
         result.append(life)
     return result
 
