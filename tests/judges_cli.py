@@ -38,14 +38,22 @@ def both_analyses(log: Path) -> list[int]:
     return [analyze(log, s) for s in STREAMS]
 
 
+def reported_analyses(log: Path, work: Path) -> list[tuple[str, int, dict[str, Any]]]:
+    """(stream, exit code, JSON report) of analyze's whole and streamed analyses of ``log``, each
+    report written to ``work / f"{stream}.json"``."""
+    judged: list[tuple[str, int, dict[str, Any]]] = []
+    for s in STREAMS:
+        code = analyze(log, s, work / f"{s}.json")
+        judged.append((s, code, json.loads((work / f"{s}.json").read_text())))
+    return judged
+
+
 def fails_by_position(tampered: Path, work: Path, beyond_m: float = 5e-3) -> list[str]:
     """What is wrong with the tampered log's verdicts (nothing: ``[]``): each analysis must exit
     1 with the position beyond its allowance by more than ``beyond_m``."""
     wrong = []
-    for s in STREAMS:
-        code = analyze(tampered, s, work / f"{s}.json")
-        vs_ref = json.loads((work / f"{s}.json").read_text())["onboard_vs_reference"]
-        beyond = vs_ref["max_position_error_beyond_allowance_m"]
+    for s, code, report in reported_analyses(tampered, work):
+        beyond = report["onboard_vs_reference"]["max_position_error_beyond_allowance_m"]
         if code != 1 or beyond <= beyond_m:
             wrong.append(f"--stream {s}: exit {code}, position {beyond * 1e3:.4g} mm beyond")
     return wrong
