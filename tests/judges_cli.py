@@ -20,7 +20,7 @@ from cantools.database.can import Database
 from odocan.host.cli.app import main
 from odocan.sim.contract import DBC_PATH
 from tests.fw_watch import Watch, watched
-from tests.log_edit import raise_raw
+from tests.log_edit import raise_raw, raise_raw_once
 
 STREAMS = ("never", "always")
 POSE_X = (2, 4)  # ODOM_POSE_X's X: bytes 2..5, signed, 0.1 mm
@@ -64,6 +64,15 @@ def raise_x_10_mm(log: Path, tampered: Path, from_s: float) -> int:
     ``from_s`` s after the log's first frame on, each raised frame re-signed by cantools
     (``tests.log_edit.raise_raw``): the number of frames raised."""
     return raise_raw(log, tampered, "ODOM_POSE_X", POSE_X, TEN_MM_LSB, from_s)
+
+
+def raise_first_x(log: Path, tampered: Path, lsb: int, from_s: float, before_s: float) -> None:
+    """Copy ``log`` to ``tampered`` with the X of only the first ODOM_POSE_X at or after
+    ``from_s`` s raised by ``lsb`` (0.1 mm), re-signed (``tests.log_edit.raise_raw_once``); that
+    pose asserted heard before ``before_s``."""
+    times = raise_raw_once(log, tampered, "ODOM_POSE_X", POSE_X, lsb, from_s)
+    assert len(times) == 1, times
+    assert from_s <= times[0] < before_s, (times, from_s, before_s)
 
 
 def x_10_mm_off_fails(log: Path, tampered: Path, from_s: float, more_than: int) -> list[str]:
