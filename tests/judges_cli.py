@@ -1,7 +1,8 @@
 """The CLI's judges on a log, as the fault tests call them: a drive recorded by the Python
-firmware under the tests' watch, ``analyze`` whole and streamed, a tamper's FAIL by the position
-(a FAIL by the heading alone says nothing: a correct firmware can FAIL by it too), and a log's
-raw signals decoded by cantools (not the host's decoder)."""
+firmware under the tests' watch, ``analyze`` whole and streamed, the tests' tamper (X 10 mm off
+from a time on) and its FAIL by the position (a FAIL by the heading alone says nothing: a
+correct firmware can FAIL by it too), and a log's raw signals decoded by cantools (not the
+host's decoder)."""
 
 from __future__ import annotations
 
@@ -19,6 +20,7 @@ from cantools.database.can import Database
 from odocan.host.cli.app import main
 from odocan.sim.contract import DBC_PATH
 from tests.fw_watch import Watch, watched
+from tests.log_edit import raise_raw, raise_raw_once
 
 STREAMS = ("never", "always")
 POSE_X = (2, 4)  # ODOM_POSE_X's X: bytes 2..5, signed, 0.1 mm
@@ -36,17 +38,51 @@ def both_analyses(log: Path) -> list[int]:
     return [analyze(log, s) for s in STREAMS]
 
 
+def reported_analyses(log: Path, work: Path) -> list[tuple[str, int, dict[str, Any]]]:
+    """(stream, exit code, JSON report) of analyze's whole and streamed analyses of ``log``, each
+    report written to ``work / f"{stream}.json"``."""
+    judged: list[tuple[str, int, dict[str, Any]]] = []
+    for s in STREAMS:
+        code = analyze(log, s, work / f"{s}.json")
+        judged.append((s, code, json.loads((work / f"{s}.json").read_text())))
+    return judged
+
+
 def fails_by_position(tampered: Path, work: Path, beyond_m: float = 5e-3) -> list[str]:
     """What is wrong with the tampered log's verdicts (nothing: ``[]``): each analysis must exit
     1 with the position beyond its allowance by more than ``beyond_m``."""
     wrong = []
-    for s in STREAMS:
-        code = analyze(tampered, s, work / f"{s}.json")
-        vs_ref = json.loads((work / f"{s}.json").read_text())["onboard_vs_reference"]
-        beyond = vs_ref["max_position_error_beyond_allowance_m"]
+    for s, code, report in reported_analyses(tampered, work):
+        beyond = report["onboard_vs_reference"]["max_position_error_beyond_allowance_m"]
         if code != 1 or beyond <= beyond_m:
             wrong.append(f"--stream {s}: exit {code}, position {beyond * 1e3:.4g} mm beyond")
     return wrong
+
+
+def raise_x_10_mm(log: Path, tampered: Path, from_s: float) -> int:
+    """Copy ``log`` to ``tampered`` with ODOM_POSE_X's X raised 10 mm (``TEN_MM_LSB``) from
+    ``from_s`` s after the log's first frame on, each raised frame re-signed by cantools
+    (``tests.log_edit.raise_raw``): the number of frames raised."""
+    return raise_raw(log, tampered, "ODOM_POSE_X", POSE_X, TEN_MM_LSB, from_s)
+
+
+def raise_first_x(log: Path, tampered: Path, lsb: int, from_s: float, before_s: float) -> None:
+    """Copy ``log`` to ``tampered`` with the X of only the first ODOM_POSE_X at or after
+    ``from_s`` s raised by ``lsb`` (0.1 mm), re-signed (``tests.log_edit.raise_raw_once``); that
+    pose asserted heard before ``before_s``."""
+    times = raise_raw_once(log, tampered, "ODOM_POSE_X", POSE_X, lsb, from_s)
+    assert len(times) == 1, times
+    assert from_s <= times[0] < before_s, (times, from_s, before_s)
+
+
+def x_10_mm_off_fails(log: Path, tampered: Path, from_s: float, more_than: int) -> list[str]:
+    """What is wrong with the verdicts on ``log`` with X 10 mm off from ``from_s`` s on
+    (``raise_x_10_mm`` into ``tampered``, more than ``more_than`` frames raised: asserted), as
+    ``fails_by_position`` tells it (its reports beside ``tampered``): ``[]`` when each analysis
+    FAILs it by the position."""
+    raised = raise_x_10_mm(log, tampered, from_s)
+    assert raised > more_than, (raised, more_than)
+    return fails_by_position(tampered, tampered.parent)
 
 
 def watched_run(log: Path, robot: str, scenario: str, seed: object, duration: object,

@@ -32,11 +32,8 @@ from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.protocol.decode import BulkDecoder
 from odocan.sim.robot import load
 from tests.fw_watch import Watch
-from tests.judges_cli import STREAMS, analyze, fails_by_position, watched_run
-from tests.log_edit import raise_raw
+from tests.judges_cli import STREAMS, analyze, raise_x_10_mm, watched_run, x_10_mm_off_fails
 
-POSE_X = (2, 4)  # ODOM_POSE_X's X: bytes 2..5, signed, 0.1 mm
-TAMPER_X_LSB = 100  # 10 mm
 FAULTS = "busoff=1.5:0.4,delay=0.2:150,reboot=4.0:0.2"
 DURATION_S = 9
 AFTER_REBOOT_S = 4.5  # after the held-back boot summary (4.351 s)
@@ -137,16 +134,14 @@ def test_the_streamed_life_split_is_the_whole_logs(drive: Drive, chunk_frames: i
 def test_plus_10_mm_after_the_reboot_fails_by_the_position(
         drive: Drive, stream: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     _, log, _, _ = drive
-    tampered = tmp_path / "t.log"
-    assert raise_raw(log, tampered, "ODOM_POSE_X", POSE_X, TAMPER_X_LSB, AFTER_REBOOT_S) > 50
-    wrong = [w for w in fails_by_position(tampered, tmp_path) if w.startswith(f"--stream {stream}")]
+    wrong = x_10_mm_off_fails(log, tmp_path / "t.log", AFTER_REBOOT_S, 50)
     capsys.readouterr()
-    assert wrong == []
+    assert [w for w in wrong if w.startswith(f"--stream {stream}")] == []
 
 
 def test_plus_10_mm_after_the_reboot_fails_the_live_judge(drive: Drive, tmp_path: Path) -> None:
     name, log, _, _ = drive
     tampered = tmp_path / "t.log"
-    assert raise_raw(log, tampered, "ODOM_POSE_X", POSE_X, TAMPER_X_LSB, AFTER_REBOOT_S) > 50
+    assert raise_x_10_mm(log, tampered, AFTER_REBOOT_S) > 50
     beyond_m = _live_beyond_m(tampered, DRIVES[name][0])
     assert min(beyond_m) > 5e-3, beyond_m

@@ -37,7 +37,7 @@ from odocan.host.judge.monitor import BusMonitor
 from odocan.host.protocol.e2e import check_frames
 from odocan.sim.robot import load
 from tests.fw_watch import Watch
-from tests.judges_cli import STREAMS, analyze, fails_by_position, raw_signals, watched_run
+from tests.judges_cli import STREAMS, analyze, raw_signals, watched_run, x_10_mm_off_fails
 from tests.log_edit import raise_raw
 
 TAMPER_DISTANCE_LSB = -10  # 10 mm short, in ODOM_TWIST DISTANCE's 1 mm LSBs
@@ -47,7 +47,6 @@ DRIVES = {  # name: robot, scenario, seed, duration s, faults, the bus-off's sta
                      6.0),
     "busoff": ("kobuki", "figure8", "446", "8", "busoff=2:0.3,delay=0.3:55", 2.0),
 }
-POSE_X = (2, 4)  # ODOM_POSE_X's X: bytes 2..5, signed, 0.1 mm
 # the log, the firmware's watch, run's exit code
 Drive = tuple[Path, Watch, int]
 
@@ -139,9 +138,7 @@ def test_a_pose_10_mm_off_from_the_bus_off_s_end_fails(
     whole and streamed FAIL by the position."""
     log, _, _ = drive
     busoff_s = DRIVES[request.node.callspec.params["drive"]][5]
-    tampered = tmp_path / "raised.log"
-    assert raise_raw(log, tampered, "ODOM_POSE_X", POSE_X, 100, busoff_s) > 100
-    assert fails_by_position(tampered, tmp_path) == []
+    assert x_10_mm_off_fails(log, tmp_path / "raised.log", busoff_s, 100) == []
     capsys.readouterr()
 
 

@@ -50,10 +50,9 @@ from odocan.host.io.logs import read_log
 from odocan.host.judge.analysis import analyze
 from odocan.sim.robot import load
 from tests.fw_watch import HEADING_LSB_RAD, POSITION_LSB_M, watched
-from tests.log_edit import raise_raw
+from tests.judges_cli import raise_x_10_mm
 
 KOBUKI = load("kobuki")
-TAMPER_LSB = 100  # 10 mm in ODOM_POSE_X's 0.1 mm LSBs
 JUDGE_WRONG = ("issue #11: the judge's model of the frames the firmware took under delay + busoff "
                "/ long delay differs (its E2E window and bus-off receive order); analyze's "
                "reference is off the correct firmware by ")
@@ -157,7 +156,7 @@ def test_a_pose_10_mm_off_fails(seed: int, faults: str, tmp_path: Path,
                                 capsys: pytest.CaptureFixture[str]) -> None:
     log, tampered = tmp_path / "drive.log", tmp_path / "tampered.log"
     _run(log, seed, faults)
-    assert raise_raw(log, tampered, "ODOM_POSE_X", (2, 4), TAMPER_LSB, 2.0) > 20
+    assert raise_x_10_mm(log, tampered, 2.0) > 20
     capsys.readouterr()
     assert not analyze(read_log(tampered), KOBUKI, "exact").passed
     for stream in ("always", "never"):

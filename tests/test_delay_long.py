@@ -29,10 +29,7 @@ from odocan.host.cli.app import main
 from odocan.host.judge.latenames import late_sends
 from odocan.host.protocol.busfacts import POSE_PERIOD_S
 from tests.fw_watch import Watch, watched
-from tests.judges_cli import both_analyses, fails_by_position
-from tests.log_edit import raise_raw
-
-TAMPER_LSB = 100  # 10 mm in ODOM_POSE_X's 0.1 mm LSBs
+from tests.judges_cli import both_analyses, raise_x_10_mm, x_10_mm_off_fails
 
 Drive = tuple[Path, Watch, int]  # the log, the firmware's watch, run's exit code
 
@@ -101,9 +98,7 @@ def test_a_pose_10_mm_off_fails_by_its_position(
         name: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     robot, seed, faults = DRIVES[name]
     log, _, _ = _drive(tmp_path, robot, seed, faults)
-    tampered = tmp_path / "t.log"
-    assert raise_raw(log, tampered, "ODOM_POSE_X", (2, 4), TAMPER_LSB, 5.0) > 100
-    wrong = fails_by_position(tampered, tmp_path)
+    wrong = x_10_mm_off_fails(log, tmp_path / "t.log", 5.0, 100)
     capsys.readouterr()
     assert wrong == []
 
@@ -156,7 +151,7 @@ def test_a_pose_10_mm_off_fails_across_refused_gaps(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     log, _, code = _drive(tmp_path, "pmir", 2, "delay=0.5:100")
     tampered = tmp_path / "t.log"
-    assert raise_raw(log, tampered, "ODOM_POSE_X", (2, 4), TAMPER_LSB, 5.0) > 100
+    assert raise_x_10_mm(log, tampered, 5.0) > 100
     codes = [code, *both_analyses(tampered)]
     capsys.readouterr()
     assert codes == [0, 1, 1]

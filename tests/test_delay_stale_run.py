@@ -37,8 +37,7 @@ from odocan.host.judge.monitor import BusMonitor
 from odocan.host.protocol.e2e_evidence import send_readings
 from odocan.sim.robot import load
 from tests.fw_e2e import firmware_verdicts, host_disagreements
-from tests.judges_cli import POSE_X, TEN_MM_LSB, both_analyses, correct_drive, fails_by_position
-from tests.log_edit import raise_raw
+from tests.judges_cli import both_analyses, correct_drive, x_10_mm_off_fails
 
 DRIVE = ("kobuki", "figure8", 843, 9, "delay=0.1:200")
 
@@ -86,9 +85,7 @@ def test_a_wrong_pose_after_the_stale_run_still_fails(drive: tuple[Path, list[bo
                                                       tmp_path: Path) -> None:
     """No new false PASS: every ODOM_POSE_X after 5 s raised 10 mm FAILs both analyses by the
     position."""
-    tampered = tmp_path / "tampered.log"
-    assert raise_raw(drive[0], tampered, "ODOM_POSE_X", POSE_X, TEN_MM_LSB, 5.0) > 100
-    assert fails_by_position(tampered, tmp_path) == []
+    assert x_10_mm_off_fails(drive[0], tmp_path / "tampered.log", 5.0, 100) == []
 
 
 def test_a_pose_frame_held_back_a_lap_half_is_not_read() -> None:

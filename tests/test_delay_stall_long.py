@@ -31,11 +31,10 @@ from cantools.database.can import Database
 from odocan.host.cli import main
 from odocan.host.judge import analysis, lonehalves
 from odocan.sim import contract
-from tests.log_edit import raise_raw
+from tests.judges_cli import raise_x_10_mm
 from tests.test_live_reboot import bridge_of, monitor_of
 from tests.test_lone_halves import lone_halves
 
-TAMPER_LSB = 100  # 10 mm in ODOM_POSE_X's 0.1 mm LSBs
 Drive = tuple[Path, subprocess.CompletedProcess[str]]  # the log, run's outcome
 
 
@@ -122,7 +121,7 @@ def test_the_live_judges_raise_no_pose_wrong(drive: Drive) -> None:
 def test_a_pose_10_mm_off_fails(drive: Drive, from_s: float, tmp_path: Path) -> None:
     log, _ = drive
     tampered = tmp_path / "t.log"
-    assert raise_raw(log, tampered, "ODOM_POSE_X", (2, 4), TAMPER_LSB, from_s) > 100
+    assert raise_x_10_mm(log, tampered, from_s) > 100
     for stream in ("never", "always"):
         assert _cli("analyze", str(tampered), "--robot", "kobuki",
                     "--stream", stream).returncode == 1, stream

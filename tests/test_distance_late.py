@@ -29,7 +29,6 @@ no judge FAILs it).
 from __future__ import annotations
 
 import itertools
-import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -41,12 +40,11 @@ from odocan.host.cli.app import main
 from odocan.sim import motor_controller as mc
 from odocan.sim.robot import load
 from tests.fw_watch import Watch, watched
-from tests.judges_cli import STREAMS, analyze, fails_by_position
+from tests.judges_cli import reported_analyses, x_10_mm_off_fails
 from tests.log_edit import raise_raw
 
-POSE_X = (2, 4)  # ODOM_POSE_X's X: bytes 2..5, signed, 0.1 mm
 DISTANCE = (6, 2)  # ODOM_TWIST's DISTANCE: bytes 6..7, 1 mm
-TEN_MM = {"ODOM_POSE_X": 100, "ODOM_TWIST": 10}  # 10 mm in each one's LSBs
+TEN_MM_DISTANCE_LSB = 10  # 10 mm in DISTANCE's 1 mm LSBs
 FORWARD = ("a firmware step goes back in the sender's order: after a counter restart taken on "
            "frames held back 150 ms (three in a row, each the E2E successor of the latest "
            "frame: the COUNTER came round), the firmware re-primes on a frame sent 15 periods "
@@ -179,11 +177,10 @@ def test_run_and_both_analyzes_pass_the_correct_firmware(
     name, d = drive
     if (reason := DRIVES[name][7]) is not None:
         request.applymarker(pytest.mark.xfail(strict=True, reason=reason))
-    codes = [d.code, *(analyze(d.log, s, tmp_path / f"{s}.json") for s in STREAMS)]
+    judged = reported_analyses(d.log, tmp_path)
     out = capsys.readouterr().out
-    assert codes == [0, 0, 0], out[-2500:]
-    for s in STREAMS:
-        report = json.loads((tmp_path / f"{s}.json").read_text())
+    assert [d.code, *(code for _, code, _ in judged)] == [0, 0, 0], out[-2500:]
+    for s, _, report in judged:
         assert report["onboard_distance_vs_reference"]["passed"], s
 
 
@@ -198,14 +195,13 @@ def test_ten_mm_more_distance_after_the_faults_fails(
     if DRIVES[name][7] is not None:
         pytest.skip("not fixed: the untampered drive FAILs already")
     tampered = tmp_path / "t.log"
-    assert raise_raw(d.log, tampered, "ODOM_TWIST", DISTANCE, TEN_MM["ODOM_TWIST"],
+    assert raise_raw(d.log, tampered, "ODOM_TWIST", DISTANCE, TEN_MM_DISTANCE_LSB,
                      DRIVES[name][5][at]) > 50
     wrong = []
-    for s in STREAMS:
-        code = analyze(tampered, s, tmp_path / f"{s}.json")
-        report = json.loads((tmp_path / f"{s}.json").read_text())["onboard_distance_vs_reference"]
-        if code != 1 or report["passed"] or report["max_excess_m"] <= 2e-3:
-            wrong.append(f"--stream {s}: exit {code}, {report}")
+    for s, code, report in reported_analyses(tampered, tmp_path):
+        distance = report["onboard_distance_vs_reference"]
+        if code != 1 or distance["passed"] or distance["max_excess_m"] <= 2e-3:
+            wrong.append(f"--stream {s}: exit {code}, {distance}")
     capsys.readouterr()
     assert wrong == []
 
@@ -217,9 +213,6 @@ def test_ten_mm_more_x_after_the_faults_fails_by_the_position(
     name, d = drive
     if DRIVES[name][7] is not None:
         pytest.skip("not fixed: the untampered drive FAILs already")
-    tampered = tmp_path / "t.log"
-    assert raise_raw(d.log, tampered, "ODOM_POSE_X", POSE_X, TEN_MM["ODOM_POSE_X"],
-                     DRIVES[name][5][at]) > 50
-    wrong = fails_by_position(tampered, tmp_path)
+    wrong = x_10_mm_off_fails(d.log, tmp_path / "t.log", DRIVES[name][5][at], 50)
     capsys.readouterr()
     assert wrong == []

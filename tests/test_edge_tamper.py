@@ -29,9 +29,8 @@ from pathlib import Path
 import can
 import pytest
 
-from tests.log_edit import raise_raw, raise_raw_once
+from tests.judges_cli import raise_first_x, raise_x_10_mm
 
-POSE_X = (2, 4)  # ODOM_POSE_X's X: bytes 2..5, signed, 0.1 mm
 POSE_X_ID = 0x200  # ODOM_POSE_X (512)
 JUDGES = ["auto", "always", "never"]
 DRIVES = {
@@ -87,7 +86,7 @@ def stepped(drive: tuple[str, Path], tmp_path_factory: pytest.TempPathFactory) -
     name, log = drive
     at_s = first_pose_after_silence(log, *EDGES[name])
     out = tmp_path_factory.mktemp(name + "_step") / "step.log"
-    assert raise_raw(log, out, "ODOM_POSE_X", POSE_X, 100, at_s - 1e-4) > 100  # +10 mm
+    assert raise_x_10_mm(log, out, at_s - 1e-4) > 100
     return out
 
 
@@ -146,9 +145,7 @@ def reordered(tmp_path_factory: pytest.TempPathFactory) -> Path:
     "(kobuki seed 3, delay=0.3:55,dup=0.1, the X at 6.136 s; 116 of 419 poses unjudged)"))
 def test_a_10_mm_lone_x_that_may_alias_fails(reordered: Path, tmp_path: Path) -> None:
     out = tmp_path / "once.log"
-    times = raise_raw_once(reordered, out, "ODOM_POSE_X", POSE_X, 100, 6.13)
-    assert len(times) == 1
-    assert 6.13 <= times[0] < 6.14
+    raise_first_x(reordered, out, 100, 6.13, 6.14)
     assert _analyze(out, "never").returncode == 1
 
 
@@ -191,8 +188,7 @@ def unfixed(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFac
                    *drive, "--log", str(base / "clean.log"))
     assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
     at_s = first_pose_after_silence(base / "clean.log", *edge)
-    assert raise_raw(base / "clean.log", base / "step.log", "ODOM_POSE_X", POSE_X, 100,
-                     at_s - 1e-4) > 100
+    assert raise_x_10_mm(base / "clean.log", base / "step.log", at_s - 1e-4) > 100
     return base / "clean.log", base / "step.log"
 
 

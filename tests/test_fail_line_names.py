@@ -12,12 +12,11 @@ from pathlib import Path
 import pytest
 
 from odocan.host.cli.app import main
-from tests.log_edit import raise_raw
+from tests.judges_cli import raise_x_10_mm
 
 DRIVE = ["run", "--robot", "kobuki", "--scenario", "straight", "--seed", "406", "--duration", "8",
          "--faults", "drop=0.05,stall=2.5:0.6"]
 RAISED_FROM_S = 3.101  # the first pose after the stall
-X_LSB = 100  # 10 mm
 
 
 @pytest.fixture(scope="module")
@@ -25,7 +24,7 @@ def logs(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
     work = tmp_path_factory.mktemp("failline")
     log, raised = work / "drive.log", work / "raised.log"
     assert main([*DRIVE, "--log", str(log)]) == 0
-    raise_raw(log, raised, "ODOM_POSE_X", (2, 4), X_LSB, RAISED_FROM_S)
+    raise_x_10_mm(log, raised, RAISED_FROM_S)
     return log, raised
 
 

@@ -32,10 +32,9 @@ from odocan.sim.robot import load
 from odocan.sim.scenarios import get_scenario
 from tests import independent_checker as ic
 from tests.fault_rig import FaultRig
-from tests.log_edit import raise_raw
+from tests.judges_cli import raise_x_10_mm
 
 FOUR = "stall=2:1,stall=6:0.5,reboot=9,reboot=14:0.3"  # the example
-TAMPER_LSB = 100  # 10 mm in ODOM_POSE_X's 0.1 mm LSBs
 TINY16 = ("name = \"tiny16\"\ncounts_per_rev = 1024\nwheel_radius_left_m = 0.05\n"
           "wheel_radius_right_m = 0.0501\nwheelbase_m = 0.25\ncounter_bits = 16\n")
 
@@ -221,7 +220,7 @@ def test_every_judge_passes_the_correct_firmware_and_fails_a_pose_moved_10_mm(
     capsys.readouterr()
     assert _judges(log, robot_arg) == {"whole": 0, "streamed": 0, "replay": 0}
     tampered = tmp_path / "tampered.log"
-    assert raise_raw(log, tampered, "ODOM_POSE_X", (2, 4), TAMPER_LSB, second_end_s + 0.3) > 50
+    assert raise_x_10_mm(log, tampered, second_end_s + 0.3) > 50
     assert _judges(tampered, robot_arg) == {"whole": 1, "streamed": 1, "replay": 1}
     assert not analyze_file(tampered, load(robot_arg), "exact", chunk_frames=97)["passed"]
     capsys.readouterr()

@@ -34,9 +34,16 @@ from pathlib import Path
 import pytest
 
 from odocan.sim.robot import load
-from tests.judges_cli import STREAMS, analyze, both_analyses, fails_by_position, watched_run
+from tests.judges_cli import (
+    STREAMS,
+    analyze,
+    both_analyses,
+    fails_by_position,
+    raise_x_10_mm,
+    watched_run,
+)
 from tests.log_edit import raise_raw
-from tests.test_edge_tamper import POSE_X, first_pose_after_silence
+from tests.test_edge_tamper import first_pose_after_silence
 from tests.test_stall_bound import _live
 
 BEYOND_M = 5e-3  # a tamper's FAIL by the position: beyond the allowance by more than this
@@ -64,7 +71,7 @@ def busoff_drive(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
     assert watch.steps > 100
     assert watch.within_a_thousandth_lsb(), (watch.worst_m, watch.worst_rad)
     at_s = first_pose_after_silence(log, 0.3, 4.0)
-    assert raise_raw(log, base / "step.log", "ODOM_POSE_X", POSE_X, 100, at_s - 1e-4) > 100
+    assert raise_x_10_mm(log, base / "step.log", at_s - 1e-4) > 100
     return log, base / "step.log"
 
 

@@ -47,10 +47,8 @@ from pathlib import Path
 import pytest
 
 from odocan.host.cli.app import main
-from tests.judges_cli import fails_by_position, watched_run
-from tests.log_edit import raise_raw
+from tests.judges_cli import watched_run, x_10_mm_off_fails
 
-POSE_X = (2, 4)  # ODOM_POSE_X's X: bytes 2..5, signed, 0.1 mm
 # name: (robot, scenario, seed, duration s, faults, tamper from s, None or the xfail's reason)
 DRIVES = {
     "busoff_delay": ("pmir", "straight", 411, 9, "delay=0.4:70,busoff=3:0.4", 3.403, None),
@@ -104,8 +102,7 @@ def test_plus_10_mm_from_the_gap_s_end_fails_every_judge(
     if unfixed is not None:
         request.applymarker(pytest.mark.xfail(strict=True, reason=unfixed))
     out = tmp_path / "raised.log"
-    assert raise_raw(log, out, "ODOM_POSE_X", POSE_X, 100, from_s - 1e-4) > 100
-    wrong = fails_by_position(out, tmp_path)  # the robot its PROFILE page names
+    wrong = x_10_mm_off_fails(log, out, from_s - 1e-4, 100)  # its PROFILE's robot
     replayed = _replay(out, robot, tmp_path / "replay.json")
     capsys.readouterr()
     assert wrong == []

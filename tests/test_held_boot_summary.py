@@ -20,10 +20,15 @@ import pytest
 
 from odocan.host.judge.heldboot import held_tick_s
 from tests.fw_watch import Watch
-from tests.judges_cli import STREAMS, analyze, both_analyses, raw_signals, watched_run
-from tests.log_edit import raise_raw
+from tests.judges_cli import (
+    STREAMS,
+    analyze,
+    both_analyses,
+    raise_x_10_mm,
+    raw_signals,
+    watched_run,
+)
 
-TAMPER_X_LSB = 100  # 10 mm in ODOM_POSE_X's 0.1 mm LSBs
 BOOT_S = 3.5  # the reboot's end: the new firmware's first tick
 Drive = tuple[Path, Watch, int]  # the log, the firmware's watch, run's exit code
 
@@ -97,7 +102,7 @@ def test_a_pose_10_mm_off_after_the_boot_fails(drive: Drive, stream: str, tmp_pa
     allowances' work, left to it.)"""
     log, _, _ = drive
     tampered = tmp_path / "t.log"
-    assert raise_raw(log, tampered, "ODOM_POSE_X", (2, 4), TAMPER_X_LSB, BOOT_S + 0.3) > 10
+    assert raise_x_10_mm(log, tampered, BOOT_S + 0.3) > 10
     code = analyze(tampered, stream, tmp_path / "r.json")
     capsys.readouterr()
     vs_ref = json.loads((tmp_path / "r.json").read_text())["onboard_vs_reference"]

@@ -28,11 +28,8 @@ from odocan.host.protocol.e2e_pages import OkPages
 from odocan.host.protocol.e2e_skipveto import by_page_skips, exact_surplus
 from odocan.sim.robot import load
 from tests.fw_watch import Watch
-from tests.judges_cli import STREAMS, analyze, cli, fails_by_position, watched_run
-from tests.log_edit import raise_raw
+from tests.judges_cli import STREAMS, analyze, cli, raise_x_10_mm, watched_run, x_10_mm_off_fails
 
-POSE_X = (2, 4)  # ODOM_POSE_X's X: bytes 2..5, signed, 0.1 mm
-TAMPER_X_LSB = 100  # 10 mm
 ROBOT, SCENARIO, SEED, DURATION_S = "kobuki", "random", 710, 9
 FAULTS = "busoff=1.5:0.4,delay=0.2:150,reboot=4.0:0.2"
 AFTER_FAULT_S = 4.5  # after the bus-off and the reboot (the delays last the whole drive)
@@ -89,17 +86,15 @@ def test_replay_finds_the_log_s_robot(drive: Drive) -> None:
 def test_plus_10_mm_after_the_faults_fails_by_the_position(
         drive: Drive, stream: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     log, _, _ = drive
-    tampered = tmp_path / "t.log"
-    assert raise_raw(log, tampered, "ODOM_POSE_X", POSE_X, TAMPER_X_LSB, AFTER_FAULT_S) > 50
-    wrong = [w for w in fails_by_position(tampered, tmp_path) if w.startswith(f"--stream {stream}")]
+    wrong = x_10_mm_off_fails(log, tmp_path / "t.log", AFTER_FAULT_S, 50)
     capsys.readouterr()
-    assert wrong == []
+    assert [w for w in wrong if w.startswith(f"--stream {stream}")] == []
 
 
 def test_plus_10_mm_after_the_faults_fails_the_live_judge(drive: Drive, tmp_path: Path) -> None:
     log, _, _ = drive
     tampered = tmp_path / "t.log"
-    assert raise_raw(log, tampered, "ODOM_POSE_X", POSE_X, TAMPER_X_LSB, AFTER_FAULT_S) > 50
+    assert raise_x_10_mm(log, tampered, AFTER_FAULT_S) > 50
     assert _live_beyond_m(tampered) > 5e-3
 
 

@@ -36,9 +36,8 @@ from odocan.host.judge.samples import sender_seq
 from odocan.host.judge.step_periods import doubted_bound_periods, pair_bound_periods
 from odocan.sim.robot import load
 from tests.fw_watch import Watch
-from tests.judges_cli import watched_run
-from tests.log_edit import raise_raw
-from tests.test_edge_tamper import POSE_X, first_pose_after_silence
+from tests.judges_cli import raise_x_10_mm, watched_run
+from tests.test_edge_tamper import first_pose_after_silence
 from tests.test_stall_bound import _live
 
 BEYOND_M = 5e-3  # a tamper's FAIL by the position: beyond the allowance by more than this
@@ -89,7 +88,7 @@ def test_the_live_judges_pass_the_correct_firmware(drive: Drive) -> None:
 def test_plus_10_mm_after_the_faults_fails_live(drive: Drive, tmp_path: Path) -> None:
     name, log, _, _ = drive
     tampered = tmp_path / "t.log"
-    assert raise_raw(log, tampered, "ODOM_POSE_X", POSE_X, 100, DRIVES[name][5]) > 50
+    assert raise_x_10_mm(log, tampered, DRIVES[name][5]) > 50
     for wrong, beyond_m in _live_verdicts(tampered, DRIVES[name][0]):
         assert wrong, (name, beyond_m)
         assert beyond_m > BEYOND_M, (name, beyond_m)
@@ -162,7 +161,7 @@ def test_plus_10_mm_from_the_first_pose_after_the_bus_off_fails_live(
     _, code = watched_run(log, robot, scenario, seed, duration, faults)
     assert code in (0, 1)  # kobuki 652's run FAILs its DISTANCE (test_mcu_bus_combos' UNFIXED)
     at_s = first_pose_after_silence(log, *FIRST_AFTER_BUS_OFF[name])
-    assert raise_raw(log, tampered, "ODOM_POSE_X", POSE_X, 100, at_s - 1e-4) > 50
+    assert raise_x_10_mm(log, tampered, at_s - 1e-4) > 50
     for wrong, beyond_m in _live_verdicts(tampered, robot):
         assert wrong, (name, beyond_m)
         assert beyond_m > BEYOND_M, (name, beyond_m)

@@ -50,11 +50,8 @@ from odocan.host.judge.livelatestatus import StatusOrder, held_back
 from odocan.host.judge.monitor import BusMonitor
 from odocan.sim.robot import load
 from tests.fw_watch import Watch
-from tests.judges_cli import STREAMS, analyze, fails_by_position, raw_signals, watched_run
-from tests.log_edit import raise_raw
+from tests.judges_cli import STREAMS, analyze, raw_signals, watched_run, x_10_mm_off_fails
 
-POSE_X = (2, 4)  # ODOM_POSE_X's X: bytes 2..5, signed, 0.1 mm
-TAMPER_X_LSB = 100  # 10 mm
 Drive = tuple[Path, Watch, int]  # the log, the firmware's watch, run's exit code
 UNFIXED = (
     "kobuki circle 652: DISTANCE 1.99 mm beyond its tolerance (44.0 mm before reprime444), the "
@@ -125,9 +122,7 @@ def test_plus_10_mm_after_the_faults_fails_by_the_position(
     name, (log, _, _) = drive
     if DRIVES[name][6] is not None:
         pytest.skip("not fixed: the untampered drive FAILs already")
-    tampered = tmp_path / "t.log"
-    assert raise_raw(log, tampered, "ODOM_POSE_X", POSE_X, TAMPER_X_LSB, DRIVES[name][5]) > 50
-    wrong = fails_by_position(tampered, tmp_path)
+    wrong = x_10_mm_off_fails(log, tmp_path / "t.log", DRIVES[name][5], 50)
     capsys.readouterr()
     assert wrong == []
 
@@ -239,8 +234,6 @@ def test_645_plus_10_mm_right_after_the_stall_fails(
     name, (log, _, _) = drive
     if name != "stall_uptime_back":
         pytest.skip("pmir 645's tamper")
-    tampered = tmp_path / "t.log"
-    assert raise_raw(log, tampered, "ODOM_POSE_X", POSE_X, TAMPER_X_LSB, 5.3) > 50
-    wrong = fails_by_position(tampered, tmp_path)
+    wrong = x_10_mm_off_fails(log, tmp_path / "t.log", 5.3, 50)
     capsys.readouterr()
     assert wrong == []

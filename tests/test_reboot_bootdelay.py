@@ -27,9 +27,8 @@ from pathlib import Path
 
 import pytest
 
-from tests.log_edit import raise_raw
+from tests.judges_cli import raise_x_10_mm
 
-TAMPER_LSB = 100  # 10 mm in ODOM_POSE_X's 0.1 mm LSBs
 FAULTS = "delay=0.1:15,reboot=10:0.3"
 BOOTED_S = 10.3  # the reboot at 10 s, its boot 0.3 s
 DRIVES = [("kobuki", 1, 16), ("kobuki", 2, 12), ("pmir", 1, 12)]  # (robot, seed, duration s)
@@ -57,7 +56,7 @@ def test_a_reboot_with_a_boot_time_under_a_delay_passes_and_a_tamper_fails(
     assert events[0] == events[1]
     primed = [e for e in events[0] if e["kind"] == "power_up_primed_on"]
     assert all("it passes from frame" in e["detail"] for e in primed), primed
-    assert raise_raw(log, tampered, "ODOM_POSE_X", (2, 4), TAMPER_LSB, BOOTED_S) > 50
+    assert raise_x_10_mm(log, tampered, BOOTED_S) > 50
     for stream in ("always", "never"):
         assert _cli("analyze", str(tampered), "--robot", robot, "--stream", stream) == 1, stream
 
@@ -82,7 +81,7 @@ def test_the_live_judges_follow_a_reboot_with_a_boot_time_under_a_delay(
     assert _cli("run", "--robot", robot, "--scenario", "random", "--seed", str(seed),
                 "--duration", str(duration), "--faults", f"delay=0.1:15,reboot=10:{boot_s}",
                 "--log", str(log)) == 0
-    assert raise_raw(log, tampered, "ODOM_POSE_X", (2, 4), TAMPER_LSB, 10 + boot_s) > 50
+    assert raise_x_10_mm(log, tampered, 10 + boot_s) > 50
     for judge in (monitor_of, bridge_of):
         right = judge(log, robot, "exact").tracker.vs_reference
         assert right.max_dpos_m <= POSITION_LSB_M, (judge, right.max_dpos_m)
@@ -134,6 +133,6 @@ def test_a_longer_boot_under_a_delay_passes_and_a_tamper_fails(seed: int, tmp_pa
                 "--log", str(log)) == 0
     for stream in ("always", "never"):
         assert _cli("analyze", str(log), "--robot", "kobuki", "--stream", stream) == 0, stream
-    assert raise_raw(log, tampered, "ODOM_POSE_X", (2, 4), TAMPER_LSB, 10.5) > 50
+    assert raise_x_10_mm(log, tampered, 10.5) > 50
     for stream in ("always", "never"):
         assert _cli("analyze", str(tampered), "--robot", "kobuki", "--stream", stream) == 1, stream

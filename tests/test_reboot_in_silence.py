@@ -20,9 +20,8 @@ from pathlib import Path
 import pytest
 
 from odocan.host.cli.app import main
-from tests.log_edit import raise_raw
+from tests.judges_cli import raise_x_10_mm
 
-TAMPER_LSB = 100  # 10 mm in ODOM_POSE_X's 0.1 mm LSBs
 FROM_S = 6.0  # before the new life's first frame (the silence ends at busoff's end)
 DRIVES = [  # (seed, faults): a reboot inside bus-offs of 1..3 s
     (31, "busoff=5:2,reboot=5.5:0.3"),
@@ -46,7 +45,7 @@ def test_a_reboot_in_a_silence_is_judged_from_its_power_up(
     assert main(["analyze", str(log)]) == 0
     assert "(power-up)" in capsys.readouterr().out  # not "(fitted)"
     assert main(["analyze", str(log), "--stream", "always"]) == 0
-    assert raise_raw(log, tampered, "ODOM_POSE_X", (2, 4), TAMPER_LSB, FROM_S) > 50
+    assert raise_x_10_mm(log, tampered, FROM_S) > 50
     capsys.readouterr()
     for stream in ("always", "never"):
         assert main(["analyze", str(tampered), "--stream", stream]) == 1

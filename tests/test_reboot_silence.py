@@ -27,9 +27,8 @@ import pytest
 from cantools.database.can import Database
 
 from odocan.sim import contract
-from tests.log_edit import raise_raw
+from tests.judges_cli import raise_x_10_mm
 
-TAMPER_LSB = 100  # 10 mm in ODOM_POSE_X's 0.1 mm LSBs
 DRIVES = [  # (robot, seed, bus-off start s, its length s, reset s, first summaries missed)
     ("kobuki", 5, 4.0, 1.0, 4.3, 0),
     ("kobuki", 5, 4.0, 1.0, 4.3, 8),
@@ -81,7 +80,7 @@ def test_a_reboot_in_a_bus_off_nothing_names_is_judged_from_its_power_up(
     assert _strip(drive, log, back_s, summaries) >= summaries + 3
     for stream in ("always", "never"):
         assert _cli("analyze", str(log), "--stream", stream) == 0, stream
-    assert raise_raw(log, tampered, "ODOM_POSE_X", (2, 4), TAMPER_LSB, back_s) > 50
+    assert raise_x_10_mm(log, tampered, back_s) > 50
     for stream in ("always", "never"):
         assert _cli("analyze", str(tampered), "--stream", stream) == 1, stream
 
@@ -99,7 +98,7 @@ def test_the_live_judge_follows_a_reboot_in_a_bus_off_nothing_names(tmp_path: Pa
     assert _cli("run", "--robot", "kobuki", "--seed", "5", "--duration", "8", "--faults",
                 "busoff=4:1,reboot=4.3", "--log", str(drive)) == 0
     assert _strip(drive, log, 4.95, 8) >= 11
-    assert raise_raw(log, tampered, "ODOM_POSE_X", (2, 4), TAMPER_LSB, 4.95) > 50
+    assert raise_x_10_mm(log, tampered, 4.95) > 50
     right = monitor_of(log, "kobuki", "exact").tracker.vs_reference.max_dpos_m
     wrong = monitor_of(tampered, "kobuki", "exact").tracker.vs_reference.max_dpos_m
     assert right <= POSITION_LSB_M < 50 * POSITION_LSB_M < wrong, (right, wrong)

@@ -25,9 +25,8 @@ import pytest
 
 from odocan.host.cli.app import main
 from tests.fw_watch import watched
-from tests.log_edit import raise_raw
+from tests.judges_cli import raise_x_10_mm
 
-TAMPER_LSB = 100  # 10 mm in ODOM_POSE_X's 0.1 mm LSBs
 FAULTS = "delay=0.1:15,reboot=6:0.5"
 AFTER_BOOT_S = 6.6  # the reboot at 6 s, its boot 0.5 s: the new life's poses from here
 DRIVES = [("kobuki", 6, "random", 14), ("kobuki", 10, "figure8", 11),
@@ -55,7 +54,7 @@ def test_replay_after_a_boot_under_a_delay_passes_and_a_tamper_fails(
     replayed = _cli("replay", str(log))
     assert replayed.returncode == 0, replayed.stdout[-2000:]
     assert "life 1 from t=6.50 s (a fresh firmware)" in replayed.stdout
-    assert raise_raw(log, tampered, "ODOM_POSE_X", (2, 4), TAMPER_LSB, AFTER_BOOT_S) > 50
+    assert raise_x_10_mm(log, tampered, AFTER_BOOT_S) > 50
     wrong = _cli("replay", str(tampered))
     assert wrong.returncode == 1, wrong.stdout[-2000:]
     assert "FAIL: the replayed firmware departs from the log's" in wrong.stdout

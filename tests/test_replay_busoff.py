@@ -37,8 +37,7 @@ import pytest
 
 from odocan.host.judge.replay_track import encoder_ticks
 from odocan.sim import contract
-from tests.judges_cli import POSE_X, TEN_MM_LSB, cli, correct_drive
-from tests.log_edit import raise_raw
+from tests.judges_cli import cli, correct_drive, raise_x_10_mm
 
 FIRMWARE_IDS = {m.frame_id for m in contract.database().messages if m.senders == ["ODOM_MCU"]}
 DRIVE = ("kobuki", "random", 516, 10, "busoff=4.0:0.3")
@@ -82,7 +81,7 @@ def test_the_correct_firmware_replays_pass_and_its_bus_is_the_logs(drive: Path,
 def test_plus_10_mm_from_after_the_bus_off_fails(drive: Path, tmp_path: Path,
                                                  from_s: float) -> None:
     out = tmp_path / "raised.log"
-    assert raise_raw(drive, out, "ODOM_POSE_X", POSE_X, TEN_MM_LSB, from_s) > 50
+    assert raise_x_10_mm(drive, out, from_s) > 50
     done = cli("replay", str(out))
     assert done.returncode == 1, done.stdout[-2500:]
     assert "FAIL" in done.stdout

@@ -28,8 +28,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.judges_cli import POSE_X, TEN_MM_LSB, cli, named_drive
-from tests.log_edit import raise_raw
+from tests.judges_cli import cli, named_drive, raise_x_10_mm
 
 # name: robot, scenario, seed, duration (s), faults, tamper from (s, after the bus-off)
 DRIVES = {
@@ -69,6 +68,6 @@ def test_plus_10_mm_after_the_bus_off_fails(drive: tuple[str, Path], tmp_path: P
     if name in LEFT:
         request.applymarker(pytest.mark.xfail(strict=True, reason=LEFT[name]))
     out = tmp_path / "raised.log"
-    assert raise_raw(log, out, "ODOM_POSE_X", POSE_X, TEN_MM_LSB, DRIVES[name][5]) > 50
+    assert raise_x_10_mm(log, out, DRIVES[name][5]) > 50
     done = cli("replay", str(out))
     assert done.returncode == 1, f"{name}: {done.stdout[-2500:]}"

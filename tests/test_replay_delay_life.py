@@ -49,8 +49,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.judges_cli import POSE_X, TEN_MM_LSB, cli, named_drive
-from tests.log_edit import raise_raw
+from tests.judges_cli import cli, named_drive, raise_x_10_mm
 
 # name: robot, scenario, seed, duration (s), faults, tamper from (s, after the fault named)
 DRIVES = {
@@ -92,7 +91,7 @@ def test_the_correct_firmware_replays_pass_every_pose_identical(
 def _tampered_verdict(name: str, log: Path, from_s: float, work: Path) -> tuple[int, str]:
     """replay's exit code and last verdict line on ``log`` with X raised 10 mm from ``from_s``."""
     out = work / "raised.log"
-    assert raise_raw(log, out, "ODOM_POSE_X", POSE_X, TEN_MM_LSB, from_s) > 50
+    assert raise_x_10_mm(log, out, from_s) > 50
     done = cli("replay", str(out))
     said = [line for line in done.stdout.splitlines()
             if line.startswith(("PASS", "FAIL", "UNJUDGED"))]

@@ -27,9 +27,8 @@ import pytest
 from cantools.database.can import Database
 
 from odocan.sim import contract
-from tests.log_edit import raise_raw
+from tests.judges_cli import raise_x_10_mm
 
-POSE_X = (2, 4)  # ODOM_POSE_X's X: bytes 2..5, signed, 0.1 mm
 DRIVES = {  # the trial's drives: a bus-off, a burst of drops, a stall with drops
     "busoff": ["--robot", "kobuki", "--scenario", "random", "--seed", "11", "--duration", "10",
                "--faults", "busoff=2:0.5"],
@@ -84,7 +83,7 @@ def test_plus_10_mm_from_the_first_pose_after_a_gap_or_stall_is_no_pass(
     name, log = drive
     out = tmp_path / "raised.log"
     from_s = _first_pose_after_a_break_s(log)
-    assert raise_raw(log, out, "ODOM_POSE_X", POSE_X, 100, from_s - 1e-4) > 100
+    assert raise_x_10_mm(log, out, from_s - 1e-4) > 100
     done = _odocan("replay", str(out), "--robot", "kobuki")
     assert done.returncode == 1, f"{name} from {from_s:.3f} s: {done.stdout[-2000:]}"
 
@@ -92,7 +91,7 @@ def test_plus_10_mm_from_the_first_pose_after_a_gap_or_stall_is_no_pass(
 def test_plus_10_mm_from_mid_drive_is_no_pass(drive: tuple[str, Path], tmp_path: Path) -> None:
     name, log = drive
     out = tmp_path / "raised.log"
-    assert raise_raw(log, out, "ODOM_POSE_X", POSE_X, 100, 5.0) > 100
+    assert raise_x_10_mm(log, out, 5.0) > 100
     done = _odocan("replay", str(out), "--robot", "kobuki")
     assert done.returncode == 1, f"{name} from 5 s: {done.stdout[-2000:]}"
 

@@ -24,9 +24,8 @@ from pathlib import Path
 import pytest
 
 from odocan.host.cli.app import main
-from tests.log_edit import raise_raw
+from tests.judges_cli import raise_x_10_mm
 
-TAMPER_LSB = 100  # 10 mm in ODOM_POSE_X's 0.1 mm LSBs
 RUN_S = 10.0
 # (seed, --faults, robot, the later stall's end in s: tampered 0.3 s after it)
 CASES = [
@@ -62,5 +61,5 @@ def test_a_stall_after_an_early_episode_or_a_close_stall_replays_identically(
         vs = life["onboard_vs_log"]
         assert vs["identical"] == vs["samples"] > 100, (life["life"], vs)
     tampered = tmp_path / "tampered.log"
-    assert raise_raw(log, tampered, "ODOM_POSE_X", (2, 4), TAMPER_LSB, end_s + 0.3) > 50
+    assert raise_x_10_mm(log, tampered, end_s + 0.3) > 50
     assert _replayed(tampered, capsys)[0] == 1

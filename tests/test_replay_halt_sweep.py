@@ -21,12 +21,11 @@ from pathlib import Path
 import pytest
 
 from odocan.host.cli.app import main
-from tests.log_edit import raise_raw
+from tests.judges_cli import raise_x_10_mm
 
 RUN_S = 2.6  # the stall's end (2.22 s at most) well before the run's
 STARTS_S = (2.000, 2.005, 2.010, 2.015, 2.020)
 DURATIONS_S = (0.095, 0.105, 0.2)
-TAMPER_LSB = 100  # 10 mm in ODOM_POSE_X's 0.1 mm LSBs
 
 
 def _replayed(log: Path, capsys: pytest.CaptureFixture[str]) -> tuple[int, dict[str, object]]:
@@ -55,8 +54,7 @@ def test_every_stall_of_the_grid_is_replayed_identically_and_a_tamper_after_it_f
             if code != 0 or vs["identical"] != vs["samples"] or vs["samples"] < 100:
                 wrong.append((at_s, dur_s, code, vs["identical"], vs["samples"]))
             tampered = tmp_path / "tampered.log"
-            assert raise_raw(log, tampered, "ODOM_POSE_X", (2, 4), TAMPER_LSB,
-                             at_s + dur_s + 0.05) > 5
+            assert raise_x_10_mm(log, tampered, at_s + dur_s + 0.05) > 5
             code, _ = _replayed(tampered, capsys)
             if code != 1:
                 wrong.append((at_s, dur_s, "tampered", code))
@@ -84,7 +82,7 @@ def test_a_halt_of_14_mod_16_ticks_is_replayed_identically_and_a_tamper_after_it
         if code != 0 or vs["identical"] != vs["samples"] or vs["samples"] < 100:
             wrong.append((dur_s, code, vs["identical"], vs["samples"]))
         tampered = tmp_path / "tampered.log"
-        assert raise_raw(log, tampered, "ODOM_POSE_X", (2, 4), TAMPER_LSB, 2 + dur_s + 0.05) > 5
+        assert raise_x_10_mm(log, tampered, 2 + dur_s + 0.05) > 5
         code, _ = _replayed(tampered, capsys)
         if code != 1:
             wrong.append((dur_s, "tampered", code))

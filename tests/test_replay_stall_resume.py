@@ -18,8 +18,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.judges_cli import POSE_X, TEN_MM_LSB, cli, correct_drive
-from tests.log_edit import raise_raw
+from tests.judges_cli import cli, correct_drive, raise_x_10_mm
 
 DRIVE = ("kobuki", "circle", 526, 11, "stall=2.0:0.5,busoff=2.3:0.3,drop=0.05")
 
@@ -39,7 +38,7 @@ def test_the_correct_firmware_replays_pass(drive: Path) -> None:
 
 def test_plus_10_mm_from_inside_the_silence_fails(drive: Path, tmp_path: Path) -> None:
     out = tmp_path / "raised.log"
-    assert raise_raw(drive, out, "ODOM_POSE_X", POSE_X, TEN_MM_LSB, 2.55) > 50
+    assert raise_x_10_mm(drive, out, 2.55) > 50
     done = cli("replay", str(out))
     assert done.returncode == 1, done.stdout[-2500:]
     assert "beyond any its firmware can resume at" in done.stdout, done.stdout[-2500:]
@@ -49,6 +48,6 @@ def test_plus_10_mm_from_after_the_stall_is_no_pass(drive: Path, tmp_path: Path)
     """A jump of the offset well after the stall: UNJUDGED after the stall (replay_lives: which
     frames the FIFO kept), exit 1, as before; never a PASS."""
     out = tmp_path / "raised.log"
-    assert raise_raw(drive, out, "ODOM_POSE_X", POSE_X, TEN_MM_LSB, 3.0) > 50
+    assert raise_x_10_mm(drive, out, 3.0) > 50
     done = cli("replay", str(out))
     assert done.returncode == 1, done.stdout[-2500:]

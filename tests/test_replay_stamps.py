@@ -28,8 +28,7 @@ import can
 import pytest
 
 from odocan.host.cli.app import main
-from tests.judges_cli import POSE_X, TEN_MM_LSB, both_analyses, named_drive
-from tests.log_edit import raise_raw
+from tests.judges_cli import both_analyses, named_drive, raise_x_10_mm
 
 USB_FRAME_S = 1e-3
 LATE_S = 2e-3
@@ -96,5 +95,5 @@ def test_plus_10_mm_from_a_pose_on_fails_replay(
     name, log = drive
     stamped, raised = tmp_path / "stamped.log", tmp_path / "raised.log"
     restamped(log, stamped, how)
-    assert raise_raw(stamped, raised, "ODOM_POSE_X", POSE_X, TEN_MM_LSB, DRIVES[name][5]) > 50
+    assert raise_x_10_mm(stamped, raised, DRIVES[name][5]) > 50
     assert main(["replay", str(raised)]) == 1

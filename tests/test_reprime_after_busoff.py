@@ -34,8 +34,7 @@ from odocan.host.cli.app import main
 from odocan.host.judge.step_periods import doubted_bound_periods
 from odocan.sim import cboard
 from tests.fw_watch import Watch, watched
-from tests.judges_cli import both_analyses
-from tests.log_edit import raise_raw
+from tests.judges_cli import both_analyses, raise_x_10_mm
 from tests.requires import require_executables
 
 DRIVES = {  # name: robot, scenario, seed, duration s, faults, the bus-off's end (s)
@@ -43,7 +42,6 @@ DRIVES = {  # name: robot, scenario, seed, duration s, faults, the bus-off's end
                   7.2),
     "pmir82": ("pmir", "figure8", "82", "10", "delay=0.3:55,busoff=1:1", 2.0),
 }
-TAMPER_X_LSB = 100  # 10 mm in ODOM_POSE_X's 0.1 mm LSBs
 # the drive's name, its log, the watch, run's exit code, its report
 Drive = tuple[str, Path, Watch, int, dict[str, Any]]
 
@@ -118,8 +116,7 @@ def test_a_pose_10_mm_off_after_the_busoff_fails(drive: Drive, after_s: float, t
                                                  capsys: pytest.CaptureFixture[str]) -> None:
     name, log, _, _, _ = drive
     tampered = tmp_path / "t.log"
-    assert raise_raw(log, tampered, "ODOM_POSE_X", (2, 4), TAMPER_X_LSB,
-                     DRIVES[name][5] + after_s) > 10
+    assert raise_x_10_mm(log, tampered, DRIVES[name][5] + after_s) > 10
     codes = [main(["analyze", str(tampered), "--stream", s]) for s in ("never", "always")]
     capsys.readouterr()
     assert codes == [1, 1]

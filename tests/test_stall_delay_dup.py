@@ -25,10 +25,8 @@ import pytest
 from odocan.host.cli.app import main
 from odocan.host.judge.analysis import POSITION_LSB_M
 from tests.fw_watch import Watch, watched
-from tests.judges_cli import analyze, both_analyses, fails_by_position
-from tests.log_edit import raise_raw
+from tests.judges_cli import analyze, both_analyses, raise_x_10_mm, x_10_mm_off_fails
 
-TAMPER_LSB = 100  # 10 mm in ODOM_POSE_X's 0.1 mm LSBs
 FAULTS_6S = "delay=0.3:55,dup=0.1,stall=4:6"
 FAULTS_2S = "delay=0.3:55,dup=0.1,stall=4:2"
 LATE_REPRIME = (
@@ -130,7 +128,7 @@ def test_a_pose_10_mm_off_after_a_two_second_halt_fails(
         two: Drive, from_s: float, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     log, _, _ = two
     tampered = tmp_path / "t.log"
-    assert raise_raw(log, tampered, "ODOM_POSE_X", (2, 4), TAMPER_LSB, from_s) > 100
+    assert raise_x_10_mm(log, tampered, from_s) > 100
     codes = both_analyses(tampered)
     capsys.readouterr()
     assert codes == [1, 1]
@@ -143,9 +141,7 @@ def test_a_pose_10_mm_off_after_a_six_second_halt_fails_by_its_position(
     """FAIL by the position, beyond the allowance by most of the 10 mm (a FAIL by the heading
     alone says nothing: the correct firmware FAILs by it too)."""
     log, _, _ = six
-    tampered = tmp_path / "t.log"
-    assert raise_raw(log, tampered, "ODOM_POSE_X", (2, 4), TAMPER_LSB, from_s) > 40
-    wrong = fails_by_position(tampered, tmp_path)
+    wrong = x_10_mm_off_fails(log, tmp_path / "t.log", from_s, 40)
     capsys.readouterr()
     assert wrong == []
 

@@ -37,12 +37,11 @@ from odocan.sim.robot import list_profiles, load
 from odocan.sim.scenarios import get_scenario
 from tests import independent_checker as ic
 from tests.fault_rig import FaultRig
-from tests.log_edit import raise_raw
+from tests.judges_cli import raise_x_10_mm
 
 AT_S, TAIL_S, SEED = 3.0, 3.0, 3
 STALLS_S = (0.5, 1.0, 2.0, 4.0)
 ROBOTS = list_profiles()
-TAMPER_LSB = 100  # 10 mm in ODOM_POSE_X's 0.1 mm LSBs
 LSB_M, LSB_RAD = 1e-4, 2 * math.pi / 65536
 
 
@@ -137,8 +136,7 @@ def test_every_judge_passes_the_correct_firmware_and_fails_10_mm(
         assert main(["analyze", str(log), "--robot", name, "--stream", stream]) == 0
     assert main(["replay", str(log)]) == 0
     tampered = tmp_path / "tampered.log"
-    assert raise_raw(log, tampered, "ODOM_POSE_X", (2, 4), TAMPER_LSB,
-                     AT_S + stall_s + 1.0) > 50
+    assert raise_x_10_mm(log, tampered, AT_S + stall_s + 1.0) > 50
     assert not analyze(read_log(tampered), robot, "exact").passed
     assert not analyze_file(tampered, robot, "exact", chunk_frames=97)["passed"]
     for stream in ("always", "never"):

@@ -33,13 +33,13 @@ from pathlib import Path
 import can
 import pytest
 
-from tests.log_edit import drop_frames, raise_raw, raise_raw_once
+from tests.judges_cli import POSE_X, raise_first_x, raise_x_10_mm
+from tests.log_edit import drop_frames, raise_raw
 from tests.test_live_reboot import monitor_of
 
 PMIR_DRIVE = ["--robot", "pmir", "--seed", "7", "--scenario", "figure8", "--duration", "25",
               "--faults", "reboot=0.01,reboot=3:0.5,stall=10:3"]
 KOBUKI_DRIVE = ["--robot", "kobuki", "--duration", "20", "--seed", "1"]
-POSE_X = (2, 4)  # ODOM_POSE_X's X: bytes 2..5, signed, 0.1 mm
 JUDGES = ["auto", "always", "never"]
 
 
@@ -62,9 +62,7 @@ def pmir_stall(tmp_path_factory: pytest.TempPathFactory) -> Path:
 @pytest.fixture(scope="module")
 def pmir_first_off(tmp_path_factory: pytest.TempPathFactory, pmir_stall: Path) -> Path:
     out = tmp_path_factory.mktemp("pmir_off") / "first_off.log"
-    times = raise_raw_once(pmir_stall, out, "ODOM_POSE_X", POSE_X, 100_000, 13.0)  # +10 m
-    assert len(times) == 1
-    assert 13.0 <= times[0] < 13.01
+    raise_first_x(pmir_stall, out, 100_000, 13.0, 13.01)  # +10 m
     return out
 
 
@@ -81,9 +79,7 @@ def kobuki_silence(tmp_path_factory: pytest.TempPathFactory) -> Path:
 @pytest.fixture(scope="module")
 def kobuki_first_off(tmp_path_factory: pytest.TempPathFactory, kobuki_silence: Path) -> Path:
     out = tmp_path_factory.mktemp("kobuki_off") / "first_off.log"
-    times = raise_raw_once(kobuki_silence, out, "ODOM_POSE_X", POSE_X, 100, 11.0)  # +10 mm
-    assert len(times) == 1
-    assert 11.0 <= times[0] < 11.01
+    raise_first_x(kobuki_silence, out, 100, 11.0, 11.01)  # +10 mm
     return out
 
 
@@ -228,7 +224,7 @@ def test_plus_10_mm_after_a_reprime_is_pose_wrong(tmp_path: Path, kobuki_stall: 
     replay refuses it: judged as not declared), or only from 0.5 s after it (the reference
     re-primed with the firmware, then the offset): the monitor says POSE WRONG."""
     out = tmp_path / "off.log"
-    assert raise_raw(kobuki_stall, out, "ODOM_POSE_X", POSE_X, 100, from_s) > 300
+    assert raise_x_10_mm(kobuki_stall, out, from_s) > 300
     state, kinds = _monitor_told(out, "kobuki")
     assert state == "POSE WRONG"
     assert ("stall_reprime_refused" if from_s < 13.1 else "stall_reprime") in kinds, kinds
@@ -237,9 +233,7 @@ def test_plus_10_mm_after_a_reprime_is_pose_wrong(tmp_path: Path, kobuki_stall: 
 def test_plus_10_mm_on_the_first_pose_kept_after_a_reprime_is_pose_wrong(
         tmp_path: Path, kobuki_stall: Path) -> None:
     out = tmp_path / "first_off.log"
-    times = raise_raw_once(kobuki_stall, out, "ODOM_POSE_X", POSE_X, 100, 13.015)
-    assert len(times) == 1
-    assert 13.015 <= times[0] < 13.03  # the first kept (13.001's names no frame)
+    raise_first_x(kobuki_stall, out, 100, 13.015, 13.03)  # the first kept (13.001's names no frame)
     state, kinds = _monitor_told(out, "kobuki")
     assert state == "POSE WRONG"
     assert "stall_reprime_refused" in kinds, kinds

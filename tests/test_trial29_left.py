@@ -18,14 +18,18 @@ pose 10 mm off from the fault's end still FAILed:
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import pytest
 
 from tests.fw_watch import Watch
-from tests.judges_cli import STREAMS, analyze, both_analyses, fails_by_position, watched_run
-from tests.log_edit import raise_raw
+from tests.judges_cli import (
+    both_analyses,
+    fails_by_position,
+    raise_x_10_mm,
+    reported_analyses,
+    watched_run,
+)
 
 DRIVES: dict[str, tuple[tuple[str, str, str, str, str], str | None]] = {
     # name: (robot, scenario, seed, duration s, faults), why the judges FAIL it (None: fixed)
@@ -41,8 +45,6 @@ DRIVES: dict[str, tuple[tuple[str, str, str, str, str], str | None]] = {
         "before)"),
 }
 Drive = tuple[Path, Watch, int]  # the log, the firmware's watch, run's exit code
-POSE_X = (2, 4)  # ODOM_POSE_X's X: bytes 2..5, signed, 0.1 mm
-TAMPER_LSB = 100  # 10 mm
 TAMPERED = {"late_frame_a_lap_on": 2.0, "stall_delay_dup": 6.0}  # from the fault's end (s)
 
 
@@ -83,13 +85,12 @@ def test_a_pose_10_mm_off_from_the_fault_s_end_fails(
     log, _, _ = drive
     name = request.node.callspec.params["drive"]
     out = tmp_path / "raised.log"
-    assert raise_raw(log, out, "ODOM_POSE_X", POSE_X, TAMPER_LSB, TAMPERED[name]) > 100
+    assert raise_x_10_mm(log, out, TAMPERED[name]) > 100
     if name == "late_frame_a_lap_on":
         assert fails_by_position(out, tmp_path) == []
     else:
-        codes = [analyze(out, s, tmp_path / f"{s}.json") for s in STREAMS]
-        resumes = [json.loads((tmp_path / f"{s}.json").read_text())["stall_first_pose"]
-                   for s in STREAMS]
-        assert codes == [1, 1]
+        judged = reported_analyses(out, tmp_path)
+        resumes = [report["stall_first_pose"] for _, _, report in judged]
+        assert [code for _, code, _ in judged] == [1, 1]
         assert all(r["max_resume_beyond_m"] > 5e-3 for r in resumes), resumes
     capsys.readouterr()
