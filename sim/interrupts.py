@@ -16,7 +16,16 @@ import signal
 from collections.abc import Callable, Iterator, Mapping
 from typing import Any
 
+from odocan.sim.exceptions import Terminated
+
 _latched: list[int] = []  # the signal numbers latched since the last ``clear``, first first
+
+
+def latch_and_raise(signum: int, frame: object) -> None:
+    """The CLI's handler for SIGINT and SIGTERM: ``latch`` the signal, then raise where the
+    main thread is (``Terminated`` for SIGTERM, ``KeyboardInterrupt`` for SIGINT)."""
+    latch(signum)
+    raise Terminated if signum == signal.SIGTERM else KeyboardInterrupt
 
 
 def latch(signum: int) -> None:

@@ -10,6 +10,8 @@ import os
 import signal
 import sys
 
+from odocan.sim import interrupts
+
 __all__ = ["main"]
 
 # numpy's OpenBLAS starts a thread per core when numpy loads; they spin-wait for work no odocan
@@ -32,6 +34,8 @@ def main(argv: list[str] | None = None) -> int:
     code changes it (``_ended``)."""
     try:  # a Ctrl-C at the first line is odocan's too: one line, no traceback (CI met one there)
         os.environ.setdefault(*BLAS_THREADS)
+        if argv is None:  # the program: a Ctrl-C from here on is latched (app stops on it)
+            signal.signal(signal.SIGINT, interrupts.latch_and_raise)
         from odocan.host.cli.app import main as app_main
     except KeyboardInterrupt:  # Ctrl-C while the command line loads: one line, no traceback
         code = _said(STARTING, EXIT_SIGINT)

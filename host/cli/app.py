@@ -21,7 +21,6 @@ import sys
 import traceback
 from collections.abc import Iterator
 from contextlib import contextmanager
-from types import FrameType
 from typing import NoReturn
 
 from odocan import __version__
@@ -259,11 +258,6 @@ def split_debug(argv: list[str]) -> tuple[list[str], bool]:
     return kept, len(kept) != len(argv)
 
 
-def _interrupt(signum: int, frame: FrameType | None) -> None:
-    interrupts.latch(signum)  # heard even if some library swallows the exception (interrupts)
-    raise Terminated if signum == signal.SIGTERM else KeyboardInterrupt
-
-
 _LATCHED_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 
@@ -273,11 +267,15 @@ def sigterm_as_interrupt() -> Iterator[None]:
     stops cleanly on Ctrl-C (summary, report, logs closed) does so on SIGTERM too; and both are
     ``latch``ed first (``sim.interrupts``): a Ctrl-C in the first second of ``odocan run``,
     whose ``KeyboardInterrupt`` numpy.random's Cython import swallowed, once let the run go
-    on to its end (exit 0, or -2 from the interpreter's exit). Main thread only (elsewhere a
-    no-op); commands that install their own handlers override it."""
-    interrupts.clear()
+    on to its end (exit 0, or -2 from the interpreter's exit). A signal latched before (the
+    command line's early handler, ``odocan.host.cli``) stops the command here: its exception
+    may have been lost as odocan loaded. Main thread only (elsewhere a no-op); commands that
+    install their own handlers override it."""
     try:
-        with interrupts.handlers_installed(dict.fromkeys(_LATCHED_SIGNALS, _interrupt)):
+        with interrupts.handlers_installed(
+                dict.fromkeys(_LATCHED_SIGNALS, interrupts.latch_and_raise)):
+            if (signum := interrupts.latched()) is not None:
+                interrupts.latch_and_raise(signum, None)
             yield
     finally:
         interrupts.clear()
