@@ -101,13 +101,15 @@ def test_loaded_recorder_stamps(tmp_path: Path, wrong: str | None) -> None:
 
 def test_placements_bound_the_offset_from_the_start(tmp_path: Path) -> None:
     """The same capture with every run of 8 frames between two samples taken for a hold (the
-    live rule before it counted the frames on time): 27 placements, most with their budget
-    withdrawn by the pages (the firmware took every frame), and the fit anchored at each taken
-    into the reference at the next; a correct firmware still PASSes (10 episodes, worst
-    0.107 mm, before the fits' shifts were counted)."""
+    live rule before it counted the frames on time, and before it asked evidence of a hold):
+    27 placements, most with their budget withdrawn by the pages (the firmware took every
+    frame), and the fit anchored at each taken into the reference at the next; a correct
+    firmware still PASSes (10 episodes, worst 0.107 mm, before the fits' shifts were
+    counted)."""
     woken = _drive(tmp_path)
     with pytest.MonkeyPatch.context() as monkeypatch:
         monkeypatch.setattr(livestall, "held_on_time", lambda *_: True)
+        monkeypatch.setattr(livestall, "hold_shown", lambda *_: True)  # no evidence asked
         wrongs, holds = _live(woken)
     assert holds == 27
     assert wrongs == 0

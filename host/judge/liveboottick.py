@@ -95,3 +95,15 @@ def refused_frame(tracker: PoseTracker, can_id: int, signals: Any, t_s: float,
     and a gap's fill (``livetwins.refused_encoders``) and to ``tracker.boot_tick``."""
     refused_encoders(tracker.twins, signals, t_s, tracker.placer.fill)
     tracker.boot_tick.refused(can_id, signals, t_s, status)
+
+
+def refused_named(tracker: PoseTracker, can_id: int, name: str, signals: Callable[[], Any],
+                  t_s: float, status: str) -> None:
+    """A frame of message ``name`` E2E refused (``status``) with its CRC right, heard at bus
+    time ``t_s``: a WHEEL_ENCODERS frame to ``refused_frame`` (``signals``: its raw signals,
+    decoded when asked), an ODOM_POSE_Y counted as sent (``livestall.StallRule.pose_refused``:
+    the hold evidence's quiet)."""
+    if name == "WHEEL_ENCODERS":
+        refused_frame(tracker, can_id, signals(), t_s, status)
+    elif name == "ODOM_POSE_Y":
+        tracker.stall.pose_refused(t_s)

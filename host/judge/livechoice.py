@@ -122,7 +122,8 @@ class LiveChoice:
         if p is None or pose.seq < p.seq:
             return False
         p.held.append(pose)
-        self._tracker.stall.last_compared = pose.seq
+        stall = self._tracker.stall
+        stall.last_compared, stall.compared_t_s = pose.seq, self._tracker.pose_t_s
         return True
 
     def ahead(self, counter: int, t_s: float, prev: tuple[float, ...]) -> None:
@@ -153,7 +154,7 @@ class LiveChoice:
                 tracker.placer.took_gap(p.gap)
         else:
             self.reprimed += 1
-        tracker.stall.last_compared = p.last_compared
+        tracker.stall.last_compared, tracker.stall.compared_t_s = p.last_compared, None
         for pose in p.held:
             tracker.judge(pose)
 

@@ -29,7 +29,8 @@ from odocan.host.judge.livewindow import CYCLE_S
 if TYPE_CHECKING:
     from odocan.host.judge.liveholdstep import BusOrder
 
-KEPT_PERIODS = 64  # refused frames kept this many periods behind the latest accepted one
+KEPT_PERIODS = 512  # refused frames kept this many periods behind the latest accepted one (as
+# long as ``livegapskips`` keeps the accepted ones: the pages proving a gap come 1.2 s later)
 
 
 class LiveFill:
@@ -39,6 +40,7 @@ class LiveFill:
         self.sender = 0  # the latest accepted frame's sender number
         self._anchors: deque[tuple[int, float, int]] = deque(maxlen=ANCHOR_FRAMES)
         self._counts: dict[int, Counts | None] = {}  # None: two frames of a number disagreed
+        self._kept_from = 0  # the lowest sender number whose refused frames are all kept
         self.heard: Callable[[], None] | None = None  # told of every frame placed (liveplace)
         self.bus: BusOrder | None = None  # told of every frame refused (liveplace)
 
@@ -49,6 +51,7 @@ class LiveFill:
         if len(self._counts) > 2 * KEPT_PERIODS:
             oldest = self.sender - KEPT_PERIODS
             self._counts = {s: c for s, c in self._counts.items() if s > oldest}
+            self._kept_from = oldest + 1
 
     def refused(self, counter: int, left: int, right: int, t_s: float) -> None:
         """A WHEEL_ENCODERS frame the host's E2E check refused with its CRC right."""
@@ -66,6 +69,19 @@ class LiveFill:
         self._counts[seq] = (left, right) if known == (left, right) else None
         if self.heard is not None:
             self.heard()
+
+    def known(self, seq_before: int, periods: int) -> list[tuple[int, Counts]] | None:
+        """The refused frames heard in a gap of ``periods`` after sender number
+        ``seq_before`` (periods after it, counts), those unheard left out; None when two frames
+        of one number disagreed (``gapfill.LateFrames.known``), or the frames of its numbers
+        are no longer all kept (a frame left out must be one never heard)."""
+        if seq_before + 1 < self._kept_from:
+            return None
+        found = [(k, self._counts[seq_before + k]) for k in range(1, periods)
+                 if seq_before + k in self._counts]
+        if any(c is None for _, c in found):
+            return None
+        return found  # type: ignore[return-value]
 
     def fill(self, seq_before: int, periods: int) -> list[Counts] | None:
         """The counts of the frames a gap of ``periods`` after sender number ``seq_before``

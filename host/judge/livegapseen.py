@@ -134,7 +134,8 @@ class LiveSeen:
             self.seen = Seen(_joined(self.seen.same, new.same, base, horizon),
                              _joined(self.seen.missed, new.missed, base, horizon),
                              counted=_joined(self.seen.counted, new.counted, base, horizon),
-                             skips=_skips_joined(self.seen.skips, new.skips, base, horizon))
+                             skips=_skips_joined(self.seen.skips, new.skips, base, horizon),
+                             received=_joined(self.seen.received, new.received, base, horizon))
         return self.seen
 
     def through(self, a_s: float, b_s: float) -> int | None:

@@ -64,7 +64,7 @@ class NewStartHold:
         tracker = self._tracker
         tracker.fit.feed(pose, raw)
         tracker.placer.compared(pose)
-        tracker.stall.last_compared = pose.seq
+        tracker.stall.last_compared, tracker.stall.compared_t_s = pose.seq, tracker.pose_t_s
         self._held.append((pose, raw, tracker.pose_t_s))
         return True
 

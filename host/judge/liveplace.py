@@ -366,6 +366,7 @@ class StallPlacer:
             seen.gap_missed(part[1], reprimed) if part[0]
             else seen.took_all(part[1] - 1, part[2], reprimed))]
         self._parts = [part for part in self._parts if part not in proven]
+        self.skips.fill, self.skips.speed = self.fill, self.max_wheel_speed_mm_s  # (received)
         skipped = self.skips.lowered(self._parts, seen, reprimed)
         if not proven and not skipped:
             return False

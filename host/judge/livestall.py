@@ -13,7 +13,9 @@ Once the reference runs, an on-board sample not let out in a burst (not ``queued
   more after the last sample compared, with as many frames on time between: the firmware held its
   pose that long, then took the frames since as one step: the sample is compared, the position
   placed again first, with a stall's allowance (also where a gap opened it), unless a stall or
-  hold already waits for its placement.
+  hold already waits for its placement, and only where the firmware shows it held
+  (``liveholdevidence``: the frame named again, or its poses quiet, those refused with their
+  CRC right counted: ``pose_refused``), as ``stalls.hold_evidence`` asks.
 
 Each counts in ``stalls`` and owes a placement: ``place_at_next``, and the placer's ``stalled``
 (its allowance: ``liveplace.StallPlacer.shift``, which clears it). ``place_at_next`` is also owed
@@ -30,14 +32,19 @@ started, after a silence from the firmware's ODOM_STATUS (a stall before its fir
 
 from __future__ import annotations
 
+from collections import deque
 from typing import TYPE_CHECKING
 
+from odocan.host.judge.liveholdevidence import hold_shown
 from odocan.host.judge.livewindow import held_on_time, silent_since
 from odocan.host.judge.samples import SILENCE_CYCLES
 
 if TYPE_CHECKING:
     from odocan.host.judge.liveplace import StallPlacer
     from odocan.host.judge.livewindow import Columns
+
+
+REFUSED_KEPT = 256  # ODOM_POSE_Y frames refused with their CRC right kept (their times)
 
 
 class StallRule:
@@ -52,6 +59,8 @@ class StallRule:
         self.place_at_next = False  # a placement owed at the next sample compared
         self._last_t_s: float | None = None  # bus time of the last sample's ODOM_POSE_Y (s)
         self._carried = False  # a silence carried into an unstarted reference (module docstring)
+        self.compared_t_s: float | None = None  # ODOM_POSE_Y time of the last sample compared
+        self._refused_ys: deque[float] = deque(maxlen=REFUSED_KEPT)  # (pose_refused)
 
     @property
     def last_t_s(self) -> float | None:
@@ -79,6 +88,11 @@ class StallRule:
         sample at ``last_t_s`` carried (module docstring)."""
         self._last_t_s, self._carried = last_t_s, True
 
+    def pose_refused(self, t_s: float) -> None:
+        """An ODOM_POSE_Y frame refused by the host's E2E check with its CRC right, heard at bus
+        time ``t_s``: the firmware sent it (the hold evidence's quiet)."""
+        self._refused_ys.append(t_s)
+
     def left_out(self, seq: int, t_s: float, queued: bool, started: bool) -> bool:
         """The rule (module docstring) on the sample of encoder frame ``seq`` whose ODOM_POSE_Y
         came at bus time ``t_s`` (``queued``: in a burst; ``started``: the reference runs):
@@ -92,7 +106,10 @@ class StallRule:
             return True
         last_seq = self.last_compared
         if (0 <= last_seq <= seq - SILENCE_CYCLES and not self._placer.stalled
-                and held_on_time(self._window, last_seq, seq)):
+                and held_on_time(self._window, last_seq, seq) and (
+                    self.compared_t_s is None or hold_shown(
+                        self._window, (self._placer.halves, self._ys), self._refused_ys,
+                        last_seq, (self.compared_t_s, t_s)))):
             self._owe()
         return False
 
@@ -104,5 +121,5 @@ class StallRule:
     def restart(self) -> None:
         """A new reference: no sample compared or heard yet, no placement owed."""
         self.last_compared = -1
-        self._last_t_s = None
+        self._last_t_s = self.compared_t_s = None
         self.place_at_next = self._carried = False

@@ -60,7 +60,7 @@ from cantools.database.can import Database, Message
 
 from odocan.host.judge import sources as src  # status_frame, start_new_life
 from odocan.host.judge.busstats import LoadWindow
-from odocan.host.judge.liveboottick import boot_frame, refused_frame
+from odocan.host.judge.liveboottick import boot_frame, refused_named
 from odocan.host.judge.liveconfig import SAME_TICK_S, ConfigFollower, follow_config_ack, rebooted
 from odocan.host.judge.livedistance import LiveDistance
 from odocan.host.judge.livegapseen import heard_encoder
@@ -236,9 +236,9 @@ class BusMonitor:
             self._watch_senders(message.frame_id, data, timestamp_s)
         if status in ACCEPTED:
             self._use(message, stats, data)
-        elif crc_right and message.name == "WHEEL_ENCODERS":
-            refused_frame(self.tracker, message.frame_id, message.decode(
-                data, decode_choices=False), timestamp_s, status)  # a twin, a gap's, a boot's
+        elif crc_right:  # an encoder frame: a twin, a gap's, a boot's; a pose: sent
+            refused_named(self.tracker, message.frame_id, message.name, lambda: message.decode(
+                data, decode_choices=False), timestamp_s, status)
 
     def _watch_senders(self, can_id: int, data: bytes, t_s: float) -> None:
         """A CRC-right command frame: a second sender's signature is a ``two senders`` event

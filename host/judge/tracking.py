@@ -335,6 +335,7 @@ class PoseTracker:
         self.placer.compared(pose)
         self.reference, self.last_pair = ref, (pose, ref)
         self.stall.last_compared = pose.seq
+        self.stall.compared_t_s = self.pose_t_s if t_s is None else t_s
         self.vs_reference.add(pose, ref, self.pose_t_s if t_s is None else t_s)
         self.losses.spans += self.twins.resolve(self.geometry, self.counter_bits, self.integrator)
         self.losses.record(pose.seq, self.vs_reference.latest, self.fast_path,

@@ -55,7 +55,7 @@ import can
 from cantools.database.can import Database
 
 from odocan.host.judge.bootticks import POSE_MESSAGE, pose_heard
-from odocan.host.judge.liveboottick import boot_frame, refused_frame
+from odocan.host.judge.liveboottick import boot_frame, refused_named
 from odocan.host.judge.liveconfig import SAME_TICK_S, rebooted
 from odocan.host.judge.livedistance import LiveDistance, robot_of
 from odocan.host.judge.livefit import pose_wrong
@@ -228,9 +228,8 @@ class RobotTelemetry(CommandFollowing):
             self.hold.recent.append((t_s, can_id, data, False))
         tracker = self.tracker  # ``advance``: settles the pose halves heard half a cycle before
         tracker.advance(t_s)
-        if status in CRC_RIGHT_REFUSED and route is not None \
-                and route.name == "WHEEL_ENCODERS":  # a twin of the latest accepted one?
-            refused_frame(tracker, can_id, route.signals(data), t_s, status)  # liveboottick
+        if status in CRC_RIGHT_REFUSED and route is not None:  # a twin? a pose sent? (liveboottick)
+            refused_named(tracker, can_id, route.name, lambda: route.signals(data), t_s, status)
         message = self._by_id.get(can_id)
         self.rejected[message.name if message else self._unknown_key(can_id)] += 1
         return self._samples() if tracker.settled else []
