@@ -1,0 +1,92 @@
+"""A held-back twist frame just before an MCU stall does not make the stall's first sends late
+(issue #11: a FAIL must never blame a correct firmware).
+
+``odocan run --robot kobuki --scenario random --seed 698 --duration 8 --faults
+busoff=1.5:0.2,delay=0.1:150,stall=3.1:0.3``: ODOM_TWIST COUNTER 10 heard in order at 3.081 s,
+then 4 and 6 (held back 150 ms by ``delay``) at 3.111 and 3.151 s, then the MCU halted 0.3 s and
+sent 11, 12, 13 ... on time from 3.401 s. ``latenames.LateScan`` read 11 as continuing the late
+run from 10, the latest heard in order (``_top_send``: 320 ms before, a hair less than a COUNTER
+lap of 16 sends), sent at 3.101 s and held back 300 ms, and every frame after it at its cadence
+as late as that: the twists of 3.42-3.62 s were named at the encoder frames of 3.12-3.32 s, two
+COUNTER laps back. FAIL by ODOM_TWIST 46.5 mm/s, 387 mrad/s and DISTANCE 53.8 mm (seed 699: 8.29
+mm/s, 382 mrad/s, 56.5 mm) with every pose within 0.07 mm of the reference, the firmware within
+1/1000 LSB of float64 (``tests.fw_watch``). A lateness of half a COUNTER lap or more cannot be
+told from a silence of the sender (the lapped rule); such a reading from the latest frame heard
+in order is no longer taken.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from odocan.host.judge.latenames import late_sends
+from odocan.host.protocol.busfacts import POSE_PERIOD_S
+from tests.fw_watch import Watch
+from tests.judges_cli import STREAMS, analyze, reported_analyses, watched_run, x_10_mm_off_fails
+from tests.log_edit import raise_raw
+
+FAULTS = "busoff=1.5:0.2,delay=0.1:150,stall=3.1:0.3"
+DRIVES = {"random_698": ("random", 698), "random_699": ("random", 699)}
+AFTER_STALL_S = 3.6  # the stall (3.1 s, 0.3 s) and its first sends over
+TEN_MM_SHORT_LSB = -10  # ODOM_TWIST DISTANCE's 1 mm LSBs
+DISTANCE_SPAN = (6, 2)  # ODOM_TWIST DISTANCE: bytes 6..7, little-endian
+Drive = tuple[Path, Watch, int]
+
+
+@pytest.fixture(scope="module", params=sorted(DRIVES))
+def drive(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory) -> Drive:
+    scenario, seed = DRIVES[request.param]
+    log = tmp_path_factory.mktemp(request.param) / "d.log"
+    watch, code = watched_run(log, "kobuki", scenario, seed, 8, FAULTS)
+    return log, watch, code
+
+
+def test_the_stall_s_first_sends_after_a_late_frame_are_on_time() -> None:
+    """ODOM_TWIST as seed 698 heard it: 7, 0 (late), 8, 9, 10 in order, 4 and 6 held back
+    150 ms, the MCU halted 0.3 s, then 11-14 at its cadence: 11-14 are on time."""
+    heard = np.array([3.021, 3.031, 3.041, 3.061, 3.081, 3.111, 3.151,
+                      3.401, 3.421, 3.441, 3.461])
+    counter = np.array([7, 0, 8, 9, 10, 4, 6, 11, 12, 13, 14], dtype=np.int64)
+    late, sent = late_sends(heard, counter, POSE_PERIOD_S)
+    assert late[7:].tolist() == [False] * 4, sent.tolist()
+    assert np.array_equal(sent[7:], heard[7:])
+
+
+def test_the_firmware_integrates_the_frames_it_took(drive: Drive) -> None:
+    _, watch, _ = drive
+    assert watch.steps > 300, watch.steps
+    assert watch.within_a_thousandth_lsb(), (watch.worst_m, watch.worst_rad)
+
+
+def test_the_correct_firmware_passes(drive: Drive, capsys: pytest.CaptureFixture[str]) -> None:
+    log, _, code = drive
+    codes = [code, *(analyze(log, s) for s in STREAMS)]
+    out = capsys.readouterr().out
+    assert codes == [0, 0, 0], out[-1500:]
+
+
+def test_x_10_mm_off_after_the_stall_fails_by_the_position(
+        drive: Drive, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    wrong = x_10_mm_off_fails(drive[0], tmp_path / "t.log", AFTER_STALL_S, 100)
+    capsys.readouterr()
+    assert wrong == []
+
+
+def test_a_distance_10_mm_short_after_the_stall_fails(
+        drive: Drive, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """ODOM_TWIST DISTANCE lowered 10 mm from after the stall on: each analysis FAILs it on
+    DISTANCE."""
+    tampered = tmp_path / "t.log"
+    assert raise_raw(drive[0], tampered, "ODOM_TWIST", DISTANCE_SPAN, TEN_MM_SHORT_LSB,
+                     AFTER_STALL_S) > 100
+    wrong = []
+    for s, code, report in reported_analyses(tampered, tmp_path):
+        if code != 1 or report["onboard_distance_vs_reference"]["passed"]:
+            wrong.append(f"--stream {s}: exit {code}, "
+                         f"{json.dumps(report['onboard_distance_vs_reference'])}")
+    capsys.readouterr()
+    assert wrong == []
