@@ -12,7 +12,9 @@ COUNTER laps back. FAIL by ODOM_TWIST 46.5 mm/s, 387 mrad/s and DISTANCE 53.8 mm
 mm/s, 382 mrad/s, 56.5 mm) with every pose within 0.07 mm of the reference, the firmware within
 1/1000 LSB of float64 (``tests.fw_watch``). A lateness of half a COUNTER lap or more cannot be
 told from a silence of the sender (the lapped rule); such a reading from the latest frame heard
-in order is no longer taken.
+in order is no longer taken. The same faults' neighbours 696 and 697 (77.9 mm; DISTANCE 163.2 mm)
+and figure8 671 at ``reboot=1.8:0.2,stall=5.6:0.2,delay=0.3:55`` (DISTANCE 43.5 mm) PASS with
+it; figure8 672 still FAILs, for another cause (``FIGURE8_672``).
 """
 
 from __future__ import annotations
@@ -29,20 +31,36 @@ from tests.fw_watch import Watch
 from tests.judges_cli import STREAMS, analyze, reported_analyses, watched_run, x_10_mm_off_fails
 from tests.log_edit import raise_raw
 
-FAULTS = "busoff=1.5:0.2,delay=0.1:150,stall=3.1:0.3"
-DRIVES = {"random_698": ("random", 698), "random_699": ("random", 699)}
-AFTER_STALL_S = 3.6  # the stall (3.1 s, 0.3 s) and its first sends over
+RANDOM = "busoff=1.5:0.2,delay=0.1:150,stall=3.1:0.3"
+FIGURE8 = "reboot=1.8:0.2,stall=5.6:0.2,delay=0.3:55"
+PAST_RANDOM_S, PAST_FIGURE8_S = 3.6, 6.0  # the stall and its first sends over
+DRIVES = {  # name: scenario, seed, duration s, faults, a time past the faults; before the fix
+    "random_696": ("random", 696, 8, RANDOM, PAST_RANDOM_S),  # 77.9 mm, DISTANCE 74.2 mm
+    "random_697": ("random", 697, 8, RANDOM, PAST_RANDOM_S),  # DISTANCE 163.2 mm
+    "random_698": ("random", 698, 8, RANDOM, PAST_RANDOM_S),  # DISTANCE 53.8 mm
+    "random_699": ("random", 699, 8, RANDOM, PAST_RANDOM_S),  # DISTANCE 56.5 mm
+    "figure8_671": ("figure8", 671, 9, FIGURE8, PAST_FIGURE8_S),  # DISTANCE 43.5 mm
+    "figure8_672": ("figure8", 672, 9, FIGURE8, PAST_FIGURE8_S),  # 634 mm: FIGURE8_672
+}
+FIGURE8_672 = (
+    "not fixed: figure8 672 FAILs its correct firmware (on-board vs reference 634.4 mm, "
+    "DISTANCE 19.5 mm, the pose at 2.060 s 625 mm beyond a stall's resume). The reboot at "
+    "2.0 s primed on the encoder frame of 2.020 s (its power-up ODOM_POSE_Y names it), but its "
+    "first page of encoder E2E counts (OK 7, LOST 2), sent at 2.101 s, was held back 55 ms by "
+    "the delay fault: counted back from the latest encoder frame before its stamp (2.156 s), "
+    "the new life starts at 2.070 s and its first poses (X 16 mm at 2.061 s) are judged as "
+    "the old life's, 625 mm off (reboots.page_counted_start reads the page at its stamp)")
 TEN_MM_SHORT_LSB = -10  # ODOM_TWIST DISTANCE's 1 mm LSBs
 DISTANCE_SPAN = (6, 2)  # ODOM_TWIST DISTANCE: bytes 6..7, little-endian
-Drive = tuple[Path, Watch, int]
+Drive = tuple[Path, Watch, int, float]
 
 
 @pytest.fixture(scope="module", params=sorted(DRIVES))
 def drive(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory) -> Drive:
-    scenario, seed = DRIVES[request.param]
+    scenario, seed, duration, faults, past_s = DRIVES[request.param]
     log = tmp_path_factory.mktemp(request.param) / "d.log"
-    watch, code = watched_run(log, "kobuki", scenario, seed, 8, FAULTS)
-    return log, watch, code
+    watch, code = watched_run(log, "kobuki", scenario, seed, duration, faults)
+    return log, watch, code, past_s
 
 
 def test_the_stall_s_first_sends_after_a_late_frame_are_on_time() -> None:
@@ -57,32 +75,45 @@ def test_the_stall_s_first_sends_after_a_late_frame_are_on_time() -> None:
 
 
 def test_the_firmware_integrates_the_frames_it_took(drive: Drive) -> None:
-    _, watch, _ = drive
+    _, watch, _, _ = drive
     assert watch.steps > 300, watch.steps
     assert watch.within_a_thousandth_lsb(), (watch.worst_m, watch.worst_rad)
 
 
-def test_the_correct_firmware_passes(drive: Drive, capsys: pytest.CaptureFixture[str]) -> None:
-    log, _, code = drive
+def _unfixed(request: pytest.FixtureRequest) -> bool:
+    return bool(request.node.callspec.params["drive"] == "figure8_672")
+
+
+def test_the_correct_firmware_passes(drive: Drive, request: pytest.FixtureRequest,
+                                     capsys: pytest.CaptureFixture[str]) -> None:
+    if _unfixed(request):
+        request.applymarker(pytest.mark.xfail(strict=True, reason=FIGURE8_672))
+    log, _, code, _ = drive
     codes = [code, *(analyze(log, s) for s in STREAMS)]
     out = capsys.readouterr().out
     assert codes == [0, 0, 0], out[-1500:]
 
 
 def test_x_10_mm_off_after_the_stall_fails_by_the_position(
-        drive: Drive, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    wrong = x_10_mm_off_fails(drive[0], tmp_path / "t.log", AFTER_STALL_S, 100)
+        drive: Drive, request: pytest.FixtureRequest, tmp_path: Path,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    if _unfixed(request):
+        pytest.skip("the untampered drive FAILs already (FIGURE8_672)")
+    wrong = x_10_mm_off_fails(drive[0], tmp_path / "t.log", drive[3], 100)
     capsys.readouterr()
     assert wrong == []
 
 
 def test_a_distance_10_mm_short_after_the_stall_fails(
-        drive: Drive, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+        drive: Drive, request: pytest.FixtureRequest, tmp_path: Path,
+        capsys: pytest.CaptureFixture[str]) -> None:
     """ODOM_TWIST DISTANCE lowered 10 mm from after the stall on: each analysis FAILs it on
     DISTANCE."""
+    if _unfixed(request):
+        pytest.skip("the untampered drive FAILs already (FIGURE8_672)")
     tampered = tmp_path / "t.log"
     assert raise_raw(drive[0], tampered, "ODOM_TWIST", DISTANCE_SPAN, TEN_MM_SHORT_LSB,
-                     AFTER_STALL_S) > 100
+                     drive[3]) > 100
     wrong = []
     for s, code, report in reported_analyses(tampered, tmp_path):
         if code != 1 or report["onboard_distance_vs_reference"]["passed"]:
