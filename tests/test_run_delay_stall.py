@@ -74,6 +74,21 @@ def test_the_stall_s_first_sends_after_a_late_frame_are_on_time() -> None:
     assert np.array_equal(sent[7:], heard[7:])
 
 
+@pytest.mark.parametrize(("heard_s", "late"), [(8.971, True), (9.117, False)])
+def test_a_late_reading_from_the_latest_in_order_stops_at_half_a_lap(
+        heard_s: float, late: bool) -> None:
+    """7 in order at 8.801 s, 0 held back (sent 8.661 s), then 8, off the late run's cadence:
+    its step from 7 puts its send at 8.821 s. Heard 7.5 periods after that, it is read late
+    there, as before. Heard 14.8 periods after (315 ms after 7, within a lap of it), its
+    nearest reading from 7 is a lap more, 17 sends, on time after a silence: a lateness of half
+    a lap or more cannot be told from that, and it is left where it was heard (read late
+    before)."""
+    heard = np.array([8.781, 8.801, 8.811, heard_s])
+    read, sent = late_sends(heard, np.array([6, 7, 0, 8], dtype=np.int64), POSE_PERIOD_S)
+    assert read.tolist() == [False, False, True, late]
+    assert sent[3] == pytest.approx(8.821 if late else heard_s)
+
+
 def test_the_firmware_integrates_the_frames_it_took(drive: Drive) -> None:
     _, watch, _, _ = drive
     assert watch.steps > 300, watch.steps
