@@ -14,7 +14,8 @@ mm/s, 382 mrad/s, 56.5 mm) with every pose within 0.07 mm of the reference, the 
 told from a silence of the sender (the lapped rule); such a reading from the latest frame heard
 in order is no longer taken. The same faults' neighbours 696 and 697 (77.9 mm; DISTANCE 163.2 mm)
 and figure8 671 at ``reboot=1.8:0.2,stall=5.6:0.2,delay=0.3:55`` (DISTANCE 43.5 mm) PASS with
-it; figure8 672 still FAILs, for another cause (``FIGURE8_672``).
+it, as does pmir 697 (DISTANCE 163.3 mm); figure8 672 still FAILs, for another cause
+(``FIGURE8_672``).
 """
 
 from __future__ import annotations
@@ -34,13 +35,14 @@ from tests.log_edit import raise_raw
 RANDOM = "busoff=1.5:0.2,delay=0.1:150,stall=3.1:0.3"
 FIGURE8 = "reboot=1.8:0.2,stall=5.6:0.2,delay=0.3:55"
 PAST_RANDOM_S, PAST_FIGURE8_S = 3.6, 6.0  # the stall and its first sends over
-DRIVES = {  # name: scenario, seed, duration s, faults, a time past the faults; before the fix
-    "random_696": ("random", 696, 8, RANDOM, PAST_RANDOM_S),  # 77.9 mm, DISTANCE 74.2 mm
-    "random_697": ("random", 697, 8, RANDOM, PAST_RANDOM_S),  # DISTANCE 163.2 mm
-    "random_698": ("random", 698, 8, RANDOM, PAST_RANDOM_S),  # DISTANCE 53.8 mm
-    "random_699": ("random", 699, 8, RANDOM, PAST_RANDOM_S),  # DISTANCE 56.5 mm
-    "figure8_671": ("figure8", 671, 9, FIGURE8, PAST_FIGURE8_S),  # DISTANCE 43.5 mm
-    "figure8_672": ("figure8", 672, 9, FIGURE8, PAST_FIGURE8_S),  # 634 mm: FIGURE8_672
+DRIVES = {  # name: robot, scenario, seed, duration s, faults, a time past the faults; FAILed
+    "random_696": ("kobuki", "random", 696, 8, RANDOM, PAST_RANDOM_S),  # 77.9, DISTANCE 74.2 mm
+    "random_697": ("kobuki", "random", 697, 8, RANDOM, PAST_RANDOM_S),  # DISTANCE 163.2 mm
+    "random_698": ("kobuki", "random", 698, 8, RANDOM, PAST_RANDOM_S),  # DISTANCE 53.8 mm
+    "random_699": ("kobuki", "random", 699, 8, RANDOM, PAST_RANDOM_S),  # DISTANCE 56.5 mm
+    "pmir_697": ("pmir", "random", 697, 8, RANDOM, PAST_RANDOM_S),  # DISTANCE 163.3 mm
+    "figure8_671": ("kobuki", "figure8", 671, 9, FIGURE8, PAST_FIGURE8_S),  # DISTANCE 43.5 mm
+    "figure8_672": ("kobuki", "figure8", 672, 9, FIGURE8, PAST_FIGURE8_S),  # 634 mm: unfixed
 }
 FIGURE8_672 = (
     "not fixed: figure8 672 FAILs its correct firmware (on-board vs reference 634.4 mm, "
@@ -57,9 +59,9 @@ Drive = tuple[Path, Watch, int, float]
 
 @pytest.fixture(scope="module", params=sorted(DRIVES))
 def drive(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory) -> Drive:
-    scenario, seed, duration, faults, past_s = DRIVES[request.param]
+    robot, scenario, seed, duration, faults, past_s = DRIVES[request.param]
     log = tmp_path_factory.mktemp(request.param) / "d.log"
-    watch, code = watched_run(log, "kobuki", scenario, seed, duration, faults)
+    watch, code = watched_run(log, robot, scenario, seed, duration, faults)
     return log, watch, code, past_s
 
 
