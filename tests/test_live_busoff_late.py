@@ -115,7 +115,8 @@ def test_plus_10_mm_fails_live_and_in_analyze(drive: Drive, from_s: float | str,
     assert fails_by_position(tampered, tmp_path, BEYOND_M) == [], (name, from_s)
 
 
-AT_BUS_OFF = {"random448": ("kobuki", "random", 448), "random445": ("kobuki", "random", 445)}
+AT_BUS_OFF = {"random448": ("kobuki", "random", 448), "random445": ("kobuki", "random", 445),
+              "figure8445": ("kobuki", "figure8", 445), "circle445": ("kobuki", "circle", 445)}
 
 
 @pytest.fixture(scope="module", params=sorted(AT_BUS_OFF))
@@ -130,6 +131,7 @@ def tampered_at_bus_off(request: pytest.FixtureRequest,
     assert code == 0
     assert watch.within_a_thousandth_lsb(), (watch.worst_m, watch.worst_rad)
     assert [wrong for wrong, _, _ in _live_verdicts(log, AT_BUS_OFF[name][0])] == [False, False]
+    assert both_analyses(log) == [0, 0], name
     at_s = first_pose_after_silence(log, *BUS_OFF)
     assert raise_raw(log, tampered, "ODOM_POSE_X", POSE_X, TEN_MM_LSB, at_s - 1e-4) > 50
     return name, tampered
