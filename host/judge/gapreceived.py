@@ -29,12 +29,12 @@ it, 17 periods by COUNTER to the frame at 5.30 s, holds the frames heard 5.21..5
 counts a period apart, but 954 counts from it in 8 periods (kobuki's bound: 85 a period). The
 gap kept ``gapbound``'s 20.6 mm, and a pose raised 10 mm from the first pose after the bus-off
 PASSed both analyses and both live judges (0.050 to 0.090 mm beyond); the frames the log holds
-bound it to 0.033 mm. Whichever of the gap's frames the firmware took, the bound holds: it is
-the merge error over the counts the log holds, refused or not. The gap must lie ``MARGIN_FRAMES`` frames inside the run: a
-frame of the gap held back (fewer than 15 periods, gapfill's premise) then reached the
-firmware between the run's pages, where the count holds. No counter restart re-primed in the
-run (the sequence numbers hold). Shared by the whole-log and the streamed judge (the same
-``Seen``) and ``replay``'s jumps.
+bound it to 0.033 mm (the two analyses and both live judges now FAIL that pose, 9.7 to 9.8 mm
+beyond). The gap must lie ``MARGIN_FRAMES`` frames inside the run: a frame of the gap held back
+(fewer than 15 periods, gapfill's premise) then reached the firmware between the run's pages,
+where the count holds. No counter restart re-primed in the run (the sequence numbers hold).
+Shared by the whole-log and the streamed judge (the same ``Seen``), the live judges
+(``livegapskips``) and ``replay``'s jumps.
 """
 
 from __future__ import annotations
