@@ -18,12 +18,23 @@ are runs of the path over them merged, as the reference's one step is: gapfill's
     |fw - ref| <= |fw - fine| + |ref - fine| <= 2 * breaks.merge_allowance_m(b-1, known, b)
 
 with the frames the log lacks merged in the fine path too (no firmware took them apart), each
-step within the plausibility bound over its periods (else a frame may be a forgery: the gap
-keeps ``gapbound``'s allowance). The gap must lie ``MARGIN_FRAMES`` frames inside the run: a
-frame of the gap held back (fewer than 15 periods, gapfill's premise) then reached the
-firmware between the run's pages, where the count holds. No counter restart re-primed in the
-run (the sequence numbers hold). Shared by the whole-log and the streamed judge (the same
-``Seen``) and ``replay``'s jumps.
+step from a frame of the gap within the plausibility bound over its periods (else a frame may
+be a forgery: the gap keeps ``gapbound``'s allowance). The step out of the frame before the gap
+is not judged: that frame is one the host and the firmware accepted (its counts the sender's),
+and its COUNTER may number it a lap after its sample, which the firmware's bound allows for
+(``sampledoubt``, ``step_periods.doubted_bound_periods``) and the gap's periods do not. kobuki
+figure8 and circle 445, ``delay=0.3:55,busoff=5:0.2``: the bus-off's held frame (COUNTER 1,
+sampled 4.97 s, heard 5.2028 s) is numbered 14 periods after the frame before it; the gap after
+it, 17 periods by COUNTER to the frame at 5.30 s, holds the frames heard 5.21..5.29 s, 40
+counts a period apart, but 954 counts from it in 8 periods (kobuki's bound: 85 a period). The
+gap kept ``gapbound``'s 20.6 mm, and a pose raised 10 mm from the first pose after the bus-off
+PASSed both analyses and both live judges (0.050 to 0.090 mm beyond); the frames the log holds
+bound it to 0.033 mm (the two analyses and both live judges now FAIL that pose, 9.7 to 9.8 mm
+beyond). The gap must lie ``MARGIN_FRAMES`` frames inside the run: a frame of the gap held back
+(fewer than 15 periods, gapfill's premise) then reached the firmware between the run's pages,
+where the count holds. No counter restart re-primed in the run (the sequence numbers hold).
+Shared by the whole-log and the streamed judge (the same ``Seen``), the live judges
+(``livegapskips``) and ``replay``'s jumps.
 """
 
 from __future__ import annotations
@@ -60,14 +71,15 @@ def received_allowance_m(
 ) -> float:
     """Twice the merge allowance (m) over the frame before the gap, the frames ``fill`` (from
     ``received_fill``) and the frame after it (``periods`` after the one before); inf where
-    ``fill`` is None or a step lies beyond the plausibility bound over its periods."""
+    ``fill`` is None or a step from a frame of ``fill`` lies beyond the plausibility bound over
+    its periods (the step out of the frame before is not judged: module docstring)."""
     if fill is None:
         return math.inf
     at = [0, *(k for k, _ in fill), periods]
     left = np.array([before[0], *(c[0] for _, c in fill), after[0]], dtype=np.int64)
     right = np.array([before[1], *(c[1] for _, c in fill), after[1]], dtype=np.int64)
     steps: IntArray = np.diff(np.array(at, dtype=np.int64)).astype(np.int64)
-    if not plausible_steps(left, right, steps, geometry, bits, max_wheel_speed_mm_s):
+    if not plausible_steps(left[1:], right[1:], steps[1:], geometry, bits, max_wheel_speed_mm_s):
         return math.inf
     return 2.0 * merge_allowance_m(left, right, geometry, bits, integrator)
 
