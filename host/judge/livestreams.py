@@ -175,7 +175,9 @@ class LiveStreams:
         the bus time they are told from while their pairs go on (this frame one); else None."""
         if message not in WATCHED or len(data) < 2:
             return None
-        watch = self._watches.setdefault(message, TwinWatch())
+        watch = self._watches.get(message)
+        if watch is None:  # (not setdefault: a TwinWatch is 16 deques, made for every frame)
+            watch = self._watches[message] = TwinWatch()
         watch.hear(bytes(data), t_s)
         return watch.told[0] if watch.told is not None and watch.last_paired else None
 
