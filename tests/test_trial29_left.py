@@ -37,12 +37,19 @@ DRIVES: dict[str, tuple[tuple[str, str, str, str, str], str | None]] = {
     "stall_delay_dup": (("pmir", "random", "12", "12", "delay=0.3:55,dup=0.1,stall=4:2"), None),
     "late_naming_100ms": (
         ("kobuki", "random", "23", "10", "delay=0.5:100,stall=4:1"),
-        "issue #11: ODOM_TWIST DISTANCE 16.8 mm off a right firmware from 8.02 s (the twist "
-        "COUNTER 9 sent 7.921 s, heard 100 ms late, named where sent: the WHEEL_ENCODERS "
-        "ENC_COUNTER 13 of 7.91 s; the reference's path runs 16.5 mm past its DISTANCE there, "
-        "likely the firmware had the late frame of that ENC_COUNTER from 7.75 s: not traced). "
-        "The pose is met since the late naming (host.judge.latenames; 23.3 mm, 603 mrad "
-        "before)"),
+        "issue #11: ODOM_TWIST DISTANCE 16.8 mm off a right firmware from 8.02 s. Traced: "
+        "half the encoder frames come 100 ms late, and the firmware's E2E (and the host's "
+        "mostly) follows the late run (LEFT 1489 at 7.81 s ... 1230 at 7.91 s, every step in "
+        "line). At 7.840 s the host's E2E took two on-time frames, COUNTER 0 and 1 (LEFT 1154, "
+        "1129: 10 periods ahead of the late run), which the firmware refused (its window counts "
+        "ticks, the host's jittered bus times), then the late run again (1307, +178 counts): "
+        "the reference steps 256 counts ahead and back, a 16.5 mm zigzag of path the "
+        "firmware never drove, while the pose cancels it (within 0.05 mm). The allowance for "
+        "frames the host took and the firmware refused (distance's 'skipped', proven by "
+        "ENC_E2E_OK growing less than the host's frames) does not come: the 100 ms delay "
+        "holds back the pages, so no page is known made in its tick (pagekeeper). The late "
+        "twist (COUNTER 9 sent 7.921 s, heard 8.021 s) is named right, the ENC_COUNTER 13 of "
+        "7.91 s (host.judge.latenames; 23.3 mm, 603 mrad before that)"),
 }
 Drive = tuple[Path, Watch, int]  # the log, the firmware's watch, run's exit code
 TAMPERED = {"late_frame_a_lap_on": 2.0, "stall_delay_dup": 6.0}  # from the fault's end (s)
