@@ -78,6 +78,7 @@ from odocan.host.judge.heldboot import summary_start as summary_start
 from odocan.host.judge.heldsummaries import summaries_held_back
 from odocan.host.judge.liveconfig import config_text
 from odocan.host.judge.navrestart import second_evidence
+from odocan.host.judge.pagesent import pages_counted_from
 from odocan.host.judge.primed import counted_start
 from odocan.host.judge.samples import ENC_E2E_PAGE, AnalysisError, contract_cycle_s
 from odocan.host.judge.silentboot import fresh_counted_start, silent_start
@@ -116,6 +117,7 @@ def split_lives(frames: FrameArrays, decoder: BulkDecoder) -> list[Life]:
     encoders, counters = rows["index"][keep], rows["COUNTER"][keep].astype(np.int64)
     pages, every = encoder_count_pages(frames, decoder), (frames.select(rows["index"]),
                                                           rows["index"].astype(np.int64))
+    sent = pages_counted_from(frames, decoder, pages[0])  # each page where it was sent
     poses, after = powerup_poses(frames, decoder), pose_enc_rows(frames, decoder)
     heard = heard_encoders(every, decoder)  # the power-up pose's word (``bootnamed``)
     starts: list[int] = []
@@ -130,7 +132,8 @@ def split_lives(frames: FrameArrays, decoder: BulkDecoder) -> list[Life]:
         counted = (None if stalled_first(frames, decoder, encoders, position, limit)
                    else page_counted_start(position, limit, (encoders, counters), pages, (
                        every, decoder, (starts[-1] if starts else 0,
-                                        summary_start(position, uptime_s, state, rows["index"])))))
+                                        summary_start(position, uptime_s, state, rows["index"]))),
+                       sent))
         said = (named_start(poses, (encoders.astype(np.int64), counters), position,
                             float(frames.timestamp_s[position]), after, heard)
                 if uptime_s == 0 else None)
@@ -191,19 +194,22 @@ def page_counted_start(
     position: int, limit: int, encoders: tuple[npt.NDArray[np.intp], npt.NDArray[np.int64]],
     pages: tuple[npt.NDArray[np.int64], ...],
     fresh: tuple[tuple[FrameArrays, npt.NDArray[np.int64]], BulkDecoder, tuple[int, int]]
-    | None = None,
+    | None = None, sent: npt.NDArray[np.int64] | None = None,
 ) -> int | None:
     """The encoder frame the firmware primed on, from its first page of WHEEL_ENCODERS E2E
     counts after the summary at ``position`` (and before ``limit``, the next boot):
     ``counted_start``; with ``fresh`` (every WHEEL_ENCODERS frame and its position, the
     decoder, the life before's start and ``summary_start`` over every WHEEL_ENCODERS frame),
     its E2E check fresh at that frame as the new firmware's was
-    (``silentboot.fresh_counted_start``). None without such a page."""
+    (``silentboot.fresh_counted_start``); with ``sent`` (per page, the position it is counted
+    from: ``pagesent.pages_counted_from``), counted from where it was sent, not heard. None
+    without such a page."""
     where, ok, lost = pages
     after = int(np.searchsorted(where, position))
     if after == len(where) or where[after] >= limit:
         return None
-    page, counts = int(where[after]), (int(ok[after]), int(lost[after]))
+    page = int(where[after] if sent is None else sent[after])
+    counts = (int(ok[after]), int(lost[after]))
     counted = counted_start(encoders, page, *counts)
     return counted if fresh is None else fresh_counted_start(
         fresh[0], fresh[1], page, counts, (counted, fresh[2][1], fresh[2][0]))
