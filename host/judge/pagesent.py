@@ -94,6 +94,25 @@ def pages_counted_from(frames: FrameArrays, decoder: BulkDecoder,
     return out
 
 
+def encoder_count_pages(
+    frames: FrameArrays, decoder: BulkDecoder
+) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+    """Positions, ENC_E2E_OK and ENC_E2E_LOST (0 where the DBC has none) of the ODOM_STATUS
+    pages of WHEEL_ENCODERS E2E counts whose CRC holds (empty when the log or the DBC has
+    none); ``reboots`` re-exports it."""
+    none = (np.zeros(0, dtype=np.int64),) * 3
+    try:
+        page = decoder.decode_page(frames, "ODOM_STATUS", ENC_E2E_PAGE)
+    except DecodeError:
+        return none
+    if "ENC_E2E_OK" not in page:
+        return none
+    good = crc_holds(frames, decoder, page["index"])
+    lost = page.get("ENC_E2E_LOST", np.zeros(len(good), dtype=np.int64))
+    return (page["index"][good].astype(np.int64), page["ENC_E2E_OK"][good].astype(np.int64),
+            lost[good].astype(np.int64))
+
+
 Counts = tuple[int, int, int]  # ENC_E2E_OK, ENC_E2E_LOST, the position counted from
 
 

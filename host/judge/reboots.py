@@ -21,8 +21,10 @@ frame (``Life.boot``), with E2E sequences starting afresh (a reboot is not frame
   starts at the summary and its start is fitted like a log that starts mid-drive;
 * whatever the summary says, when the new firmware's first page of WHEEL_ENCODERS E2E counts
   (ENC_E2E_OK: encoder frames accepted since its boot; ENC_E2E_LOST: lost) follows, it names
-  the frame it primed on: ENC_E2E_OK + ENC_E2E_LOST - 1 COUNTER steps back from the page's
-  latest encoder frame (``page_counted_start``: the earliest the counts allow). That holds when the
+  the frame it primed on: ENC_E2E_OK + ENC_E2E_LOST - 1 COUNTER steps back from the latest
+  encoder frame before the page was sent (``page_counted_start``: the earliest the counts allow;
+  a page the bus held back, in order, is counted from its send, ``host.judge.pagesent``: from
+  its stamp, figure8 672's new life started 5 frames late and FAILed by 634 mm). That holds when the
   log missed the boot summary (UPTIME counts whole seconds: the summaries of the first second
   all say 0) and is checked again on the life (``host.judge.powerup.saw_only_the_log``); that
   life is a power-up (``Life.boot``) whatever UPTIME says: a new firmware starts at (0, 0, 0)
@@ -78,9 +80,10 @@ from odocan.host.judge.heldboot import summary_start as summary_start
 from odocan.host.judge.heldsummaries import summaries_held_back
 from odocan.host.judge.liveconfig import config_text
 from odocan.host.judge.navrestart import second_evidence
+from odocan.host.judge.pagesent import encoder_count_pages as encoder_count_pages
 from odocan.host.judge.pagesent import pages_counted_from
 from odocan.host.judge.primed import counted_start
-from odocan.host.judge.samples import ENC_E2E_PAGE, AnalysisError, contract_cycle_s
+from odocan.host.judge.samples import AnalysisError, contract_cycle_s
 from odocan.host.judge.silentboot import fresh_counted_start, silent_start
 from odocan.host.judge.sources import SourceWatch, two_sources_text
 from odocan.host.judge.stallfirst import merged_first
@@ -213,25 +216,6 @@ def page_counted_start(
     counted = counted_start(encoders, page, *counts)
     return counted if fresh is None else fresh_counted_start(
         fresh[0], fresh[1], page, counts, (counted, fresh[2][1], fresh[2][0]))
-
-
-def encoder_count_pages(
-    frames: FrameArrays, decoder: BulkDecoder
-) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64], npt.NDArray[np.int64]]:
-    """Positions, ENC_E2E_OK and ENC_E2E_LOST (0 where the DBC has none) of the ODOM_STATUS
-    pages of WHEEL_ENCODERS E2E counts whose CRC holds (empty when the log or the DBC has
-    none)."""
-    none = (np.zeros(0, dtype=np.int64),) * 3
-    try:
-        page = decoder.decode_page(frames, "ODOM_STATUS", ENC_E2E_PAGE)
-    except DecodeError:
-        return none
-    if "ENC_E2E_OK" not in page:
-        return none
-    good = crc_holds(frames, decoder, page["index"])
-    lost = page.get("ENC_E2E_LOST", np.zeros(len(good), dtype=np.int64))
-    return (page["index"][good].astype(np.int64), page["ENC_E2E_OK"][good].astype(np.int64),
-            lost[good].astype(np.int64))
 
 
 def two_sources(frames: FrameArrays, decoder: BulkDecoder) -> tuple[int, float] | None:

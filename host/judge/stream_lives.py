@@ -4,7 +4,8 @@ A reboot is a summary (ODOM_STATUS page 0, CRC holding) that ``SourceWatch`` cal
 bus order as in the whole log. Its life starts at the summary, at the latest accepted encoder
 frame before it (UPTIME 0, not INIT), or at the encoder frame its first page of WHEEL_ENCODERS
 E2E counts names (``primed.counted_start``: ENC_E2E_OK + ENC_E2E_LOST - 1 COUNTER steps back
-from that page's latest encoder frame, when the page comes before the next reboot), except when
+from the latest encoder frame before that page was sent, ``pagesent.StreamPages``: a page
+waits for the next ODOM_STATUS frame, when the page comes before the next reboot), except when
 the new firmware stalled before its first count page or its first pose (``reboots
 .stalled_first``: its page misses the frames its halted MCU's FIFO overran; the firmware's signs
 of life are carried for it, the last 2^16). Carried: the watch, the positions, COUNTERs and
