@@ -61,6 +61,7 @@ DRIVES = {  # name: robot, scenario, seed, duration s, faults, a time past the f
     "pmir_697": ("pmir", "random", 697, 8, RANDOM, PAST_RANDOM_S),  # DISTANCE 163.3 mm
     "figure8_671": ("kobuki", "figure8", 671, 9, FIGURE8, PAST_FIGURE8_S),  # DISTANCE 43.5 mm
     "figure8_672": ("kobuki", "figure8", 672, 9, FIGURE8, PAST_FIGURE8_S),  # 634 mm: pagesent
+    "pmir_figure8_672": ("pmir", "figure8", 672, 9, FIGURE8, PAST_FIGURE8_S),  # FAILed alike
 }
 REBOOT_S = 2.0  # figure8's reboot (1.8 s + 0.2 s)
 LIVE_671 = (
@@ -182,11 +183,12 @@ def test_the_streamed_life_split_is_the_whole_logs(drive: Drive) -> None:
 def test_the_live_judges_pass_the_correct_firmware(drive: Drive,
                                                    request: pytest.FixtureRequest) -> None:
     """The monitor and the bridge fed the log frame by frame: within the 0.1 mm tolerance
-    (figure8 672: 21.2 mm beyond before ``pagesent``)."""
+    (figure8 672: 21.2 mm beyond before ``pagesent``, pmir 19.8 mm)."""
     _figure8(drive)
-    if request.node.callspec.params["drive"] == "figure8_671":
+    name = request.node.callspec.params["drive"]
+    if name == "figure8_671":
         request.applymarker(pytest.mark.xfail(strict=True, reason=LIVE_671))
-    profile = load("kobuki")
+    profile = load(DRIVES[name][0])
     monitor = BusMonitor(profile)
     bridge = RobotTelemetry("r1", Geometry.of(profile), "exact",
                             counter_bits=profile.counter_bits)
