@@ -9,17 +9,21 @@ import pytest
 from odocan.host.judge.pagesent import counted_from, sent_s
 
 
-@pytest.mark.parametrize(("following", "sent"), [
-    ((2.201, 4), 2.101),  # figure8 672: the next tick's summary heard on time
-    ((2.202, 5), 2.102),  # its page (the summary lost)
-    ((2.256, 4), 2.156),  # as late as the page: no earlier
-    ((2.301, 6), 2.156),  # three steps on: two ticks or more, not told
-    ((2.180, 0), 2.156),  # a new firmware's power-up summary: another sequence
-    ((2.180, 1), 2.156),  # ... its power-up page
-    (None, 2.156),  # nothing heard after it (the log's end)
-])
-def test_the_send_is_bounded_by_the_next_tick(following: tuple[float, int] | None,
-                                              sent: float) -> None:
+@pytest.mark.parametrize(
+    ("following", "sent"),
+    [
+        ((2.201, 4), 2.101),  # figure8 672: the next tick's summary heard on time
+        ((2.202, 5), 2.102),  # its page (the summary lost)
+        ((2.256, 4), 2.156),  # as late as the page: no earlier
+        ((2.301, 6), 2.156),  # three steps on: two ticks or more, not told
+        ((2.180, 0), 2.156),  # a new firmware's power-up summary: another sequence
+        ((2.180, 1), 2.156),  # ... its power-up page
+        (None, 2.156),  # nothing heard after it (the log's end)
+    ],
+)
+def test_the_send_is_bounded_by_the_next_tick(
+    following: tuple[float, int] | None, sent: float
+) -> None:
     """The count page COUNTER 3 heard at 2.156 s: sent a status cycle or more before the next
     tick's frame, never after it was heard."""
     assert sent_s((2.156, 3), following) == pytest.approx(sent)

@@ -56,8 +56,9 @@ def sent_s(page: tuple[float, int], following: tuple[float, int] | None) -> floa
     return min(heard_s, following[0] - STATUS_CYCLE_S)
 
 
-def counted_from(page: int, page_sent_s: float, encoders: tuple[npt.NDArray[np.int64],
-                                                                npt.NDArray[np.float64]]) -> int:
+def counted_from(
+    page: int, page_sent_s: float, encoders: tuple[npt.NDArray[np.int64], npt.NDArray[np.float64]]
+) -> int:
     """The log position ``counted_start`` counts back from for a page heard at ``page`` and sent
     at ``page_sent_s``: the first of the encoder frames (``encoders``: positions, bus times, in
     bus order) before the page stamped at or after its send, so that the latest before it is the
@@ -70,8 +71,9 @@ def counted_from(page: int, page_sent_s: float, encoders: tuple[npt.NDArray[np.i
     return page if j == k else int(at[j])
 
 
-def pages_counted_from(frames: FrameArrays, decoder: BulkDecoder,
-                       pages: npt.NDArray[np.int64]) -> npt.NDArray[np.int64]:
+def pages_counted_from(
+    frames: FrameArrays, decoder: BulkDecoder, pages: npt.NDArray[np.int64]
+) -> npt.NDArray[np.int64]:
     """``counted_from`` of each count page at log positions ``pages`` (CRC holding) of a whole
     log, its next ODOM_STATUS frame heard (CRC holding) read by ``sent_s`` (vectorised: a page
     moves only when held back)."""
@@ -82,8 +84,11 @@ def pages_counted_from(frames: FrameArrays, decoder: BulkDecoder,
     ok[ok] = where[row[ok]] == out[ok]
     row, nxt = row[ok], row[ok] + 1
     step = (counter[nxt] - counter[row]) & ENC_COUNTER_MASK
-    moved = (np.isin(step, NEXT_TICK_STEPS) & ~np.isin(counter[nxt], POWER_UP_COUNTERS)
-             & (t_s[nxt] - STATUS_CYCLE_S < t_s[row]))
+    moved = (
+        np.isin(step, NEXT_TICK_STEPS)
+        & ~np.isin(counter[nxt], POWER_UP_COUNTERS)
+        & (t_s[nxt] - STATUS_CYCLE_S < t_s[row])
+    )
     if not moved.any():
         return out
     enc = decoder.select(frames, "WHEEL_ENCODERS").astype(np.int64)
@@ -109,8 +114,11 @@ def encoder_count_pages(
         return none
     good = crc_holds(frames, decoder, page["index"])
     lost = page.get("ENC_E2E_LOST", np.zeros(len(good), dtype=np.int64))
-    return (page["index"][good].astype(np.int64), page["ENC_E2E_OK"][good].astype(np.int64),
-            lost[good].astype(np.int64))
+    return (
+        page["index"][good].astype(np.int64),
+        page["ENC_E2E_OK"][good].astype(np.int64),
+        lost[good].astype(np.int64),
+    )
 
 
 Counts = tuple[int, int, int]  # ENC_E2E_OK, ENC_E2E_LOST, the position counted from
@@ -126,15 +134,20 @@ class StreamPages:
         self._decoder = decoder
         self._waiting: list[tuple[int, int, int, float, int]] = []  # position, OK, LOST, t, CTR
 
-    def feed(self, chunk: FrameArrays, offset: int,
-             encoders: tuple[npt.NDArray[np.int64], npt.NDArray[np.float64]]
-             ) -> list[tuple[int, Counts]]:
+    def feed(
+        self,
+        chunk: FrameArrays,
+        offset: int,
+        encoders: tuple[npt.NDArray[np.int64], npt.NDArray[np.float64]],
+    ) -> list[tuple[int, Counts]]:
         """The pages told by ``chunk`` (at log position ``offset``): those waiting and the
         chunk's own whose next ODOM_STATUS frame it holds; ``encoders``: the positions and bus
         times of the encoder frames carried, this chunk's included."""
         where, t_s, counter = status_rows(chunk, self._decoder)
-        rows = [(int(p) + offset, float(t), int(c))
-                for p, t, c in zip(where.tolist(), t_s.tolist(), counter.tolist(), strict=True)]
+        rows = [
+            (int(p) + offset, float(t), int(c))
+            for p, t, c in zip(where.tolist(), t_s.tolist(), counter.tolist(), strict=True)
+        ]
         pages = self._waiting + _chunk_pages(chunk, self._decoder, offset, rows)
         positions = np.array([position for position, _, _ in rows], dtype=np.int64)
         told, self._waiting = [], []
@@ -144,8 +157,16 @@ class StreamPages:
                 self._waiting.append(page)
                 continue
             sent = sent_s((page[3], page[4]), rows[k][1:])
-            told.append((page[0], (page[1], page[2], counted_from(page[0], sent, encoders)
-                                   if sent < page[3] else page[0])))
+            told.append(
+                (
+                    page[0],
+                    (
+                        page[1],
+                        page[2],
+                        counted_from(page[0], sent, encoders) if sent < page[3] else page[0],
+                    ),
+                )
+            )
         return told
 
     def finish(self) -> list[tuple[int, Counts]]:
@@ -154,8 +175,9 @@ class StreamPages:
         return told
 
 
-def _chunk_pages(chunk: FrameArrays, decoder: BulkDecoder, offset: int,
-                 rows: list[tuple[int, float, int]]) -> list[tuple[int, int, int, float, int]]:
+def _chunk_pages(
+    chunk: FrameArrays, decoder: BulkDecoder, offset: int, rows: list[tuple[int, float, int]]
+) -> list[tuple[int, int, int, float, int]]:
     """The chunk's count pages whose CRC holds (``rows``: its ODOM_STATUS frames whose CRC
     holds, at their log positions): position, ENC_E2E_OK, ENC_E2E_LOST, bus time, COUNTER."""
     try:
@@ -167,6 +189,12 @@ def _chunk_pages(chunk: FrameArrays, decoder: BulkDecoder, offset: int,
     good = crc_holds(chunk, decoder, page["index"])
     lost = page.get("ENC_E2E_LOST", np.zeros(len(good), dtype=np.int64))
     heard = {position: (t, c) for position, t, c in rows}
-    return [(int(p) + offset, int(ok), int(n), *heard[int(p) + offset]) for p, ok, n in
-            zip(page["index"][good].tolist(), page["ENC_E2E_OK"][good].tolist(),
-                lost[good].tolist(), strict=True)]
+    return [
+        (int(p) + offset, int(ok), int(n), *heard[int(p) + offset])
+        for p, ok, n in zip(
+            page["index"][good].tolist(),
+            page["ENC_E2E_OK"][good].tolist(),
+            lost[good].tolist(),
+            strict=True,
+        )
+    ]
