@@ -8,12 +8,16 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
+import numpy as np
+
 from odocan.host.judge.liveadopted import UNHEARD_BOOT
 from odocan.host.judge.livefit import LiveFit
 from odocan.host.judge.liveplacing import place_reference
 from odocan.host.judge.livepose import FramePose, Sample
 from odocan.host.judge.liveprimed import UNTOLD_PRIME, choose_primed
 from odocan.host.judge.livewindow import Counted, primed_at, window_counts
+from odocan.host.judge.pagesent import counted_from, sent_s
+from odocan.host.judge.primed import counted_start
 from odocan.host.judge.reference import ReferenceOdometry
 
 if TYPE_CHECKING:
@@ -85,6 +89,9 @@ class Lives:
         # (``powerup.primed_after``; a recorder stamping ODOM_STATUS late: ``liveprimed``)
         self.primed_from: tuple[int | None, list[int]] | None = None  # the frame chosen, those
         # it may have primed on (``finish_primed``)
+        self.page: tuple[int, int, tuple[float, int] | None, int] | None = None  # a reboot's
+        # first count page, waiting for the next ODOM_STATUS (``on_status``): ENC_E2E_OK,
+        # ENC_E2E_LOST, its bus time and COUNTER, the seq after the latest frame heard before it
 
     def waits(self, pose: FramePose, now_s: float) -> bool:
         """Whether the on-board ``pose`` waits for its life's start (a boot's frame, the
@@ -130,11 +137,21 @@ class Lives:
         self.boot = (guess, now_s + BOOT_COUNT_WAIT_S)
         self.boot_named = unnamed is not None
         self.boot_unnamed = guess if unnamed is None else unnamed
-        self.boot_poses, self.held = [], {}
+        self.boot_poses, self.held, self.page = [], {}, None
 
     def expire(self) -> None:
-        """The wait for the count page is over: start without it."""
+        """The wait for the count page is over: start without it (a page heard with no
+        ODOM_STATUS frame after it: from where it was heard)."""
         assert self.boot is not None
+        if self.page is not None:
+            ok, lost, _, after = self.page
+            self.page = None
+            window = self._tracker.window
+            at = counted_start((window.col("seq").astype(np.int64),
+                                window.col("counter").astype(np.int64)), after, ok, lost)
+            if at is not None:
+                self.finish_boot(at)
+                return
         if self.boot[0] < 0:
             self.finish_first(False)
         else:
@@ -155,10 +172,29 @@ class Lives:
             self.finish_first(proven)
         elif boot is not None and self._named():
             self.finish_boot(boot[0])
-        elif boot is not None and (at := primed_at(tracker.window, ok, lost)) is not None:
-            self.finish_boot(at)
+        elif boot is not None and primed_at(tracker.window, ok, lost) is not None:
+            self.page = (ok, lost, tracker.status_heard, int(tracker.window.col("seq")[-1]) + 1)
         elif proven and not started and tracker.integrator is not None:
             self.finish_boot(0, first_life=True)  # the samples judged before keep their errors
+
+    def on_status(self, t_s: float, counter: int) -> None:
+        """The ODOM_STATUS frame heard after a reboot's first count page (``page``): it tells
+        when that page was sent (``pagesent``); the new life starts on the frame the page
+        counts back to from there."""
+        if self.page is None or self.boot is None:
+            self.page = None
+            return
+        ok, lost, heard, after = self.page
+        self.page = None
+        window = self._tracker.window
+        seqs = window.col("seq").astype(np.int64)
+        sent = after if heard is None else counted_from(
+            after, sent_s(heard, (t_s, counter)), (seqs, window.col("t_s").astype(np.float64)))
+        at = counted_start((seqs, window.col("counter").astype(np.int64)), sent, ok, lost)
+        if at is None:  # the window lacks it from there: where the page was heard
+            at = counted_start((seqs, window.col("counter").astype(np.int64)), after, ok, lost)
+        if at is not None:
+            self.finish_boot(at)
 
     def finish_primed(self, k: int) -> None:
         """The first life's samples from (0, 0, 0) on the frame it primed on, one of 0 .. k

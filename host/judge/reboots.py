@@ -21,8 +21,10 @@ frame (``Life.boot``), with E2E sequences starting afresh (a reboot is not frame
   starts at the summary and its start is fitted like a log that starts mid-drive;
 * whatever the summary says, when the new firmware's first page of WHEEL_ENCODERS E2E counts
   (ENC_E2E_OK: encoder frames accepted since its boot; ENC_E2E_LOST: lost) follows, it names
-  the frame it primed on: ENC_E2E_OK + ENC_E2E_LOST - 1 COUNTER steps back from the page's
-  latest encoder frame (``page_counted_start``: the earliest the counts allow). That holds when the
+  the frame it primed on: ENC_E2E_OK + ENC_E2E_LOST - 1 COUNTER steps back from the latest
+  encoder frame before the page was sent (``page_counted_start``: the earliest the counts allow;
+  a page the bus held back, in order, is counted from its send, ``host.judge.pagesent``: from
+  its stamp, figure8 672's new life started 5 frames late and FAILed by 634 mm). That holds when the
   log missed the boot summary (UPTIME counts whole seconds: the summaries of the first second
   all say 0) and is checked again on the life (``host.judge.powerup.saw_only_the_log``); that
   life is a power-up (``Life.boot``) whatever UPTIME says: a new firmware starts at (0, 0, 0)
@@ -78,8 +80,10 @@ from odocan.host.judge.heldboot import summary_start as summary_start
 from odocan.host.judge.heldsummaries import summaries_held_back
 from odocan.host.judge.liveconfig import config_text
 from odocan.host.judge.navrestart import second_evidence
+from odocan.host.judge.pagesent import encoder_count_pages as encoder_count_pages
+from odocan.host.judge.pagesent import pages_counted_from
 from odocan.host.judge.primed import counted_start
-from odocan.host.judge.samples import ENC_E2E_PAGE, AnalysisError, contract_cycle_s
+from odocan.host.judge.samples import AnalysisError, contract_cycle_s
 from odocan.host.judge.silentboot import fresh_counted_start, silent_start
 from odocan.host.judge.sources import SourceWatch, two_sources_text
 from odocan.host.judge.stallfirst import merged_first
@@ -116,6 +120,7 @@ def split_lives(frames: FrameArrays, decoder: BulkDecoder) -> list[Life]:
     encoders, counters = rows["index"][keep], rows["COUNTER"][keep].astype(np.int64)
     pages, every = encoder_count_pages(frames, decoder), (frames.select(rows["index"]),
                                                           rows["index"].astype(np.int64))
+    sent = pages_counted_from(frames, decoder, pages[0])  # each page where it was sent
     poses, after = powerup_poses(frames, decoder), pose_enc_rows(frames, decoder)
     heard = heard_encoders(every, decoder)  # the power-up pose's word (``bootnamed``)
     starts: list[int] = []
@@ -130,7 +135,8 @@ def split_lives(frames: FrameArrays, decoder: BulkDecoder) -> list[Life]:
         counted = (None if stalled_first(frames, decoder, encoders, position, limit)
                    else page_counted_start(position, limit, (encoders, counters), pages, (
                        every, decoder, (starts[-1] if starts else 0,
-                                        summary_start(position, uptime_s, state, rows["index"])))))
+                                        summary_start(position, uptime_s, state, rows["index"]))),
+                       sent))
         said = (named_start(poses, (encoders.astype(np.int64), counters), position,
                             float(frames.timestamp_s[position]), after, heard)
                 if uptime_s == 0 else None)
@@ -191,41 +197,25 @@ def page_counted_start(
     position: int, limit: int, encoders: tuple[npt.NDArray[np.intp], npt.NDArray[np.int64]],
     pages: tuple[npt.NDArray[np.int64], ...],
     fresh: tuple[tuple[FrameArrays, npt.NDArray[np.int64]], BulkDecoder, tuple[int, int]]
-    | None = None,
+    | None = None, sent: npt.NDArray[np.int64] | None = None,
 ) -> int | None:
     """The encoder frame the firmware primed on, from its first page of WHEEL_ENCODERS E2E
     counts after the summary at ``position`` (and before ``limit``, the next boot):
     ``counted_start``; with ``fresh`` (every WHEEL_ENCODERS frame and its position, the
     decoder, the life before's start and ``summary_start`` over every WHEEL_ENCODERS frame),
     its E2E check fresh at that frame as the new firmware's was
-    (``silentboot.fresh_counted_start``). None without such a page."""
+    (``silentboot.fresh_counted_start``); with ``sent`` (per page, the position it is counted
+    from: ``pagesent.pages_counted_from``), counted from where it was sent, not heard. None
+    without such a page."""
     where, ok, lost = pages
     after = int(np.searchsorted(where, position))
     if after == len(where) or where[after] >= limit:
         return None
-    page, counts = int(where[after]), (int(ok[after]), int(lost[after]))
+    page = int(where[after] if sent is None else sent[after])
+    counts = (int(ok[after]), int(lost[after]))
     counted = counted_start(encoders, page, *counts)
     return counted if fresh is None else fresh_counted_start(
         fresh[0], fresh[1], page, counts, (counted, fresh[2][1], fresh[2][0]))
-
-
-def encoder_count_pages(
-    frames: FrameArrays, decoder: BulkDecoder
-) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64], npt.NDArray[np.int64]]:
-    """Positions, ENC_E2E_OK and ENC_E2E_LOST (0 where the DBC has none) of the ODOM_STATUS
-    pages of WHEEL_ENCODERS E2E counts whose CRC holds (empty when the log or the DBC has
-    none)."""
-    none = (np.zeros(0, dtype=np.int64),) * 3
-    try:
-        page = decoder.decode_page(frames, "ODOM_STATUS", ENC_E2E_PAGE)
-    except DecodeError:
-        return none
-    if "ENC_E2E_OK" not in page:
-        return none
-    good = crc_holds(frames, decoder, page["index"])
-    lost = page.get("ENC_E2E_LOST", np.zeros(len(good), dtype=np.int64))
-    return (page["index"][good].astype(np.int64), page["ENC_E2E_OK"][good].astype(np.int64),
-            lost[good].astype(np.int64))
 
 
 def two_sources(frames: FrameArrays, decoder: BulkDecoder) -> tuple[int, float] | None:

@@ -42,6 +42,7 @@ from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.analysis import Tolerance
 from odocan.host.judge.bootnamed import named_start, pose_enc_rows, powerup_poses
 from odocan.host.judge.gapseen import crc_holds
+from odocan.host.judge.pagesent import pages_counted_from
 from odocan.host.judge.powerup import holds_first_cycle
 from odocan.host.judge.reboots import (
     encoder_count_pages,
@@ -157,7 +158,8 @@ def first_power_up(frames: FrameArrays, decoder: BulkDecoder,
     where, ok, lost = encoder_count_pages(frames, decoder)  # each page where it was sent
     sent = status_pages_sent_at(frames, decoder, where)
     counted = page_counted_start(position, len(frames), (track.index, track.counter),
-                                 (sent, ok, lost))
+                                 (sent, ok, lost), sent=np.minimum(sent, pages_counted_from(
+                                     frames, decoder, where)))  # held back in order too
     if "COUNTER" in page and not holds_first_cycle(int(page["COUNTER"][row])):
         # not the boot summary (lost): the firmware powered up a cycle or more before it
         return None if counted is None or counted <= int(track.index[0]) else (counted, position)

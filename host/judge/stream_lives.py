@@ -4,7 +4,8 @@ A reboot is a summary (ODOM_STATUS page 0, CRC holding) that ``SourceWatch`` cal
 bus order as in the whole log. Its life starts at the summary, at the latest accepted encoder
 frame before it (UPTIME 0, not INIT), or at the encoder frame its first page of WHEEL_ENCODERS
 E2E counts names (``primed.counted_start``: ENC_E2E_OK + ENC_E2E_LOST - 1 COUNTER steps back
-from that page's latest encoder frame, when the page comes before the next reboot), except when
+from the latest encoder frame before that page was sent, ``pagesent.StreamPages``: a page
+waits for the next ODOM_STATUS frame, when the page comes before the next reboot), except when
 the new firmware stalled before its first count page or its first pose (``reboots
 .stalled_first``: its page misses the frames its halted MCU's FIFO overran; the firmware's signs
 of life are carried for it, the last 2^16). Carried: the watch, the positions, COUNTERs and
@@ -56,9 +57,10 @@ from odocan.host.judge.heldsummaries import held_back_heard
 from odocan.host.judge.latefall import continues_twice, fell_late
 from odocan.host.judge.livestreams import pose_told_first
 from odocan.host.judge.navrestart import Carried, second_evidence
+from odocan.host.judge.pagesent import Counts, StreamPages
 from odocan.host.judge.primed import counted_start
 from odocan.host.judge.reboots import SUMMARY_PAGE, mark_two_sources
-from odocan.host.judge.samples import ENC_E2E_PAGE, AnalysisError, contract_cycle_s
+from odocan.host.judge.samples import AnalysisError, contract_cycle_s
 from odocan.host.judge.silentboot import fresh_counted_start, quiet_start
 from odocan.host.judge.sources import SourceWatch, two_sources_text
 from odocan.host.judge.stalls import silent_between, stalled_before
@@ -141,13 +143,17 @@ class StreamLives:
     # (or the next summary, ``continues_summary``) not heard yet (``bootticks.boot_ahead``): its
     # reboot if that tells one, whether it broke the status sequence, whether its pose left it
     # to the next summary; the chunk's events after it wait with it (``_deferred``)
-    _deferred: list[tuple[int, _Boot | tuple[int, int]]] = field(default_factory=list)
+    _deferred: list[tuple[int, _Boot | Counts]] = field(default_factory=list)
     _naming: list[_Boot] = field(default_factory=list)  # reboots whose ``naming`` is not told
     _poses: bootnamed.PoseRows = field(default_factory=bootnamed.pose_rows_none)  # ran_on_to
     _ahead_fall: bool = False  # the ``_ahead`` posed needs a twist's DISTANCE fallen
     _late: bool = False  # ... continued with none yet: the next summary reads a late one
+    _pages: StreamPages = field(init=False)  # the count pages, each where it was sent
     _falls: tuple[Falls, Carried | None] = field(  # the twists whose DISTANCE fell, the
         default_factory=lambda: (no_falls(), None))  # NAV_STATUS restarts (all kept), carried
+
+    def __post_init__(self) -> None:
+        self._pages = StreamPages(self.decoder)
 
     def feed(self, chunk: FrameArrays, accepted: npt.NDArray[np.bool_]) -> None:
         """Take the next chunk's accepted encoder frames, reboots and count pages."""
@@ -165,7 +171,9 @@ class StreamLives:
                                                                         self._offset))
         falls, twist = second_evidence(chunk, self.decoder, TWIST_COUNTERS, self._falls[1])
         self._falls = (joined(self._falls[0], falls), twist)  # rare: all kept
-        events = sorted(self._deferred + self._boot_events(chunk) + self._page_events(chunk),
+        pages = self._pages.feed(chunk, self._offset, (self._every[1],
+                                                       self._every[0].timestamp_s))
+        events = sorted(self._deferred + self._boot_events(chunk) + list(pages),
                         key=lambda event: event[0])
         self._corroborate(chunk)
         self._carry_alive(chunk)
@@ -206,7 +214,7 @@ class StreamLives:
             boot.named, boot.naming = (boot.naming[0] if counted else None), None
         self._naming = [b for b in self._naming if b.naming is not None]
 
-    def _run(self, events: list[tuple[int, _Boot | tuple[int, int]]]) -> None:
+    def _run(self, events: list[tuple[int, _Boot | Counts]]) -> None:
         """Reboots and count pages in log order."""
         for position, boot in events:
             if isinstance(boot, _Boot):
@@ -217,7 +225,8 @@ class StreamLives:
 
     def finish(self, n_frames: int | None = None) -> list[LifeSpan]:
         """The lives (``n_frames``: the log's frames, default all fed)."""
-        self._run(self._deferred)  # a last summary with no pose after it: no reboot
+        self._run(sorted(self._deferred + list(self._pages.finish()),  # a last summary with no
+                         key=lambda event: event[0]))  # pose after it: no reboot
         self._ahead, self._deferred = None, []
         self._decide(None)
         stop = self._offset if n_frames is None else n_frames
@@ -263,18 +272,19 @@ class StreamLives:
             mark_two_sources(report, self.conflict[1], n_frames - self._cut, self._detail)
         return report
 
-    def _decide(self, page: tuple[int, tuple[int, int]] | None, limit: int | None = None
-                ) -> None:
+    def _decide(self, page: tuple[int, Counts] | None, limit: int | None = None) -> None:
         """The waiting reboot's start, from its first count page (position, (ENC_E2E_OK,
-        ENC_E2E_LOST)) or without one (``limit``: the next reboot's position, None: the log's
-        end). A page heard before the reboot's first pose waits for it (``_settle``)."""
+        ENC_E2E_LOST, where it was sent: ``pagesent``)) or without one (``limit``: the next
+        reboot's position, None: the log's end). A page heard before the reboot's first pose
+        waits for it (``_settle``)."""
         boot = self._waiting
         if boot is None or (page is not None and boot.paged):  # its first page only
             return
         if page is not None:
             boot.paged, boot.page_at = True, page[0]
-            boot.counted = fresh_counted_start(self._every, self.decoder, page[0], page[1], (
-                counted_start((self._encoders, self._counters), page[0], *page[1]),
+            sent, counts = page[1][2], page[1][:2]  # counted from where it was sent
+            boot.counted = fresh_counted_start(self._every, self.decoder, sent, counts, (
+                counted_start((self._encoders, self._counters), sent, *counts),
                 summary_start(boot.position, boot.uptime_s, boot.state, self._every[1]),
                 self._boots[-1][1] if self._boots else 0))
             if boot.pose is None or boot.pose[0] > page[0]:  # whether it stalled before
@@ -352,7 +362,7 @@ class StreamLives:
                 and (self._ahead is None or self._ahead[0].position > boot.pose[0])):
             self._decide(None, limit=None)
 
-    def _boot_events(self, chunk: FrameArrays) -> list[tuple[int, _Boot | tuple[int, int]]]:
+    def _boot_events(self, chunk: FrameArrays) -> list[tuple[int, _Boot | Counts]]:
         """The chunk's reboots (``reboots.boot_summaries``), at their positions in the log."""
         if not self._summaries:
             return []
@@ -383,7 +393,7 @@ class StreamLives:
         (pose_t, pose_counter, pose_new), self._pose = poses_before(
             chunk, self.decoder, index[good], self._pose)
         self._ahead_posed(rows, carried, -1, int(index[good][0]) if good.any() else None)
-        events: list[tuple[int, _Boot | tuple[int, int]]] = []
+        events: list[tuple[int, _Boot | Counts]] = []
         (status_t, status_counter), self._status = status_before(
             chunk, self.decoder, index[good], self._status)
         befores, self._held_before = heldboot.statuses_before(
@@ -464,7 +474,7 @@ class StreamLives:
             self._ahead_fall = not sure  # ... its twists' DISTANCE fallen (``distfall``)
 
     def _posed_told(self, t_s: float, uptime_s: int, counter: int
-                    ) -> list[tuple[int, _Boot | tuple[int, int]]]:
+                    ) -> list[tuple[int, _Boot | Counts]]:
         """The next summary (bus time ``t_s``, UPTIME, COUNTER) after an ``_ahead`` one its
         first pose left to it, before it is observed: that one's reboot when it continues its
         sequence (``SourceWatch.told_ahead``; one with no fall yet waits to the summary after,
@@ -483,18 +493,3 @@ class StreamLives:
             return []
         self._watch.take_ahead(ahead[0].t_s, ahead[0].uptime_s)
         return [(ahead[0].position, ahead[0])]
-
-    def _page_events(self, chunk: FrameArrays) -> list[tuple[int, _Boot | tuple[int, int]]]:
-        """The chunk's count pages whose CRC holds: (position in the log, (ENC_E2E_OK,
-        ENC_E2E_LOST))."""
-        try:
-            page = self.decoder.decode_page(chunk, "ODOM_STATUS", ENC_E2E_PAGE)
-        except (DecodeError, KeyError):
-            return []
-        if "ENC_E2E_OK" not in page or len(page["index"]) == 0:
-            return []
-        good = crc_holds(chunk, self.decoder, page["index"])
-        lost = page.get("ENC_E2E_LOST", np.zeros(len(good), dtype=np.int64))
-        return [(int(p) + self._offset, (int(ok), int(n))) for p, ok, n in
-                zip(page["index"][good].tolist(), page["ENC_E2E_OK"][good].tolist(),
-                    lost[good].tolist(), strict=True)]

@@ -112,6 +112,7 @@ class PoseTracker:
         # raw: ``fit`` corrects its start (livereference); where it starts (livestart)
         self.raw = RawReference(StepGate(geometry, self.counter_bits, self.restarts))
         self.lives = Lives(self)
+        self.status_heard: tuple[float, int] | None = None  # the latest ODOM_STATUS: t, COUNTER
         self.powerup = LivePowerUp()  # the latest power-up pose heard (bootnamed)
         self.truths = TruthJudge(self)  # SIM_TRUTH's parts, judged (livetruth)
         # the latest sample judged (``record``): on-board pose, corrected reference
@@ -223,6 +224,10 @@ class PoseTracker:
         """An accepted ODOM_STATUS at bus time ``t_s``: the firmware alive (``livefirst``);
         its raw ``signals``: a summary's word on a re-prime after a stall (``livereprime``)."""
         self.first.on_status(t_s, signals)  # INIT at UPTIME 0 still (livefirst: stallpowerup)
+        counter = None if signals is None or "COUNTER" not in signals else int(signals["COUNTER"])
+        if self.lives.page is not None and counter is not None:  # a count page's send told
+            self.lives.on_status(t_s, counter)
+        self.status_heard = None if counter is None else (t_s, counter)  # (``Lives.on_counts``)
         self.first.alive.append((t_s, self.enc_seq + 1))
         self.reprime.quiet.since = 0  # the firmware talked (``reprimereplay.QuietFrames``)
         if signals is not None:
