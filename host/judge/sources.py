@@ -124,6 +124,8 @@ class SourceWatch:
         default_factory=lambda: deque(maxlen=RECENT_TWISTS))  # read as ``twists`` are
     order: StatusOrder = field(default_factory=StatusOrder)  # ODOM_STATUS frames held back,
     # live (``hear_status``; ``livelatestatus``)
+    pose_order: StatusOrder = field(default_factory=StatusOrder)  # ODOM_POSE_X's (``hear_pose``)
+    pose_late: bool = False  # the latest ODOM_POSE_X of COUNTER 0 heard was held back
 
     def on_page(self, page: str, signals: dict[str, Any], tracker: PoseTracker) -> bool:
         """An accepted ODOM_STATUS ``page`` (``"summary"``, ``"e2e_wheel_encoders"``, ...):
@@ -172,7 +174,7 @@ class SourceWatch:
 
     def observe(self, t_s: float, uptime_s: int, state: str, counter: int | None = None,
                 ahead: bool = False, seq: int | None = None, fell: bool | None = None,
-                late: bool | None = None) -> str | None:
+                late: bool | None = None, pose_late: bool | None = None) -> str | None:
         """One ODOM_STATUS summary (``counter``: its E2E COUNTER, None: not told; with the
         watch's ``pose``, the run of the ODOM_POSE_X frames heard before the summary, it tells
         a power-up tick: ``bootticks.boot_tick``; ``ahead``: the first pose after it told one,
@@ -180,10 +182,17 @@ class SourceWatch:
         ``fell``: a twist of that run fell, ``bootticks.fell_in_run``, a log's; None: read from
         ``twists``, live; ``late``: the bus held it back behind later ODOM_STATUS frames and it
         says no reboot against the summary sent before it, ``livelatestatus``, a log's; None:
-        ``order``'s, live); returns ``"reboot"``, ``"two sources"``, ``"uptime jump"`` or
-        None. Such a summary is none of them: it says the UPTIME and state its firmware had
-        when it sent it, and is passed over unless it is a power-up tick. A summary the first
-        pose after it may tell is kept in ``ahead`` (live: ``hear_pose``, ``told_ahead``)."""
+        ``order``'s, live; ``pose_late``: the pose of COUNTER 0 that began ``pose`` was held
+        back too, ``heldsummaries.pose_zeros_held``, a log's; None: the watch's, live); returns
+        ``"reboot"``, ``"two sources"``, ``"uptime jump"`` or None. Such a summary is none of
+        them: it says the UPTIME and state its firmware had when it sent it, and is passed over
+        unless it is a power-up tick whose pose of COUNTER 0 was not held back with it. Both
+        filling a hole of their own sequence, they are an old life's power-up tick (its
+        COUNTERs 0 heard after its 1..7); a new firmware's pose of COUNTER 0 repeats one heard
+        in order, unless the bus lost that one as well. Issue #11: the log's first tick held
+        back 150 ms (kobuki random 696, ``delay=0.1:150``) was told a reboot at 0.151 s by
+        every judge. A summary the first pose after it may tell is kept in ``ahead`` (live:
+        ``hear_pose``, ``told_ahead``)."""
         offset = uptime_s - t_s
         kind = None
         booted = counter is not None and boot_tick(uptime_s, counter, t_s, self.pose,
@@ -192,7 +201,9 @@ class SourceWatch:
             fell = self._fell_in_run(t_s) if fell is None else fell
             booted = boot_tick(uptime_s, counter, t_s, self.pose, self.summary_s,
                                self.status_before, fell)
-        if not booted and (self.order.passed_over(uptime_s, state) if late is None else late):
+        held_tick = self.pose_late if pose_late is None else pose_late
+        if (not booted or held_tick) and (
+                self.order.passed_over(uptime_s, state) if late is None else late):
             return None  # held back, it tells no reboot (``livelatestatus``)
         broke = (None if booted or counter is None else
                  ahead_candidate(uptime_s, counter, t_s, self.summary_s, self.status_before))
@@ -249,6 +260,8 @@ class SourceWatch:
         before = None if self.pose is None or self.pose_s is None else (self.pose_s, self.pose[1])
         self.pose = next_run(self.pose, t_s, counter, self.pose_s)
         self.pose_s = t_s
+        held = self.pose_order.hear(counter)  # a hole of its sequence filled (livelatestatus)
+        self.pose_late = held if counter == 0 else self.pose_late
         if self.ahead is not None or self.ahead_posed is not None or self.ahead_late is not None:
             self.ahead_heard.append(t_s)
         ahead, self.ahead = self.ahead, None
