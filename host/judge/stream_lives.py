@@ -378,7 +378,7 @@ class StreamLives:
         choices = dict(message.get_signal_by_name("STATE").choices or {})
         names = [str(choices.get(int(state), int(state))) for state in page["STATE"].tolist()]
         said = list(zip(page["UPTIME"].tolist(), names, strict=True))
-        late, zeros = heard_in_chunk(self._watch, chunk, self.decoder, index, said, good)
+        late, evidence = heard_in_chunk(self._watch, chunk, self.decoder, index, said, good)
         carried, rows = self._pose, pose_rows(chunk, self.decoder)
         (pose_t, pose_counter, pose_new), self._pose = poses_before(
             chunk, self.decoder, index[good], self._pose)
@@ -395,7 +395,7 @@ class StreamLives:
             page["COUNTER"][good].tolist(), following,
             zip(pose_t.tolist(), pose_counter.tolist(), pose_new.tolist(), strict=True),
             zip(status_t.tolist(), status_counter.tolist(), strict=True),
-            zip(late.tolist(), zeros.tolist(), strict=True), befores, strict=True,
+            zip(late.tolist(), evidence.tolist(), strict=True), befores, strict=True,
         ):
             name = str(choices.get(int(state), int(state)))
             events += self._posed_told(float(t_s), int(uptime_s), int(counter))
@@ -404,7 +404,7 @@ class StreamLives:
             self._watch.status_before = (status[0], int(status[1])) if status[1] >= 0 else None
             kind = self._watch.observe(float(t_s), int(uptime_s), name, int(counter),
                                        fell=fell_in_run(self._falls[0], float(t_s)),
-                                       late=held[0], pose_late=held[1])
+                                       late=held[0], held=tuple(held[1]))
             at = int(position) + self._offset
             if self._watch.changed_at_s == float(t_s):
                 self._changed = (at, float(t_s))
