@@ -8,9 +8,13 @@ COUNTER 2 (UPTIME 0, 0.101 s). Both broke their message's sequence, the summary 
 pose: a power-up tick's signature (``host.judge.bootticks``), which overrode the summary's being
 held back (``host.judge.livelatestatus``: it fills a hole of its sender's sequence). Every judge
 (run, ``analyze`` whole and streamed, the monitor, the bridge) reported "reboots 1: the firmware
-restarted at 0.15 s (power-up)" where none was. Both frames fill a hole of their own sequence:
-the old life's frames held back, not a new firmware's (whose COUNTER 0 repeats one heard in
-order unless the bus lost the old one too); such a tick is passed over.
+restarted at 0.15 s (power-up)" where none was. kobuki random 690, ``delay=0.1:150`` alone: the
+pose of COUNTER 0 sent at 0.641 s heard at 0.791 s after COUNTER 6, the summary of COUNTER 0 in
+order at 0.801 s, but right after the summary of COUNTER 12 held back from 0.601 s: told a
+reboot at 0.801 s by every judge. A frame that fills a hole of its sender's sequence was sent
+before frames already heard: its COUNTER's step breaks no life's sequence, so it is no power-up
+tick's evidence (a new firmware's COUNTER 0 repeats one heard in order, unless the bus lost the
+old one too).
 """
 
 from __future__ import annotations
@@ -32,6 +36,11 @@ POSE, SUMMARY, PAGE = "pose", "summary", "page"
 HELD_TICK = [(POSE, 0.021, 1), (POSE, 0.061, 3), (POSE, 0.081, 4), (POSE, 0.101, 5),
              (SUMMARY, 0.101, 2), (PAGE, 0.101, 3), (POSE, 0.121, 6), (POSE, 0.141, 7),
              (POSE, 0.151, 0), (SUMMARY, 0.151, 0)]
+# seed 690's 0.56 .. 0.801 s: the pose of COUNTER 0 and the summary of COUNTER 12 held back
+HELD_ZERO = [*[(POSE, 0.56 + 0.02 * k, 12 + k) for k in range(4)], (PAGE, 0.60, 13),
+             *[(POSE, 0.64 + 0.02 * c, c) for c in (1, 2, 3)], (SUMMARY, 0.70, 14),
+             (PAGE, 0.70, 15), (POSE, 0.72, 4), (SUMMARY, 0.75, 12), (POSE, 0.76, 6),
+             (POSE, 0.79, 0), (SUMMARY, 0.80, 0)]
 # a firmware whose status COUNTER 0 the bus lost, its poses heard in order, reset at 0.15 s
 LOST_STATUS_REBOOT = [*[(POSE, 0.001 + 0.02 * c, c) for c in range(8)], (SUMMARY, 0.101, 2),
                       (PAGE, 0.101, 3), (POSE, 0.151, 0), (SUMMARY, 0.151, 0)]
@@ -50,8 +59,9 @@ def _watched(heard: list[tuple[str, float, int]]) -> list[str | None]:
     return kinds
 
 
-def test_a_held_back_power_up_tick_is_no_reboot() -> None:
-    assert _watched(HELD_TICK) == [None, None]
+@pytest.mark.parametrize("heard", [HELD_TICK, HELD_ZERO], ids=["696", "690"])
+def test_frames_held_back_tell_no_power_up_tick(heard: list[tuple[str, float, int]]) -> None:
+    assert _watched(heard) == [None] * sum(kind == SUMMARY for kind, _, _ in heard)
 
 
 def test_a_reboot_whose_old_status_counter_0_was_lost_is_still_one() -> None:
@@ -86,10 +96,12 @@ def reboots_told(log: Path, run_report: dict[str, Any]) -> dict[str, list[float]
     return told
 
 
-@pytest.fixture(scope="module")
-def held_drive(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, int, dict[str, Any]]:
+@pytest.fixture(scope="module", params=[(696, HELD), (690, "delay=0.1:150")],
+                ids=["696", "690"])
+def held_drive(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory
+               ) -> tuple[Path, int, dict[str, Any]]:
     log = tmp_path_factory.mktemp("held") / "d.log"
-    return (log, *_run(log, 696, HELD))
+    return (log, *_run(log, *request.param))
 
 
 def test_no_judge_reports_a_reboot_on_the_held_back_tick(
@@ -104,3 +116,41 @@ def test_x_10_mm_off_from_0_2_s_fails(held_drive: tuple[Path, int, dict[str, Any
                                       tmp_path: Path) -> None:
     log, _, _ = held_drive
     assert x_10_mm_off_fails(log, tmp_path / "t.log", 0.2, 300) == []
+
+
+REAL = "reboot=0.2:0.2,delay=0.1:150"  # reset at 0.2 s, the new firmware up at 0.4 s
+
+
+def test_a_real_early_reboot_under_the_delay_is_still_told(tmp_path: Path) -> None:
+    """kobuki random 697: the firmware reset at 0.2 s, up again at 0.4 s under the same delay:
+    every judge tells that one reboot, the correct firmware PASSes, X 10 mm off after FAILs."""
+    log = tmp_path / "d.log"
+    code, report = _run(log, 697, REAL)
+    assert code == 0
+    told = reboots_told(log, report)
+    assert [len(times) for times in told.values()] == [1] * 5, told
+    assert all(abs(t - 0.4) < 0.02 for key, times in told.items() if key != "bridge"
+               for t in times), told
+    assert x_10_mm_off_fails(log, tmp_path / "t.log", 0.6, 300) == []
+
+
+HELD_BOOT = (
+    "not fixed (before this change as well): a reboot in the firmware's first second whose boot "
+    "summary the delay held back 150 ms, past the power-up tick's 80 ms window "
+    "(bootticks.BOOT_WINDOW_MS), is not told: UPTIME says 0 in both lives and the summary "
+    "fills a hole of the status sequence (livelatestatus). kobuki random 696 reboot=0.2:0.2: "
+    "the new firmware's summary of COUNTER 0 sent at 0.401 s heard at 0.551 s; FAIL by "
+    "ODOM_TWIST 7.83 mm/s, DISTANCE 1.0 mm, the pose at 0.420 s 2.77 mm beyond a resume (the "
+    "false reboot at 0.151 s told before: DISTANCE 1.94 mm, FAIL too). reboot=0.5: sent 0.501 "
+    "s, heard 0.651 s; 72.1 mm off, DISTANCE 3 mm (before: PASS by chance, the false reboot at "
+    "0.151 s reported, its life started at the real one's frame by the first count page after "
+    "it, reboots.page_counted_start). Its tick's page (COUNTER 1, heard in order at 0.401 / "
+    "0.501 s, breaking the status sequence) and the new pose run of COUNTER 0 there would tell it")
+
+
+@pytest.mark.xfail(strict=True, reason=HELD_BOOT)
+@pytest.mark.parametrize("faults", [REAL, "reboot=0.5,delay=0.1:150"])
+def test_a_reboot_whose_boot_summary_was_held_past_the_window(faults: str,
+                                                               tmp_path: Path) -> None:
+    code, report = _run(tmp_path / "d.log", 696, faults)
+    assert (code, len(report["reboots"])) == (0, 1), [b["t_s"] for b in report["reboots"]]
