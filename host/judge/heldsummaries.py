@@ -11,6 +11,7 @@ import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.bootticks import pose_rows, status_rows
+from odocan.host.judge.liveheldpose import PoseOrder
 from odocan.host.judge.livelatestatus import StatusOrder, held_back
 from odocan.host.protocol.decode import BulkDecoder
 
@@ -34,16 +35,18 @@ def summaries_held_back(frames: FrameArrays, decoder: BulkDecoder,
                                                                                bool)
 
 
-def pose_zeros_held(order: StatusOrder, latest: bool, frames: FrameArrays, decoder: BulkDecoder,
+def pose_zeros_held(order: PoseOrder, latest: bool, frames: FrameArrays, decoder: BulkDecoder,
                     positions: npt.NDArray[np.int64]) -> tuple[npt.NDArray[np.bool_], bool]:
     """Per frame at ``positions`` (in order): whether the latest ODOM_POSE_X of COUNTER 0 heard
     before it (CRC holding, whatever its sequence) was held back behind later poses of its
-    sender, ``order`` (``livelatestatus``; the live ``SourceWatch.hear_pose``'s) hearing every
+    sender within a sequence unbroken since, ``order`` (``liveheldpose``; the live
+    ``SourceWatch.hear_pose``'s) hearing every
     such pose of ``frames`` in bus order; and that of the last of them all (``latest``: of the
     poses before ``frames``, a stream's earlier chunks). Its break of the pose sequence is no
     power-up tick's evidence (``SourceWatch.observe``)."""
-    where, _, counters = pose_rows(frames, decoder)
-    held = np.array([order.hear(c) for c in counters.tolist()], dtype=bool)
+    where, times, counters = pose_rows(frames, decoder)
+    held = np.array([order.hear(c, t) for c, t in zip(counters.tolist(), times.tolist(),
+                                                      strict=True)], dtype=bool)
     zeros = np.flatnonzero(counters == 0)
     k = np.searchsorted(where[zeros], positions) - 1  # the latest strictly before each
     found = held[zeros][np.maximum(k, 0)] if len(zeros) else np.zeros(len(positions), bool)
@@ -81,7 +84,7 @@ def held_evidence(frames: FrameArrays, decoder: BulkDecoder, positions: npt.NDAr
     read only when ``needed`` (a summary may be a power-up tick), else none."""
     if not needed:
         return np.zeros((len(positions), 2), dtype=bool)
-    poses = pose_zeros_held(StatusOrder(), False, frames, decoder, positions)[0]
+    poses = pose_zeros_held(PoseOrder(), False, frames, decoder, positions)[0]
     said = [(0, "")] * len(positions)  # (passing over is ``summaries_held_back``'s)
     statuses = statuses_held(StatusOrder(), False, frames, decoder, (positions, said))[1]
     return np.stack((poses, statuses), axis=1)

@@ -44,6 +44,7 @@ from odocan.host.judge.distfall import (
 from odocan.host.judge.latefall import continues_twice, tied_late
 from odocan.host.judge.liveadopted import LATE_REBOOT
 from odocan.host.judge.livegapseen import heard_status
+from odocan.host.judge.liveheldpose import PoseOrder
 from odocan.host.judge.livelatestatus import StatusOrder
 from odocan.host.judge.livestreams import LiveStreams, hear_pose_frame, pose_told_first
 from odocan.host.judge.navrestart import NAV_MESSAGE, restarted_within
@@ -124,7 +125,7 @@ class SourceWatch:
         default_factory=lambda: deque(maxlen=RECENT_TWISTS))  # read as ``twists`` are
     order: StatusOrder = field(default_factory=StatusOrder)  # ODOM_STATUS frames held back,
     # live (``hear_status``; ``livelatestatus``)
-    pose_order: StatusOrder = field(default_factory=StatusOrder)  # ODOM_POSE_X's (``hear_pose``)
+    pose_order: PoseOrder = field(default_factory=PoseOrder)  # ODOM_POSE_X's (``hear_pose``)
     pose_late: bool = False  # the latest ODOM_POSE_X of COUNTER 0 heard was held back
     status_late: tuple[bool, bool] = (False, False)  # the ODOM_STATUS frame before the latest
     # and the latest were held back (``order``; as ``status_before`` and ``status_last``)
@@ -265,7 +266,7 @@ class SourceWatch:
         before = None if self.pose is None or self.pose_s is None else (self.pose_s, self.pose[1])
         self.pose = next_run(self.pose, t_s, counter, self.pose_s)
         self.pose_s = t_s
-        held = self.pose_order.hear(counter)  # a hole of its sequence filled (livelatestatus)
+        held = self.pose_order.hear(counter, t_s)  # a hole of its sequence filled (liveheldpose)
         self.pose_late = held if counter == 0 else self.pose_late
         if self.ahead is not None or self.ahead_posed is not None or self.ahead_late is not None:
             self.ahead_heard.append(t_s)
