@@ -1,6 +1,6 @@
-"""Which ODOM_STATUS summaries of a whole log the bus held back and say no reboot, and which
-power-up ticks' poses it held back with them (``host.judge.livelatestatus``), for
-``host.judge.reboots`` and ``host.judge.stream_lives``."""
+"""Which ODOM_STATUS summaries of a log the bus held back and say no reboot, and which
+frames it held back are no power-up tick's evidence (``host.judge.livelatestatus``,
+``host.judge.liveheldpose``), for ``host.judge.reboots`` and ``host.judge.stream_lives``."""
 
 from __future__ import annotations
 
@@ -40,10 +40,10 @@ def pose_zeros_held(order: PoseOrder, latest: bool, frames: FrameArrays, decoder
     """Per frame at ``positions`` (in order): whether the latest ODOM_POSE_X of COUNTER 0 heard
     before it (CRC holding, whatever its sequence) was held back behind later poses of its
     sender within a sequence unbroken since, ``order`` (``liveheldpose``; the live
-    ``SourceWatch.hear_pose``'s) hearing every
-    such pose of ``frames`` in bus order; and that of the last of them all (``latest``: of the
-    poses before ``frames``, a stream's earlier chunks). Its break of the pose sequence is no
-    power-up tick's evidence (``SourceWatch.observe``)."""
+    ``SourceWatch.hear_pose``'s) hearing every such pose of ``frames`` in bus order; and that
+    of the last of them all (``latest``: of the poses before ``frames``, a stream's earlier
+    chunks). Its break of the pose sequence is no power-up tick's evidence
+    (``SourceWatch.observe``)."""
     where, times, counters = pose_rows(frames, decoder)
     held = np.array([order.hear(c, t) for c, t in zip(counters.tolist(), times.tolist(),
                                                       strict=True)], dtype=bool)

@@ -40,8 +40,11 @@ class PoseOrder:
         within a sequence unbroken since the hole it fills (no power-up tick's evidence)."""
         if not self.order.hear(counter):
             steps = (counter - self.top - 1) % POSE_COUNTER_LAP + 1
-            self.broke[counter] = (self.top >= 0 and counter != self.top
-                                   and t_s - self.top_s < steps * POSE_PERIOD_S - SEQUENCE_SLACK_S)
+            self.broke[counter] = (
+                self.top >= 0
+                and counter != self.top
+                and t_s - self.top_s < steps * POSE_PERIOD_S - SEQUENCE_SLACK_S
+            )
             self.top, self.top_s = counter, t_s
             return False
         ahead = [((c - counter) & ENC_COUNTER_MASK, c) for c in self.order.recent]

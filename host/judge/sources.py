@@ -223,8 +223,8 @@ class SourceWatch:
             ):
                 kind = "reboot"
                 self.offset_s = offset
-                held = booted and not ahead and self.pose
-                self.life_from_s = min(t_s, self.pose[0]) if held and self.pose else t_s
+                in_run = booted and not ahead and self.pose
+                self.life_from_s = min(t_s, self.pose[0]) if in_run and self.pose else t_s
             elif broke is not None:  # the first pose after it may tell it (``hear_pose``)
                 self.ahead, self.ahead_heard = (t_s, uptime_s, state, seq, broke), [t_s]
         elif self.other_s is not None and abs(offset - self.other_s) <= UPTIME_MATCH_S:
