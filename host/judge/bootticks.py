@@ -163,20 +163,22 @@ def next_run(run: tuple[float, int, bool] | None, t_s: float, counter: int,
 
 def boot_tick(uptime_s: int, counter: int, t_s: float, pose: tuple[float, int, bool] | None,
               summary_before_s: float | None, status_before: tuple[float, int] | None,
-              fell: bool = False) -> bool:
+              fell: bool = False, held: bool = False) -> bool:
     """The summary (UPTIME ``uptime_s``, E2E ``counter``, bus time ``t_s``) is a firmware's
     power-up tick (module docstring): ``pose``, the pose run of the ODOM_POSE_X frames heard
     before it (``next_run``; None: none); ``summary_before_s``: the bus time of the summary
     before (None: none); ``status_before``: bus time and COUNTER of the ODOM_STATUS frame
     heard before it (any page; None: none). The run's pose of COUNTER 0 or the summary must
     break its message's sequence (``breaks_sequence``, ``status_breaks``), or the twists'
-    DISTANCE fell in the run's window (``fell``: ``fell_in_run``)."""
+    DISTANCE fell in the run's window (``fell``: ``fell_in_run``). ``held``: the summary or
+    the ODOM_STATUS frame before it was held back by the bus (``livelatestatus``): their
+    COUNTERs' step says nothing of a new life (``SourceWatch.observe``)."""
     if not RULE_HOLDS or uptime_s != 0 or counter != 0 or pose is None:
         return False
     if summary_before_s is not None and t_s - summary_before_s < REPEAT_S:
         return False
-    broken = fell or pose[2] or status_before is None or status_breaks(status_before[1],
-                                                                       t_s - status_before[0])
+    broken = fell or pose[2] or (not held and (status_before is None or status_breaks(
+        status_before[1], t_s - status_before[0])))
     return broken and 0 <= pose[1] < BOOT_POSE_FRAMES and 0.0 <= t_s - pose[0] < BOOT_WINDOW_S
 
 

@@ -77,7 +77,7 @@ from odocan.host.judge.breaks import merged_breaks
 from odocan.host.judge.gapseen import crc_holds
 from odocan.host.judge.heldboot import held_start, held_ticks
 from odocan.host.judge.heldboot import summary_start as summary_start
-from odocan.host.judge.heldsummaries import summaries_held_back
+from odocan.host.judge.heldsummaries import held_evidence, summaries_held_back
 from odocan.host.judge.liveconfig import config_text
 from odocan.host.judge.navrestart import second_evidence
 from odocan.host.judge.pagesent import encoder_count_pages as encoder_count_pages
@@ -259,6 +259,7 @@ def _watch_summaries(
     booted = boot_ticks(uptimes_s, counters, times_s, poses, statuses, None, falls)
     ahead = ahead_ticks(frames, decoder, positions, uptimes_s, counters, times_s, statuses)
     late = summaries_held_back(frames, decoder, (positions, uptimes_s, states))
+    held = held_evidence(frames, decoder, positions, bool(booted.any()))
     watch = SourceWatch()
     boots = []
     changed, conflict = 0, None  # the summary of the last new offset; where two sources began
@@ -281,7 +282,7 @@ def _watch_summaries(
                                else (float(statuses[0][k]), status_counter))
         kind = watch.observe(float(times_s[k]), int(uptimes_s[k]), name, int(counters[k]),
                              bool(ahead[k]), fell=fell_in_run(falls, float(times_s[k])),
-                             late=bool(late[k]))
+                             late=bool(late[k]), held=(bool(held[k, 0]), bool(held[k, 1])))
         if kind == "reboot":
             boots.append((int(positions[k]), int(uptimes_s[k]), name, int(before)))
         if watch.changed_at_s == float(times_s[k]):

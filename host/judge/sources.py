@@ -44,6 +44,7 @@ from odocan.host.judge.distfall import (
 from odocan.host.judge.latefall import continues_twice, tied_late
 from odocan.host.judge.liveadopted import LATE_REBOOT
 from odocan.host.judge.livegapseen import heard_status
+from odocan.host.judge.liveheldpose import PoseOrder
 from odocan.host.judge.livelatestatus import StatusOrder
 from odocan.host.judge.livestreams import LiveStreams, hear_pose_frame, pose_told_first
 from odocan.host.judge.navrestart import NAV_MESSAGE, restarted_within
@@ -124,6 +125,10 @@ class SourceWatch:
         default_factory=lambda: deque(maxlen=RECENT_TWISTS))  # read as ``twists`` are
     order: StatusOrder = field(default_factory=StatusOrder)  # ODOM_STATUS frames held back,
     # live (``hear_status``; ``livelatestatus``)
+    pose_order: PoseOrder = field(default_factory=PoseOrder)  # ODOM_POSE_X's (``hear_pose``)
+    pose_late: bool = False  # the latest ODOM_POSE_X of COUNTER 0 heard was held back
+    status_late: tuple[bool, bool] = (False, False)  # the ODOM_STATUS frame before the latest
+    # and the latest were held back (``order``; as ``status_before`` and ``status_last``)
 
     def on_page(self, page: str, signals: dict[str, Any], tracker: PoseTracker) -> bool:
         """An accepted ODOM_STATUS ``page`` (``"summary"``, ``"e2e_wheel_encoders"``, ...):
@@ -172,7 +177,7 @@ class SourceWatch:
 
     def observe(self, t_s: float, uptime_s: int, state: str, counter: int | None = None,
                 ahead: bool = False, seq: int | None = None, fell: bool | None = None,
-                late: bool | None = None) -> str | None:
+                late: bool | None = None, held: tuple[bool, bool] | None = None) -> str | None:
         """One ODOM_STATUS summary (``counter``: its E2E COUNTER, None: not told; with the
         watch's ``pose``, the run of the ODOM_POSE_X frames heard before the summary, it tells
         a power-up tick: ``bootticks.boot_tick``; ``ahead``: the first pose after it told one,
@@ -180,18 +185,30 @@ class SourceWatch:
         ``fell``: a twist of that run fell, ``bootticks.fell_in_run``, a log's; None: read from
         ``twists``, live; ``late``: the bus held it back behind later ODOM_STATUS frames and it
         says no reboot against the summary sent before it, ``livelatestatus``, a log's; None:
-        ``order``'s, live); returns ``"reboot"``, ``"two sources"``, ``"uptime jump"`` or
-        None. Such a summary is none of them: it says the UPTIME and state its firmware had
-        when it sent it, and is passed over unless it is a power-up tick. A summary the first
-        pose after it may tell is kept in ``ahead`` (live: ``hear_pose``, ``told_ahead``)."""
+        ``order``'s, live; ``held``: whether the pose of COUNTER 0 that began ``pose`` was
+        held back, and whether the summary or the ODOM_STATUS frame before it was, a log's,
+        ``heldsummaries``; None: the watch's ``pose_late`` and ``status_late``, live); returns
+        ``"reboot"``, ``"two sources"``, ``"uptime jump"`` or None. Such a summary is none of
+        them: it says the UPTIME and state its firmware had when it sent it, and is passed over
+        unless it is a power-up tick. A frame held back breaks no sequence of a life (it fills
+        a hole of its sender's: ``livelatestatus``), so it is no power-up tick's evidence
+        (``bootticks.boot_tick``'s ``held``); a new firmware's pose of COUNTER 0 repeats one
+        heard in order, unless the bus lost that as well. Issue #11: kobuki random 696,
+        ``delay=0.1:150``: the log's own power-up tick (pose and summary) held back to 0.151 s;
+        690: the pose of COUNTER 0 of 0.641 s held back to 0.791 s, the summary of COUNTER 0 at
+        0.801 s right after a summary of COUNTER 12 held back: each was told a reboot by every
+        judge. A summary the first pose after it may tell is kept in ``ahead`` (live:
+        ``hear_pose``, ``told_ahead``)."""
         offset = uptime_s - t_s
         kind = None
-        booted = counter is not None and boot_tick(uptime_s, counter, t_s, self.pose,
-                                                   self.summary_s, self.status_before)
+        pose_held, status_held = (self.pose_late, any(self.status_late)) if held is None else held
+        pose = (self.pose[0], self.pose[1], False) if pose_held and self.pose else self.pose
+        booted = counter is not None and boot_tick(uptime_s, counter, t_s, pose, self.summary_s,
+                                                   self.status_before, held=status_held)
         if not booted and counter == 0 and uptime_s == 0 and self.pose is not None:
             fell = self._fell_in_run(t_s) if fell is None else fell
-            booted = boot_tick(uptime_s, counter, t_s, self.pose, self.summary_s,
-                               self.status_before, fell)
+            booted = boot_tick(uptime_s, counter, t_s, pose, self.summary_s,
+                               self.status_before, fell, held=status_held)
         if not booted and (self.order.passed_over(uptime_s, state) if late is None else late):
             return None  # held back, it tells no reboot (``livelatestatus``)
         broke = (None if booted or counter is None else
@@ -206,8 +223,8 @@ class SourceWatch:
             ):
                 kind = "reboot"
                 self.offset_s = offset
-                held = booted and not ahead and self.pose
-                self.life_from_s = min(t_s, self.pose[0]) if held and self.pose else t_s
+                in_run = booted and not ahead and self.pose
+                self.life_from_s = min(t_s, self.pose[0]) if in_run and self.pose else t_s
             elif broke is not None:  # the first pose after it may tell it (``hear_pose``)
                 self.ahead, self.ahead_heard = (t_s, uptime_s, state, seq, broke), [t_s]
         elif self.other_s is not None and abs(offset - self.other_s) <= UPTIME_MATCH_S:
@@ -249,6 +266,8 @@ class SourceWatch:
         before = None if self.pose is None or self.pose_s is None else (self.pose_s, self.pose[1])
         self.pose = next_run(self.pose, t_s, counter, self.pose_s)
         self.pose_s = t_s
+        held = self.pose_order.hear(counter, t_s)  # a hole of its sequence filled (liveheldpose)
+        self.pose_late = held if counter == 0 else self.pose_late
         if self.ahead is not None or self.ahead_posed is not None or self.ahead_late is not None:
             self.ahead_heard.append(t_s)
         ahead, self.ahead = self.ahead, None
@@ -296,7 +315,7 @@ class SourceWatch:
         ``counter``, whatever its sequence, before it is observed: the one before a summary
         tells whether it breaks the sequence (``bootticks.status_breaks``)."""
         self.status_before, self.status_last = self.status_last, (t_s, counter)
-        self.order.hear(counter)
+        self.status_late = (self.status_late[1], self.order.hear(counter))
         if self.ahead_posed is not None or self.ahead_late is not None:
             self.ahead_heard.append(t_s)
 

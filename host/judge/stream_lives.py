@@ -53,7 +53,7 @@ from odocan.host.judge.bootticks import (
 from odocan.host.judge.distfall import Falls, joined, no_falls
 from odocan.host.judge.gapseen import crc_holds
 from odocan.host.judge.heldboot import summary_start
-from odocan.host.judge.heldsummaries import held_back_heard
+from odocan.host.judge.heldsummaries import heard_in_chunk
 from odocan.host.judge.latefall import continues_twice, fell_late
 from odocan.host.judge.livestreams import pose_told_first
 from odocan.host.judge.navrestart import Carried, second_evidence
@@ -373,7 +373,7 @@ class StreamLives:
             self._summaries = False
             return []
         if len(page["index"]) == 0:  # the chunk's latest pose and status frame still count
-            held_back_heard(self._watch.order, chunk, self.decoder, page["index"], [])  # in order
+            heard_in_chunk(self._watch, chunk, self.decoder, page["index"], [])  # in order
             self._ahead_posed(pose_rows(chunk, self.decoder), self._pose, -1, None)
             self._pose = poses_before(chunk, self.decoder, page["index"], self._pose)[1]
             self._status = status_before(chunk, self.decoder, page["index"], self._status)[1]
@@ -387,8 +387,8 @@ class StreamLives:
         good = crc_holds(chunk, self.decoder, index)
         choices = dict(message.get_signal_by_name("STATE").choices or {})
         names = [str(choices.get(int(state), int(state))) for state in page["STATE"].tolist()]
-        late = held_back_heard(self._watch.order, chunk, self.decoder, index, list(
-            zip(page["UPTIME"].tolist(), names, strict=True)))[good]
+        said = list(zip(page["UPTIME"].tolist(), names, strict=True))
+        late, evidence = heard_in_chunk(self._watch, chunk, self.decoder, index, said, good)
         carried, rows = self._pose, pose_rows(chunk, self.decoder)
         (pose_t, pose_counter, pose_new), self._pose = poses_before(
             chunk, self.decoder, index[good], self._pose)
@@ -404,17 +404,17 @@ class StreamLives:
             page["UPTIME"][good].tolist(), page["STATE"][good].tolist(),
             page["COUNTER"][good].tolist(), following,
             zip(pose_t.tolist(), pose_counter.tolist(), pose_new.tolist(), strict=True),
-            zip(status_t.tolist(), status_counter.tolist(), strict=True), late.tolist(), befores,
-            strict=True,
+            zip(status_t.tolist(), status_counter.tolist(), strict=True),
+            zip(late.tolist(), evidence.tolist(), strict=True), befores, strict=True,
         ):
             name = str(choices.get(int(state), int(state)))
             events += self._posed_told(float(t_s), int(uptime_s), int(counter))
             before = self._watch.last_uptime_s
-            self._watch.pose = ((pose[0], int(pose[1]), bool(pose[2])) if pose[1] >= 0
-                                else None)
+            self._watch.pose = (pose[0], int(pose[1]), bool(pose[2])) if pose[1] >= 0 else None
             self._watch.status_before = (status[0], int(status[1])) if status[1] >= 0 else None
             kind = self._watch.observe(float(t_s), int(uptime_s), name, int(counter),
-                                       fell=fell_in_run(self._falls[0], float(t_s)), late=held)
+                                       fell=fell_in_run(self._falls[0], float(t_s)),
+                                       late=held[0], held=tuple(held[1]))
             at = int(position) + self._offset
             if self._watch.changed_at_s == float(t_s):
                 self._changed = (at, float(t_s))
