@@ -164,3 +164,18 @@ def test_a_pose_10_mm_off_fails_across_refused_gaps(
     codes = [code, *both_analyses(tampered)]
     capsys.readouterr()
     assert codes == [0, 1, 1]
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "issue #11: pmir seed 4, delay=0.5:150 (a correct drive, PASS): X raised 10 mm from 5.0 s "
+    "(251 frames) PASSes both analyses, on main 25423d7b too: the placement at the gap of the "
+    "log before encoder frame 273 moved the reference 9.94 mm where that gap allows 3.18 mm "
+    "(report: 89 gap placements, 10.01 mm absorbed within 7619 mm allowed); not traced "
+    "further (found by the delaylong sweep of seeds 1-10)"))
+def test_a_pose_10_mm_off_fails_pmir_4(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    log, _, code = _drive(tmp_path, "pmir", 4, "delay=0.5:150")
+    tampered = tmp_path / "t.log"
+    assert raise_x_10_mm(log, tampered, 5.0) > 100
+    codes = [code, *both_analyses(tampered)]
+    capsys.readouterr()
+    assert codes == [0, 1, 1]
