@@ -47,7 +47,14 @@ SKIPPED_BY_PLAUSIBILITY = (
     "4.21 s as REPEATED. The host's E2E takes the same two frames' verdicts without the pose "
     "evidence, but e2e_evidence's 'skipped' (the poses after 4.20 s name the frame before it) "
     "refuses the late one, and the on-time one is then taken into the reference: the evidence "
-    "cannot tell an E2E refusal from a plausibility one")
+    "cannot tell an E2E refusal from a plausibility one. Traced (delaylong, fw records): "
+    "after the on-time COUNTER 2 of 4.18 s (LEFT 39871) the firmware's E2E took the late 3 "
+    "(4.18 s, 40589) and 5 (4.20 s, 40491), its bound refused both, REPEATED the on-time 5 "
+    "(4.21 s, 39732) and stepped +329 left counts to the late 11 of 4.26 s (40200); the host "
+    "steps 39871 -> 39732 -> 40200 (-139, +468): the same pose (absolute counts), 278 counts "
+    "more path, DISTANCE 42.8 mm beyond on main 25423d7b's summary line. "
+    "e2e_implausible.by_stamps reads skips as the bound's only when a later frame proven taken "
+    "is refused by every window, which no frame here is")
 # Was a strict xfail (kobuki seed 2, delay=0.5:150): the first sample after a hold, at 5.14 s,
 # 0.097 mm beyond the resume rule's every candidate (stallfirst.resume_across). The firmware
 # re-primed twice across the hold (COUNTER_RESET on the first of three late frames, 150 ms old,
