@@ -340,7 +340,7 @@ def _analyze_life(
     onboard, stalls = after_stalls(onboard, sent_s, enc, pose_sent_s, alive_s, halves)
     left_out = judge_left_out(halves, onboard, enc, Geometry.of(robot), integrator, min(
         robot.counter_bits, WIRE_COUNTER_BITS), (tolerance.position_m, tolerance.heading_rad),
-        pose_sent_s, stalls)
+        pose_sent_s, stalls, max_wheel_speed_mm_s)
     first = first_placement(sent_s, enc, alive_s, pose_sent_s, onboard)  # no loss span's
     truth = truth_samples(frames, accepted, decoder, enc)
     unproven: list[dict[str, Any]] = []  # its first count pages lost: said (stallpowerup)

@@ -25,14 +25,15 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import numpy.typing as npt
 
 from odocan.host.judge.breaks import merge_allowance_m
 from odocan.host.judge.losses import OneSteps
-from odocan.host.judge.reference import Geometry, wrap_delta
+from odocan.host.judge.reference import PROFILE_SPEED, Geometry, SpeedBound, wrap_delta
+from odocan.host.judge.reference_path import firmware_steps
 from odocan.host.judge.samples import (
     HEADING_LSB_RAD,
     POSITION_LSB_M,
@@ -193,7 +194,7 @@ def quiet_times(tx_s: FloatArray, pose_sent_s: FloatArray | None) -> FloatArray:
 def judge_left_out(
     halves: PoseHalves, kept: Poses, enc: Encoders, geometry: Geometry, integrator: str,
     bits: int, tolerance: tuple[float, float], pose_sent_s: FloatArray | None = None,
-    breaks: IntArray | None = None,
+    breaks: IntArray | None = None, max_wheel_speed_mm_s: SpeedBound = PROFILE_SPEED,
 ) -> FirstVerdict:
     """Judge every pose sent first after a silence of ``SILENCE_CYCLES`` encoder cycles or
     more (as ``stalls.silent`` reads one) that the samples ``kept`` lack: left out by
@@ -204,12 +205,14 @@ def judge_left_out(
     refused as out of sequence were sent all the same (delay=0.5:100, kobuki seed 2: the quiet
     read from the accepted halves alone FAILed a correct firmware 163.9 mm). The first pose
     of the life is not this rule's (the reboot rules judge it). ``breaks``: the stalls' (
-    ``stalls.after_stalls``), each judged by the resume rule too (``resume_across``)."""
+    ``stalls.after_stalls``), each judged by the resume rule too (``resume_across``), which
+    takes the steps by the firmware's plausibility bound ``max_wheel_speed_mm_s``."""
     verdict = FirstVerdict()
     if enc.cycle_s is None or len(enc.index) < 2 or len(kept.enc) == 0:
         return verdict
     if breaks is not None:
-        resume_across(verdict, kept, breaks, enc, (geometry, integrator, bits), tolerance[0])
+        resume_across(verdict, kept, breaks, enc, (geometry, integrator, bits), tolerance[0],
+                      max_wheel_speed_mm_s)
     tx = np.asarray(halves.px["timestamp_s"], dtype=np.float64)
     quiet_s = quiet_times(tx, pose_sent_s)
     queued = queued_frames(tx, enc.cycle_s)
@@ -240,7 +243,8 @@ def judge_left_out(
 
 
 def resume_across(verdict: FirstVerdict, kept: Poses, breaks: IntArray, enc: Encoders,
-                  robot: tuple[Geometry, str, int], tolerance_m: float) -> None:
+                  robot: tuple[Geometry, str, int], tolerance_m: float,
+                  max_wheel_speed_mm_s: SpeedBound = PROFILE_SPEED) -> None:
     """``stallresume.resume_excess`` of the first kept sample after each of ``breaks`` (frames
     the reference restarts at after a stall) from the last kept before it, on the accepted
     frames between, into ``verdict`` (at the later sample's frame's bus time). Issue #11 (rule
@@ -250,7 +254,8 @@ def resume_across(verdict: FirstVerdict, kept: Poses, breaks: IntArray, enc: Enc
     within the stall's merge allowance plus the gaps' (pmir, seed 2,
     ``delay=0.3:55,dup=0.1,stall=4:2``: 32 mm), absorbing a pose 10 mm off from the stall's
     end. The counts are absolute: a frame the host refused changes the fine path only between
-    frames, within the rule's merge allowance at either end."""
+    frames, within the rule's merge allowance at either end. The steps as the firmware's rules
+    take them (``taken_steps``) are one more candidate (``stallresume`` module docstring)."""
     order = np.argsort(kept.enc, kind="stable")
     at = kept.enc[order]
     for b in breaks.tolist():
@@ -263,7 +268,22 @@ def resume_across(verdict: FirstVerdict, kept: Poses, breaks: IntArray, enc: Enc
             verdict.resumed(float(enc.timestamp_s[kept.enc[s1]]), resume_excess(
                 (float(kept.x_m[s0]), float(kept.y_m[s0]), float(kept.heading_rad[s0])),
                 (float(kept.x_m[s1]), float(kept.y_m[s1])), (enc.left[span], enc.right[span]),
-                robot, tolerance_m))
+                robot, tolerance_m, taken_steps(enc, span, robot, max_wheel_speed_mm_s)))
+
+
+def taken_steps(enc: Encoders, span: slice, robot: tuple[Geometry, str, int],
+                max_wheel_speed_mm_s: SpeedBound) -> tuple[IntArray, IntArray]:
+    """The count steps between the encoder frames of ``span`` (the first one taken: a sample
+    names it) as the firmware's plausibility and counter-restart rules take them, the
+    reference's (``reference_path.firmware_steps``) on those frames alone: a refused frame's
+    step 0 and the next accepted one's from the last accepted, a re-prime's step 0."""
+    part = replace(enc, index=enc.index[span], counter=enc.counter[span], seq=enc.seq[span],
+                   left=enc.left[span], right=enc.right[span],
+                   timestamp_s=enc.timestamp_s[span],
+                   twinned=None if enc.twinned is None else enc.twinned[span], twins=None,
+                   uptime=None if enc.uptime is None else enc.uptime[span], renamed=None)
+    steps = firmware_steps(part, 0, robot[0], robot[2], max_wheel_speed_mm_s)
+    return steps.d_left, steps.d_right
 
 
 def _kept_test(kept: Poses) -> Callable[[Pair], bool]:
