@@ -66,8 +66,10 @@ from pathlib import Path
 
 import pytest
 
-from tests.judges_cli import cli, named_drive, raise_x_10_mm
+from tests.judges_cli import POSE_X, TEN_MM_LSB, cli, named_drive, raise_x_10_mm
+from tests.log_edit import raise_raw
 
+REBOOT_200 = "reboot=1.5:0.3,delay=0.1:200"
 # name: robot, scenario, seed, duration (s), faults, tamper from (s, after the fault named)
 DRIVES = {
     "kobuki-700": ("kobuki", "random", 700, 8, "busoff=1.5:0.2,delay=0.1:150,stall=3.1:0.3",
@@ -82,7 +84,13 @@ DRIVES = {
     "kobuki-square-841": ("kobuki", "square", 841, 9, "delay=0.1:200", 5.0),
     "kobuki-random-840": ("kobuki", "random", 840, 9, "delay=0.1:200", 5.0),
     "pmir-circle-842": ("pmir", "circle", 842, 9, "delay=0.1:200", 5.0),
+    "kobuki-random-911": ("kobuki", "random", 911, 9, REBOOT_200, 1.0),  # before the reboot
+    "pmir-figure8-912": ("pmir", "figure8", 912, 9, REBOOT_200, 1.0),
 }
+# the reboot's drives tampered in the life before it only (its late poses compared there)
+LIFE_0_S = (1.0, 1.8)  # from 1 s to the reboot's end (the firmware off from 1.5 s to 1.8 s)
+HEADING = (6, 2)  # ODOM_POSE_X's HEADING: bytes 6..7, 2 pi / 65536
+TEN_MRAD_LSB = 105  # 10.07 mrad in HEADING's LSBs
 # the same drives raised from after their stall: FAIL too (``replay_stallkept``)
 AFTER_STALL = {"kobuki-700": 3.8, "kobuki-701": 3.8, "kobuki-674": 6.2}
 BEYOND_ELEVEN_SENDS = (
@@ -132,6 +140,24 @@ def test_plus_10_mm_after_the_fault_fails(drive: tuple[str, Path], tmp_path: Pat
     code, verdict = _tampered_verdict(name, log, DRIVES[name][5], tmp_path)
     assert code == 1, f"{name}: {verdict}"
     assert verdict.startswith("FAIL"), f"{name}: {verdict}"
+
+
+@pytest.mark.parametrize("name", ["kobuki-random-911", "pmir-figure8-912"])
+@pytest.mark.parametrize(("field", "lsb"), [(POSE_X, TEN_MM_LSB), (HEADING, TEN_MRAD_LSB)],
+                         ids=["x-10-mm", "heading-10-mrad"])
+def test_a_tamper_before_the_reboot_fails(name: str, field: tuple[int, int], lsb: int,
+                                          tmp_path: Path) -> None:
+    """X 10 mm or HEADING 10 mrad off in the life before the reboot only (its poses late by
+    200 ms to its end compared where they were sent): FAIL, not PASS."""
+    log = named_drive(name, DRIVES, tmp_path)[1]
+    out = tmp_path / "tampered.log"
+    assert raise_raw(log, out, "ODOM_POSE_X", field, lsb, *LIFE_0_S) > 20
+    done = cli("replay", str(out))
+    said = [line for line in done.stdout.splitlines()
+            if line.startswith(("PASS", "FAIL", "UNJUDGED"))]
+    assert done.returncode == 1, done.stdout[-2500:]
+    assert said, done.stdout[-2500:]
+    assert said[-1].startswith("FAIL"), said[-1]
 
 
 @pytest.fixture(scope="module", params=sorted(AFTER_STALL))
