@@ -151,7 +151,7 @@ def test_a_tamper_before_the_reboot_fails(name: str, field: tuple[int, int], lsb
     200 ms to its end compared where they were sent): FAIL, not PASS."""
     log = named_drive(name, DRIVES, tmp_path)[1]
     out = tmp_path / "tampered.log"
-    assert raise_raw(log, out, "ODOM_POSE_X", field, lsb, *LIFE_0_S) > 20
+    assert raise_raw(log, out, "ODOM_POSE_X", field, lsb, *LIFE_0_S, wrap=True) > 20
     done = cli("replay", str(out))
     said = [line for line in done.stdout.splitlines()
             if line.startswith(("PASS", "FAIL", "UNJUDGED"))]
