@@ -55,6 +55,18 @@ circle, figure8 x seeds 840-843, 9 s, ``delay=0.1:200`` (32 of 32):
   latest sent on and the on-time frames after it read as late, a lap early. A boot is now the
   reboot judge's (``reboots.boot_summaries``).
 
+A reboot under the same delay (issue #11: run and analyze PASS, replay FAILed):
+
+* kobuki random 911 and pmir figure8 912, 9 s, ``reboot=1.5:0.3,delay=0.1:200``: life 0 67.5
+  and 87.9 mrad off, every pair identical. The firmware off at 1.5 s, the poses it sent just
+  before came 200 ms late after its last on-time one, with no newer send to read them behind:
+  one 2 sends behind (a step of 14 "forward" in 8 periods) and one a step on (11 periods after)
+  were read as sends after a silence, one 3 sends behind was named where it was logged, each 16
+  to 20 encoder periods off its partner half (a lone half against the replay's pose there). They
+  are named where they were sent now (``replay_late``: the step's time, the partner half):
+  kobuki/pmir x random/figure8/circle x seeds 905-915, 48 of 66 replays PASS (18 before); a
+  10 mm X or 10 mrad HEADING tamper of the life before the reboot FAILs.
+
 The firmware is proven right by the tests' watch (``tests.fw_watch``), not by the judges; the
 tampered log is made with python-can and cantools (``tests.log_edit``).
 """
@@ -185,5 +197,25 @@ def test_a_frame_more_than_eleven_sends_late_replays_pass(tmp_path_factory: pyte
                                                           ) -> None:
     drives = {"pmir-random-840-240": ("pmir", "random", 840, 9, "delay=0.1:240")}
     _, log = named_drive("pmir-random-840-240", drives, tmp_path_factory.mktemp("d240"))
+    done = cli("replay", str(log))
+    assert done.returncode == 0, done.stdout[-2500:]
+
+
+HELD_BOOT_SUMMARY = (
+    "kobuki random 913 (every robot and scenario of seed 913), 9 s, reboot=1.5:0.3,"
+    "delay=0.1:200: run and analyze PASS, replay FAILs life 2 'from t=2.80 s (a fresh "
+    "firmware)' by 11.2 mm (kobuki circle 479.1 mm): the ODOM_STATUS summary sent at 2.601 s, "
+    "0.8 s after the reboot's power-up (COUNTER 0 after its 8-cycle lap, UPTIME 0, as a boot "
+    "summary reads), held back 200 ms to 2.801 s beside the on-time one (COUNTER 4, UPTIME 1), "
+    "is read as a second power-up (replay_boots.boot_starts from the reboot judge; run's report "
+    "says '2.80 s (fitted)' too) and the replay resets its firmware there, its poses from "
+    "(0, 0, 0) against the log's going on; the cause test_replay_delay.py pins on kobuki 430")
+
+
+@pytest.mark.xfail(strict=True, reason=HELD_BOOT_SUMMARY)
+def test_a_held_back_summary_of_the_first_second_is_no_reboot(
+        tmp_path_factory: pytest.TempPathFactory) -> None:
+    drives = {"kobuki-random-913": ("kobuki", "random", 913, 9, REBOOT_200)}
+    _, log = named_drive("kobuki-random-913", drives, tmp_path_factory.mktemp("d913"))
     done = cli("replay", str(log))
     assert done.returncode == 0, done.stdout[-2500:]
