@@ -16,10 +16,11 @@ from tests.dbc_typed import dbc_attribute
 
 
 def raise_raw(src: Path, dst: Path, message: str, byte_span: tuple[int, int], lsb: int,
-              from_s: float, until_s: float = float("inf")) -> int:
+              from_s: float, until_s: float = float("inf"), wrap: bool = False) -> int:
     """Copy ``src`` to ``dst`` with the little-endian signed raw field in bytes
     ``byte_span`` (start, length) of ``message`` raised by ``lsb`` from ``from_s`` s after the
-    log's first frame on (up to ``until_s``, excluded); the number of frames changed."""
+    log's first frame on (up to ``until_s``, excluded); the number of frames changed.
+    ``wrap``: the field wraps round its width (a binary angle: HEADING near pi)."""
     db = cantools.database.load_file(str(contract.DBC_PATH))
     assert isinstance(db, Database)
     target = db.get_message_by_name(message)
@@ -29,18 +30,21 @@ def raise_raw(src: Path, dst: Path, message: str, byte_span: tuple[int, int], ls
         for msg in can.LogReader(str(src)):
             first = msg.timestamp if first is None else first
             if msg.arbitration_id == target.frame_id and from_s <= msg.timestamp - first < until_s:
-                msg.data = _raised(msg.data, byte_span, lsb, ids)
+                msg.data = _raised(msg.data, byte_span, lsb, ids, wrap)
                 changed += 1
             out.on_message_received(msg)
     return changed
 
 
 def _raised(payload: bytes | bytearray, byte_span: tuple[int, int], lsb: int,
-            ids: list[int]) -> bytearray:
-    """``payload`` with the signed little-endian field at ``byte_span`` raised by ``lsb`` and its
-    E2E Profile 2 CRC recomputed (the Data ID its COUNTER selects from ``ids``)."""
+            ids: list[int], wrap: bool = False) -> bytearray:
+    """``payload`` with the signed little-endian field at ``byte_span`` raised by ``lsb`` (round
+    its width when ``wrap``) and its E2E Profile 2 CRC recomputed (the Data ID its COUNTER
+    selects from ``ids``)."""
     data, (start, length) = bytearray(payload), byte_span
     raw = int.from_bytes(data[start:start + length], "little", signed=True) + lsb
+    half = 1 << (8 * length - 1)
+    raw = (raw + half) % (2 * half) - half if wrap else raw
     data[start:start + length] = raw.to_bytes(length, "little", signed=True)
     crc = compute_profile2_crc(bytes(data), ids[data[1] & 0xF])
     assert crc is not None

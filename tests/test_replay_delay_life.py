@@ -55,6 +55,18 @@ circle, figure8 x seeds 840-843, 9 s, ``delay=0.1:200`` (32 of 32):
   latest sent on and the on-time frames after it read as late, a lap early. A boot is now the
   reboot judge's (``reboots.boot_summaries``).
 
+A reboot under the same delay (issue #11: run and analyze PASS, replay FAILed):
+
+* kobuki random 911 and pmir figure8 912, 9 s, ``reboot=1.5:0.3,delay=0.1:200``: life 0 67.5
+  and 87.9 mrad off, every pair identical. The firmware off at 1.5 s, the poses it sent just
+  before came 200 ms late after its last on-time one, with no newer send to read them behind:
+  one 2 sends behind (a step of 14 "forward" in 8 periods) and one a step on (11 periods after)
+  were read as sends after a silence, one 3 sends behind was named where it was logged, each 16
+  to 20 encoder periods off its partner half (a lone half against the replay's pose there). They
+  are named where they were sent now (``replay_late``: the step's time, the partner half):
+  kobuki/pmir x random/figure8/circle x seeds 905-915, 48 of 66 replays PASS (18 before); a
+  10 mm X or 10 mrad HEADING tamper of the life before the reboot FAILs.
+
 The firmware is proven right by the tests' watch (``tests.fw_watch``), not by the judges; the
 tampered log is made with python-can and cantools (``tests.log_edit``).
 """
@@ -66,8 +78,10 @@ from pathlib import Path
 
 import pytest
 
-from tests.judges_cli import cli, named_drive, raise_x_10_mm
+from tests.judges_cli import POSE_X, TEN_MM_LSB, cli, named_drive, raise_x_10_mm
+from tests.log_edit import raise_raw
 
+REBOOT_200 = "reboot=1.5:0.3,delay=0.1:200"
 # name: robot, scenario, seed, duration (s), faults, tamper from (s, after the fault named)
 DRIVES = {
     "kobuki-700": ("kobuki", "random", 700, 8, "busoff=1.5:0.2,delay=0.1:150,stall=3.1:0.3",
@@ -82,7 +96,13 @@ DRIVES = {
     "kobuki-square-841": ("kobuki", "square", 841, 9, "delay=0.1:200", 5.0),
     "kobuki-random-840": ("kobuki", "random", 840, 9, "delay=0.1:200", 5.0),
     "pmir-circle-842": ("pmir", "circle", 842, 9, "delay=0.1:200", 5.0),
+    "kobuki-random-911": ("kobuki", "random", 911, 9, REBOOT_200, 1.0),  # before the reboot
+    "pmir-figure8-912": ("pmir", "figure8", 912, 9, REBOOT_200, 1.0),
 }
+# the reboot's drives tampered in the life before it only (its late poses compared there)
+LIFE_0_S = (1.0, 1.8)  # from 1 s to the reboot's end (the firmware off from 1.5 s to 1.8 s)
+HEADING = (6, 2)  # ODOM_POSE_X's HEADING: bytes 6..7, 2 pi / 65536
+TEN_MRAD_LSB = 105  # 10.07 mrad in HEADING's LSBs
 # the same drives raised from after their stall: FAIL too (``replay_stallkept``)
 AFTER_STALL = {"kobuki-700": 3.8, "kobuki-701": 3.8, "kobuki-674": 6.2}
 BEYOND_ELEVEN_SENDS = (
@@ -134,6 +154,24 @@ def test_plus_10_mm_after_the_fault_fails(drive: tuple[str, Path], tmp_path: Pat
     assert verdict.startswith("FAIL"), f"{name}: {verdict}"
 
 
+@pytest.mark.parametrize("name", ["kobuki-random-911", "pmir-figure8-912"])
+@pytest.mark.parametrize(("field", "lsb"), [(POSE_X, TEN_MM_LSB), (HEADING, TEN_MRAD_LSB)],
+                         ids=["x-10-mm", "heading-10-mrad"])
+def test_a_tamper_before_the_reboot_fails(name: str, field: tuple[int, int], lsb: int,
+                                          tmp_path: Path) -> None:
+    """X 10 mm or HEADING 10 mrad off in the life before the reboot only (its poses late by
+    200 ms to its end compared where they were sent): FAIL, not PASS."""
+    log = named_drive(name, DRIVES, tmp_path)[1]
+    out = tmp_path / "tampered.log"
+    assert raise_raw(log, out, "ODOM_POSE_X", field, lsb, *LIFE_0_S, wrap=True) > 20
+    done = cli("replay", str(out))
+    said = [line for line in done.stdout.splitlines()
+            if line.startswith(("PASS", "FAIL", "UNJUDGED"))]
+    assert done.returncode == 1, done.stdout[-2500:]
+    assert said, done.stdout[-2500:]
+    assert said[-1].startswith("FAIL"), said[-1]
+
+
 @pytest.fixture(scope="module", params=sorted(AFTER_STALL))
 def after_stall(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory
                 ) -> tuple[str, int, str]:
@@ -159,5 +197,25 @@ def test_a_frame_more_than_eleven_sends_late_replays_pass(tmp_path_factory: pyte
                                                           ) -> None:
     drives = {"pmir-random-840-240": ("pmir", "random", 840, 9, "delay=0.1:240")}
     _, log = named_drive("pmir-random-840-240", drives, tmp_path_factory.mktemp("d240"))
+    done = cli("replay", str(log))
+    assert done.returncode == 0, done.stdout[-2500:]
+
+
+HELD_BOOT_SUMMARY = (
+    "kobuki random 913 (every robot and scenario of seed 913), 9 s, reboot=1.5:0.3,"
+    "delay=0.1:200: run and analyze PASS, replay FAILs life 2 'from t=2.80 s (a fresh "
+    "firmware)' by 11.2 mm (kobuki circle 479.1 mm): the ODOM_STATUS summary sent at 2.601 s, "
+    "0.8 s after the reboot's power-up (COUNTER 0 after its 8-cycle lap, UPTIME 0, as a boot "
+    "summary reads), held back 200 ms to 2.801 s beside the on-time one (COUNTER 4, UPTIME 1), "
+    "is read as a second power-up (replay_boots.boot_starts from the reboot judge; run's report "
+    "says '2.80 s (fitted)' too) and the replay resets its firmware there, its poses from "
+    "(0, 0, 0) against the log's going on; the cause test_replay_delay.py pins on kobuki 430")
+
+
+@pytest.mark.xfail(strict=True, reason=HELD_BOOT_SUMMARY)
+def test_a_held_back_summary_of_the_first_second_is_no_reboot(
+        tmp_path_factory: pytest.TempPathFactory) -> None:
+    drives = {"kobuki-random-913": ("kobuki", "random", 913, 9, REBOOT_200)}
+    _, log = named_drive("kobuki-random-913", drives, tmp_path_factory.mktemp("d913"))
     done = cli("replay", str(log))
     assert done.returncode == 0, done.stdout[-2500:]

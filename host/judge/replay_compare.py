@@ -27,7 +27,7 @@ from odocan.host.judge.analysis import HEADING_LSB_RAD, POSITION_LSB_M, Toleranc
 from odocan.host.judge.posehalves import BAM, HALVES
 from odocan.host.judge.powerup import starts_at_power_up
 from odocan.host.judge.replay_jumps import JumpModel, Jumps, LogSteps, offset_jumps
-from odocan.host.judge.replay_late import boot_summaries, sent_at
+from odocan.host.judge.replay_late import boot_summaries, halves_sent_at
 from odocan.host.judge.replay_lone import (
     Anchoring,
     LoneFigures,
@@ -55,12 +55,11 @@ def halves_by_tick(frames: FrameArrays, accepted: npt.NDArray[np.bool_]) -> tupl
     tick the first sent naming it, then each other one sent naming it (a resend)."""
     decoder = BulkDecoder(contract.database())
     track = EncoderTrack.of(frames, accepted, decoder)
-    boots = boot_summaries(frames, decoder)
+    kept = _kept_halves(frames, decoder)
     halves = []
-    for name, value, extra in HALVES:
-        d = decoder.decode(frames, name)
-        keep = crc_holds(frames, decoder, name, d["index"])  # every pose sent (``crc_holds``)
-        ticks, late = _named_as_sent(frames, track, d, keep, boots)
+    for (d, keep), (ticks, late), (_, value, extra) in zip(
+            kept, _named_as_sent(frames, track, kept, boot_summaries(frames, decoder)), HALVES,
+            strict=True):
         half: Halves = {}
         # a resend names its predecessor's frame (one naming an earlier one after a gap of the
         # log's frames is no resend); a late frame is no predecessor
@@ -75,14 +74,27 @@ def halves_by_tick(frames: FrameArrays, accepted: npt.NDArray[np.bool_]) -> tupl
     return halves[0], halves[1]
 
 
-def _named_as_sent(frames: FrameArrays, track: EncoderTrack, d: dict[str, Any],
-                   keep: npt.NDArray[np.bool_],
-                   boots: IntArray) -> tuple[IntArray, npt.NDArray[np.bool_]]:
-    """The tick each kept pose frame of ``d`` (one message decoded) names, a late one's from
-    where it was sent (``replay_late``), and which were late."""
-    rows = d["index"][keep].astype(np.int64)
-    at, at_s = sent_at(frames, track, rows, d["COUNTER"][keep].astype(np.int64), boots)
-    return track.named(at, d["ENC_COUNTER"][keep].astype(np.int64), at_s), at != rows
+Kept = list[tuple[dict[str, Any], npt.NDArray[np.bool_]]]
+
+
+def _kept_halves(frames: FrameArrays, decoder: BulkDecoder) -> Kept:
+    """Each pose message of ``HALVES`` decoded, and which of its frames carry a right CRC
+    (every pose sent, ``crc_holds``)."""
+    kept = []
+    for name, _, _ in HALVES:
+        d = decoder.decode(frames, name)
+        kept.append((d, crc_holds(frames, decoder, name, d["index"])))
+    return kept
+
+
+def _named_as_sent(frames: FrameArrays, track: EncoderTrack, kept: Kept,
+                   boots: IntArray) -> list[tuple[IntArray, npt.NDArray[np.bool_]]]:
+    """Per pose message of ``kept``: the tick each kept frame names, a late one's from where it
+    was sent (``replay_late``, each half read with its partner), and which were late."""
+    halves = [(d["index"][keep].astype(np.int64), d["COUNTER"][keep].astype(np.int64),
+               d["ENC_COUNTER"][keep].astype(np.int64)) for d, keep in kept]
+    return [(track.named(at, enc, at_s), at != rows) for (rows, _, enc), (at, at_s)
+            in zip(halves, halves_sent_at(frames, track, halves, boots), strict=True)]
 
 
 def paired(px: Halves, py: Halves) -> dict[int, list[tuple[int, int, int]]]:
@@ -106,9 +118,8 @@ def x_pose_ticks(frames: FrameArrays, track: EncoderTrack, decoder: BulkDecoder)
     """The tick of the encoder frame each ODOM_POSE_X frame with a right CRC names (-1: none
     the log's accepted encoder sequence places, ``EncoderTrack.named``): every pose the log's
     firmware sent, to say which were compared and why the others were not."""
-    d = decoder.decode(frames, "ODOM_POSE_X")
-    keep = crc_holds(frames, decoder, "ODOM_POSE_X", d["index"])
-    return _named_as_sent(frames, track, d, keep, boot_summaries(frames, decoder))[0]
+    kept = _kept_halves(frames, decoder)
+    return _named_as_sent(frames, track, kept, boot_summaries(frames, decoder))[0][0]
 
 
 def versus_log(

@@ -30,9 +30,28 @@ encoder frame logged by then. The host's E2E verdict is no head: under ``delay=0
 circle 20) it took 350 of 1000 ODOM_POSE_X frames, and a frame 130 ms after the last of them was
 read as late (``tests/test_replay_trust.py``). Less late than ``MIN_BEHIND`` sends, a frame is
 named where it was logged, as before: its name resolves right there.
+
+A firmware that falls silent (a reboot) leaves its head stale: the frames it sent just before,
+held back 200 ms, come after it with no frame sent on between. Kobuki random 911 and pmir
+figure8 912, 9 s, ``reboot=1.5:0.3,delay=0.1:200`` (run and analyze PASS), the firmware off at
+1.5 s: an ODOM_POSE_X of COUNTER 8 sent at 1.441 s and logged at 1.641 s, 160 ms after the head
+(COUNTER 10, 1.481 s), was read as one after a silence though a step forward of 14 sends
+cannot come in 8 periods; an ODOM_POSE_Y 3 sends behind its head but logged 140 ms after it
+was named where it was logged (fewer than ``MIN_BEHIND`` sends behind); and an ODOM_POSE_Y of
+COUNTER 10 sent at 1.481 s, a step of one from its head (1.461 s) but logged 220 ms after it,
+was read as one after a silence. Each was named 16 to 20 encoder periods on, its partner half
+where it was sent, and the correct firmware's replay FAILed by 67.5 and 87.9 mrad in life 0.
+A frame after a silence is now one only when a step forward that long fits in the time since
+its head; a frame behind it is named from its sending when that was ``MIN_BEHIND`` periods or
+more before it was logged, however few sends behind; and a frame after a silence whose partner
+half (the other message, same COUNTER and ENC_COUNTER: the firmware sends both halves of a pose
+at one tick) was sent where the COUNTER step from the head puts it, less than a COUNTER lap
+before, is named from that send (``halves_sent_at``).
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
@@ -63,11 +82,26 @@ def boot_summaries(frames: FrameArrays, decoder: BulkDecoder) -> IntArray:
     return np.array([b[0] for b in reboot_summaries(frames, decoder)], dtype=np.int64)
 
 
+@dataclass(frozen=True)
+class Partner:
+    """The other half's frames of the poses a message's frames carry (``ODOM_POSE_Y`` for
+    ``ODOM_POSE_X``, and back; the firmware sends both of a pose at one tick with one E2E
+    COUNTER and one ENC_COUNTER): log positions, COUNTER, ENC_COUNTER and the bus time each was
+    sent at (``sent_at``'s reading of its own message)."""
+
+    rows: IntArray
+    counter: IntArray
+    enc_counter: IntArray
+    sent_s: FloatArray
+
+
 def sent_at(frames: FrameArrays, track: EncoderTrack, rows: IntArray, counter: IntArray,
-            boots: IntArray) -> tuple[IntArray, FloatArray]:
+            boots: IntArray, enc_counter: IntArray | None = None,
+            partner: Partner | None = None) -> tuple[IntArray, FloatArray]:
     """The log position and bus time each pose frame at ``rows`` (one message, log order, its
-    E2E ``counter``) names its encoder frame from: its own, or a late one's sending (module
-    docstring)."""
+    E2E ``counter``, ``enc_counter``) names its encoder frame from: its own, or a late one's
+    sending (module docstring); a frame after a silence of its message whose ``partner`` was
+    sent long before it, from that send (``_partner_sent_s``)."""
     times = np.asarray(frames.timestamp_s, dtype=np.float64)
     at, at_s = rows.astype(np.int64).copy(), times[rows].copy()
     period_s = contract.cycle_time_s("ODOM_POSE_X")
@@ -78,20 +112,68 @@ def sent_at(frames: FrameArrays, track: EncoderTrack, rows: IntArray, counter: I
             continue
         step = int((counter[k] - counter[head]) & ENC_COUNTER_MASK)
         since_s = float(at_s[k] - times[rows[head]])
+        onward = since_s >= (step - 1.5) * period_s  # as late as a step forward that long
         booted = bool(((boots > rows[head]) & (boots < rows[k])).any())
-        if booted or since_s >= (MAX_BEHIND + 1) * period_s:
-            head = k  # a new firmware's COUNTER, or one that came after a silence
+        if booted:
+            head = k  # a new firmware's COUNTER
+        elif since_s >= (MAX_BEHIND + 1) * period_s and onward:
+            sent_s = _partner_sent_s(k, rows, counter, enc_counter, partner, boots, times)
+            stepped_s = float(times[rows[head]]) + step * period_s  # sent on from the head
+            if sent_s is None or abs(sent_s - stepped_s) > 0.5 * period_s:
+                head = k  # one that came after a silence
+            else:  # sent before the silence, with its partner, the step on from the head
+                at[k], at_s[k] = _place(track, sent_s), sent_s
         elif step == 0:
             continue  # the same frame again (a duplicate)
-        elif step <= HALF_LAP and (step <= MIN_BEHIND or since_s >= (step - 1.5) * period_s):
+        elif step <= HALF_LAP and (step <= MIN_BEHIND or onward):
             head = k  # sent on: a short step (after late frames), or a long one as late as it is
-        elif ENC_COUNTER_LAP - step >= MIN_BEHIND:  # behind, or a long step forward too soon
+        elif (ENC_COUNTER_LAP - step >= MIN_BEHIND
+              or since_s + (ENC_COUNTER_LAP - step) * period_s >= MIN_BEHIND * period_s):
+            # behind, or a long step forward too soon; or a short way behind a head that
+            # came long before it (its firmware fell silent after it: a reboot)
             sent_s = float(times[rows[head]]) - (ENC_COUNTER_LAP - step) * period_s
-            latest = int(np.searchsorted(track.timestamp_s, sent_s, side="right")) - 1
-            at[k] = int(track.index[latest]) + 1 if latest >= 0 else 0
-            at_s[k] = sent_s
+            at[k], at_s[k] = _place(track, sent_s), sent_s
     return at, at_s
 
+
+def halves_sent_at(frames: FrameArrays, track: EncoderTrack,
+                   halves: list[tuple[IntArray, IntArray, IntArray]],
+                   boots: IntArray) -> list[tuple[IntArray, FloatArray]]:
+    """``sent_at`` of both pose messages (each: log positions, COUNTER, ENC_COUNTER), each read
+    again with the other's first reading as its ``partner``."""
+    first = [sent_at(frames, track, rows, counter, boots) for rows, counter, _ in halves]
+    return [sent_at(frames, track, rows, counter, boots, enc,
+                    Partner(*halves[1 - i], first[1 - i][1]))
+            for i, (rows, counter, enc) in enumerate(halves)]
+
+
+def _place(track: EncoderTrack, sent_s: float) -> int:
+    """The log position a frame sent at ``sent_s`` names its encoder frame from: after the
+    latest accepted encoder frame logged by then."""
+    latest = int(np.searchsorted(track.timestamp_s, sent_s, side="right")) - 1
+    return int(track.index[latest]) + 1 if latest >= 0 else 0
+
+
+def _partner_sent_s(k: int, rows: IntArray, counter: IntArray, enc_counter: IntArray | None,
+                    partner: Partner | None, boots: IntArray,
+                    times: FloatArray) -> float | None:
+    """When frame ``k``'s pose was sent, by its partner: the other half of its COUNTER and
+    ENC_COUNTER logged before it, sent less than a COUNTER lap (less half a period) before it
+    was logged (the pair comes again a lap of sends later), no boot between; None without
+    one."""
+    if partner is None or enc_counter is None:
+        return None
+    row, logged_s = int(rows[k]), float(times[rows[k]])
+    lap_s = (ENC_COUNTER_LAP - 0.5) * contract.cycle_time_s("ODOM_POSE_X")
+    mine = np.flatnonzero((partner.rows < row) & (partner.counter == counter[k])
+                          & (partner.enc_counter == enc_counter[k])
+                          & (partner.sent_s > logged_s - lap_s))
+    if len(mine) == 0:
+        return None
+    j = int(mine[-1])
+    if ((boots > partner.rows[j]) & (boots < row)).any():
+        return None
+    return float(partner.sent_s[j])
 
 
 def status_pages_sent_at(frames: FrameArrays, decoder: BulkDecoder,
