@@ -47,7 +47,14 @@ from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.protocol.decode import BulkDecoder
 from odocan.sim.robot import load
 from tests.fw_watch import Watch
-from tests.judges_cli import STREAMS, analyze, reported_analyses, watched_run, x_10_mm_off_fails
+from tests.judges_cli import (
+    STREAMS,
+    analyze,
+    raise_x_10_mm,
+    reported_analyses,
+    watched_run,
+    x_10_mm_off_fails,
+)
 from tests.log_edit import raise_raw
 
 RANDOM = "busoff=1.5:0.2,delay=0.1:150,stall=3.1:0.3"
@@ -61,6 +68,7 @@ DRIVES = {  # name: robot, scenario, seed, duration s, faults, a time past the f
     "pmir_697": ("pmir", "random", 697, 8, RANDOM, PAST_RANDOM_S),  # DISTANCE 163.3 mm
     "figure8_671": ("kobuki", "figure8", 671, 9, FIGURE8, PAST_FIGURE8_S),  # DISTANCE 43.5 mm
     "figure8_672": ("kobuki", "figure8", 672, 9, FIGURE8, PAST_FIGURE8_S),  # 634 mm: pagesent
+    "figure8_673": ("kobuki", "figure8", 673, 9, FIGURE8, PAST_FIGURE8_S),  # live 588.5 mm
     "pmir_figure8_672": ("pmir", "figure8", 672, 9, FIGURE8, PAST_FIGURE8_S),  # FAILed alike
 }
 REBOOT_S = 2.0  # figure8's reboot (1.8 s + 0.2 s)
@@ -180,21 +188,39 @@ def test_the_streamed_life_split_is_the_whole_logs(drive: Drive) -> None:
         assert [(span.start, span.stop) for span in lives.finish()] == whole, chunk_frames
 
 
-def test_the_live_judges_pass_the_correct_firmware(drive: Drive,
-                                                   request: pytest.FixtureRequest) -> None:
-    """The monitor and the bridge fed the log frame by frame: within the 0.1 mm tolerance
-    (figure8 672: 21.2 mm beyond before ``pagesent``, pmir 19.8 mm)."""
-    _figure8(drive)
-    name = request.node.callspec.params["drive"]
-    if name == "figure8_671":
-        request.applymarker(pytest.mark.xfail(strict=True, reason=LIVE_671))
+def _live_beyond_m(name: str, log: Path) -> tuple[float, float]:
+    """The monitor's and the bridge's largest position error beyond the allowance (m), each fed
+    ``log`` frame by frame (``name``'s robot)."""
     profile = load(DRIVES[name][0])
     monitor = BusMonitor(profile)
     bridge = RobotTelemetry("r1", Geometry.of(profile), "exact",
                             counter_bits=profile.counter_bits)
-    with can.LogReader(str(drive[0])) as reader:
+    with can.LogReader(str(log)) as reader:
         for msg in reader:
             monitor.feed(msg, now_s=msg.timestamp)
             bridge.feed(msg)
-    beyond_m = (monitor.tracker.max_beyond_allowance_m, bridge.tracker.max_beyond_allowance_m)
+    return monitor.tracker.max_beyond_allowance_m, bridge.tracker.max_beyond_allowance_m
+
+
+def test_the_live_judges_pass_the_correct_firmware(drive: Drive,
+                                                   request: pytest.FixtureRequest) -> None:
+    """The monitor and the bridge fed the log frame by frame: within the 0.1 mm tolerance
+    (figure8 672: 21.2 mm beyond before ``pagesent``, pmir 19.8 mm; 673: 588.5 mm before its
+    boot summary, held back behind the new life's first poses, withdrew them: ``sources``)."""
+    _figure8(drive)
+    name = request.node.callspec.params["drive"]
+    if name == "figure8_671":
+        request.applymarker(pytest.mark.xfail(strict=True, reason=LIVE_671))
+    beyond_m = _live_beyond_m(name, drive[0])
     assert max(beyond_m) <= 1e-4, beyond_m
+
+
+def test_x_10_mm_off_from_the_reboot_fails_live(drive: Drive, tmp_path: Path,
+                                                request: pytest.FixtureRequest) -> None:
+    """X raised 10 mm from the reboot on: the monitor and the bridge each find the position
+    more than 5 mm beyond its allowance (the new life's poses are judged, not withdrawn)."""
+    _figure8(drive)
+    tampered = tmp_path / "t.log"
+    assert raise_x_10_mm(drive[0], tampered, REBOOT_S) > 100
+    beyond_m = _live_beyond_m(request.node.callspec.params["drive"], tampered)
+    assert min(beyond_m) > 5e-3, beyond_m
