@@ -76,9 +76,15 @@ DRIVES = {  # name: robot, scenario, seed, duration s, faults, a time past the f
 REBOOT_S = 2.0  # figure8's reboot (1.8 s + 0.2 s)
 LIVE_671 = (
     "not fixed: figure8 671's live judges (monitor and bridge alike) are 63.8 mm beyond their "
-    "allowance (39.8 mm first at 4.200 s, 63.8 mm at 4.540 s: between the reboot at 2.0 s and "
-    "the stall at 5.6 s), the same before and after pagesent; run and both analyses PASS it; "
-    "not traced")
+    "allowance (39.8 mm first at 4.176 s, 63.8 mm at 4.536 s: between the reboot at 2.0 s and "
+    "the stall at 5.6 s), the same before and after pagesent and the sources fix; run and both "
+    "analyses PASS it. Traced in part: the new firmware (summary STATE INIT at 2.001 s) primed on "
+    "the frame heard at 2.005 s (COUNTER 3, CTRL_UPTIME 2: an old frame held back 55 ms), which "
+    "the host's E2E sequence refused (6 at 1.980 s before it), as analyze's split names it; its "
+    "first count page (OK 6, LOST 3) counts to no frame of the live window, the wait expires at "
+    "3.0 s and the life starts on the guess, the frame of 2.010 s (COUNTER 9); the firmware's "
+    "E2E check, fresh at 3, then lost most frames the host's sequence took (ENC_E2E_LOST 43 of "
+    "67 by 2.7 s), and no sample is judged live between 2.0 and 4.176 s")
 LIVE_673 = (
     "not fixed: figure8 673's live judges (monitor and bridge alike) are 16.0 mm beyond their "
     "allowance (first judged sample at 3.256 s, the reboot at 2.0 s): the new firmware primed on "
