@@ -223,8 +223,7 @@ class SourceWatch:
             ):
                 kind = "reboot"
                 self.offset_s = offset
-                in_run = booted and not ahead and self.pose
-                self.life_from_s = min(t_s, self.pose[0]) if in_run and self.pose else t_s
+                self.life_from_s = self._told_from(t_s, booted and not ahead)
             elif broke is not None:  # the first pose after it may tell it (``hear_pose``)
                 self.ahead, self.ahead_heard = (t_s, uptime_s, state, seq, broke), [t_s]
         elif self.other_s is not None and abs(offset - self.other_s) <= UPTIME_MATCH_S:
@@ -237,7 +236,7 @@ class SourceWatch:
             self.offset_s, self.other_s = self.other_s, self.offset_s
         else:
             kind = "reboot" if uptime_s < self.last_uptime_s or state == "INIT" else "uptime jump"
-            self.life_from_s = t_s
+            self.life_from_s = self._told_from(t_s, booted and not ahead and kind == "reboot")
             self.offset_s, self.other_s = offset, self.offset_s
             self.changed_at_s = t_s
         if kind == "reboot" and not booted and counter is not None and (
@@ -246,6 +245,16 @@ class SourceWatch:
         self.last_uptime_s, self.last_state = uptime_s, state
         self.page_pending = self.page_pending and kind != "reboot"
         return kind
+
+    def _told_from(self, t_s: float, power_up_tick: bool) -> float:
+        """Where a reboot told by the summary at bus time ``t_s`` began: the bus time of the pose
+        run's pose of COUNTER 0 when the summary was that run's ``power_up_tick`` (held back
+        behind the new life's first poses), else ``t_s``. Whether UPTIME's offset stayed within
+        ``UPTIME_MATCH_S`` or not (a life of 2 s and more): figure8 673's boot summary, held
+        back 55 ms behind its first three poses, 2.055 s after the first life's, began the new
+        life at its own bus time, and the pose of 2.041 s stayed judged against the old life's
+        reference (live 588.5 mm beyond on a correct firmware; issue #11)."""
+        return min(t_s, self.pose[0]) if power_up_tick and self.pose else t_s
 
     def _fell_in_run(self, summary_s: float) -> bool:
         """Whether a twist kept live fell where it is the pose run's before the summary at
