@@ -41,6 +41,7 @@ from odocan.host.judge.distfall import (
     distance_field,
     fell_within,
 )
+from odocan.host.judge.heldtick import TickPages
 from odocan.host.judge.latefall import continues_twice, tied_late
 from odocan.host.judge.liveadopted import LATE_REBOOT
 from odocan.host.judge.livegapseen import heard_status
@@ -129,6 +130,8 @@ class SourceWatch:
     pose_late: bool = False  # the latest ODOM_POSE_X of COUNTER 0 heard was held back
     status_late: tuple[bool, bool] = (False, False)  # the ODOM_STATUS frame before the latest
     # and the latest were held back (``order``; as ``status_before`` and ``status_last``)
+    ticks: TickPages = field(default_factory=TickPages)  # a boot summary held past its tick's
+    # page (``heldtick``): live, heard at ``hear_pose``, ``hear_status``; a log's: ``told`` set
 
     def on_page(self, page: str, signals: dict[str, Any], tracker: PoseTracker) -> bool:
         """An accepted ODOM_STATUS ``page`` (``"summary"``, ``"e2e_wheel_encoders"``, ...):
@@ -209,6 +212,8 @@ class SourceWatch:
             fell = self._fell_in_run(t_s) if fell is None else fell
             booted = boot_tick(uptime_s, counter, t_s, pose, self.summary_s,
                                self.status_before, fell, held=status_held)
+        tick = None if booted or counter != 0 or uptime_s != 0 else self.ticks.told
+        booted = booted or tick is not None  # held past its tick's page (``heldtick``)
         if not booted and (self.order.passed_over(uptime_s, state) if late is None else late):
             return None  # held back, it tells no reboot (``livelatestatus``)
         broke = (None if booted or counter is None else
@@ -225,6 +230,7 @@ class SourceWatch:
                 self.offset_s = offset
                 in_run = booted and not ahead and self.pose
                 self.life_from_s = min(t_s, self.pose[0]) if in_run and self.pose else t_s
+                self.life_from_s = self.life_from_s if tick is None else min(t_s, tick[1])
             elif broke is not None:  # the first pose after it may tell it (``hear_pose``)
                 self.ahead, self.ahead_heard = (t_s, uptime_s, state, seq, broke), [t_s]
         elif self.other_s is not None and abs(offset - self.other_s) <= UPTIME_MATCH_S:
@@ -267,6 +273,7 @@ class SourceWatch:
         self.pose = next_run(self.pose, t_s, counter, self.pose_s)
         self.pose_s = t_s
         held = self.pose_order.hear(counter, t_s)  # a hole of its sequence filled (liveheldpose)
+        self.ticks.hear_pose(t_s, counter)
         self.pose_late = held if counter == 0 else self.pose_late
         if self.ahead is not None or self.ahead_posed is not None or self.ahead_late is not None:
             self.ahead_heard.append(t_s)
@@ -316,6 +323,7 @@ class SourceWatch:
         tells whether it breaks the sequence (``bootticks.status_breaks``)."""
         self.status_before, self.status_last = self.status_last, (t_s, counter)
         self.status_late = (self.status_late[1], self.order.hear(counter))
+        self.ticks.hear_status(t_s, counter)
         if self.ahead_posed is not None or self.ahead_late is not None:
             self.ahead_heard.append(t_s)
 
