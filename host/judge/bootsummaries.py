@@ -96,7 +96,8 @@ def _watch_summaries(
         watch.status_before = (
             None if status_counter < 0 else (float(statuses[0][k]), status_counter)
         )
-        watch.ticks.told = ticks[k]
+        tick = watch.ticks.told = ticks[k]  # and DISTANCE fell at its page (``heldtick``)
+        watch.ticks.fell = tick is not None and fell_in_run(falls, tick[0])
         kind = watch.observe(
             float(times_s[k]),
             int(uptimes_s[k]),
