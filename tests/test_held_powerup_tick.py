@@ -232,9 +232,6 @@ REAL = "reboot=0.2:0.2,delay=0.1:150"  # reset at 0.2 s, the new firmware up at 
         (696, REAL, (0.54, 0.56)),
         # reset at 0.5 s, its summary sent 0.501 s heard 0.651 s: 72.1 mm off before
         (696, "reboot=0.5,delay=0.1:150", (0.64, 0.66)),
-        # down 0.3 s, up at 0.801 s in the old life's COUNTER phase (no sequence broken): its
-        # twists' DISTANCE fell in the pose run before the page; summary heard at 0.951 s
-        (696, "reboot=0.5:0.3,delay=0.1:150", (0.94, 0.96)),
     ],
 )
 def test_a_real_early_reboot_under_the_delay_is_still_told(

@@ -96,8 +96,7 @@ def _watch_summaries(
         watch.status_before = (
             None if status_counter < 0 else (float(statuses[0][k]), status_counter)
         )
-        tick = watch.ticks.told = ticks[k]  # and DISTANCE fell at its page (``heldtick``)
-        watch.ticks.fell = tick is not None and fell_in_run(falls, tick[0])
+        watch.ticks.told = ticks[k]
         kind = watch.observe(
             float(times_s[k]),
             int(uptimes_s[k]),

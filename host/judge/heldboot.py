@@ -31,7 +31,6 @@ import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.bootticks import BOOT_WINDOW_S, status_rows
-from odocan.host.judge.livelatestatus import HELD_BACK_MAX
 from odocan.host.protocol.busfacts import ENC_COUNTER_MASK, STATUS_CYCLE_S
 from odocan.host.protocol.decode import BulkDecoder
 
@@ -81,25 +80,17 @@ def statuses_before(frames: FrameArrays, decoder: BulkDecoder, positions: npt.ND
 
 
 def held_start(position: int, uptime_s: int, state: str,
-               encoders: tuple[npt.NDArray[np.int64], ...], tick_s: float) -> int:
+               encoders: tuple[npt.NDArray[np.int64], npt.NDArray[np.float64]],
+               tick_s: float) -> int:
     """``reboots.summary_start`` of a summary at log ``position`` whose tick was heard at
     ``tick_s`` (``held_tick_s``): UPTIME 0 and not INIT, the latest encoder frame (``encoders``:
     every one on the bus, its position and bus time: the new firmware's E2E check starts afresh
     and takes it whatever the whole log's check said) heard before the tick; else the first
-    heard after it and before the summary, or the summary itself when none was. With their E2E
-    COUNTERs (a third array): not a latest one 1 to ``HELD_BACK_MAX`` steps behind the one
-    before it (held back, the firmware's fresh E2E check refused it: kobuki random 696
-    ``reboot=0.5:0.3,delay=0.1:150``, COUNTER 0 sent at 0.65 s heard at 0.8 s right after
-    COUNTER 1; the power-up pose named COUNTER 1)."""
-    at, t = encoders[:2]
+    heard after it and before the summary, or the summary itself when none was."""
+    at, t = encoders
     if uptime_s == 0 and state != "INIT":
-        earlier = np.flatnonzero(t < tick_s)
-        if len(encoders) > 2 and len(earlier) > 1:
-            c = encoders[2]
-            behind = (int(c[earlier[-2]]) - int(c[earlier[-1]])) & ENC_COUNTER_MASK
-            if 0 < behind <= HELD_BACK_MAX:  # the latest held back behind the one before
-                earlier = earlier[:-1]
-        return int(at[earlier[-1]]) if len(earlier) else position
+        earlier = at[t < tick_s]
+        return int(earlier[-1]) if len(earlier) else position
     later = at[(t > tick_s) & (at < position)]
     return int(later[0]) if len(later) else position
 

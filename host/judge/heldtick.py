@@ -34,7 +34,6 @@ One rule for every judge: the whole log (``tick_pages``), the streamed ``analyze
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 
 import numpy as np
 import numpy.typing as npt
@@ -54,9 +53,7 @@ from odocan.host.protocol.busfacts import ENC_COUNTER_MASK
 from odocan.host.protocol.decode import BulkDecoder
 
 TICK_PAGE_COUNTER = 1  # the power-up tick's rotating page: sent right after its summary
-# a held boot summary's tick: the page's bus time, the run's start, whether the page broke the
-# status sequence (else the twists' DISTANCE must have fallen in the run: ``fell``)
-Tick = tuple[float, float, bool]
+Tick = tuple[float, float]  # a held boot summary's tick: the page's bus time, the run's start
 
 
 class TickPages:
@@ -73,7 +70,6 @@ class TickPages:
         self.top: tuple[float, int] | None = None  # the latest in-order ODOM_STATUS frame
         self.page: Tick | None = None  # a tick page heard, its summary not yet
         self.told: Tick | None = None  # the tick of the ODOM_STATUS frame heard last
-        self.fell: bool | None = None  # a log's: whether DISTANCE fell in its run (None: live)
 
     def hear_pose(self, t_s: float, counter: int) -> None:
         """An ODOM_POSE_X of E2E ``counter`` heard at bus time ``t_s``: on the run."""
@@ -95,20 +91,14 @@ class TickPages:
             HELD_BACK_MAX
         ):
             self.page = None  # past where its summary could fill a hole
-        if counter == TICK_PAGE_COUNTER and self._in_run(t_s):
-            self.page = (t_s, self.run[0], self._broke(t_s, top)) if self.run else None
+        if counter == TICK_PAGE_COUNTER and self._ticked(t_s, top):
+            self.page = (t_s, self.run[0]) if self.run is not None else None
 
-    @staticmethod
-    def _broke(t_s: float, top: tuple[float, int] | None) -> bool:
+    def _ticked(self, t_s: float, top: tuple[float, int] | None) -> bool:
         """Whether a page of COUNTER 1 heard in order at ``t_s`` after the in-order frame
-        ``top`` breaks the status sequence (module docstring)."""
-        return (
-            top is not None and top[1] != TICK_PAGE_COUNTER and status_breaks(top[1], t_s - top[0])
-        )
-
-    def _in_run(self, t_s: float) -> bool:
-        """Whether a pose run of COUNTER 0, not held back, began less than ``BOOT_WINDOW_S``
-        before ``t_s``, its latest COUNTER below ``BOOT_POSE_FRAMES``."""
+        ``top`` is a power-up tick's (module docstring)."""
+        if top is None or top[1] == TICK_PAGE_COUNTER or not status_breaks(top[1], t_s - top[0]):
+            return False
         run = self.run
         return (
             run is not None
@@ -160,10 +150,3 @@ def tick_s(held_s: float | None, tick: Tick | None) -> float | None:
     behind its page) when known, else its page's (``tick``: past the next summary), else None
     (it was not held back behind its page)."""
     return held_s if held_s is not None else None if tick is None else tick[0]
-
-
-def told_tick(tick: Tick | None, fell: Callable[[float], bool]) -> Tick | None:
-    """``tick`` when it tells a power-up tick: its page broke the status sequence, or ``fell``
-    (the twists' DISTANCE fell in the pose run before the page, read at its bus time:
-    ``bootticks.fell_in_run``, as ``boot_tick``'s ``fell``); else None."""
-    return tick if tick is not None and (tick[2] or fell(tick[0])) else None

@@ -79,7 +79,6 @@ from odocan.host.judge.sources import two_sources_text
 from odocan.host.judge.stallfirst import merged_first
 from odocan.host.judge.stalls import silent_between
 from odocan.host.protocol import busfacts
-from odocan.host.protocol.busfacts import ENC_COUNTER_MASK
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.protocol.e2e import check_frames
 
@@ -120,8 +119,7 @@ def split_lives(frames: FrameArrays, decoder: BulkDecoder) -> list[Life]:
     for (position, uptime_s, state, _), limit, tick_s in zip(
             boots, limits, _ticks(frames, decoder, [b[0] for b in boots]), strict=True):
         start = (summary_start(position, uptime_s, state, encoders) if tick_s is None else
-                 held_start(position, uptime_s, state, (every[1], frames.timestamp_s[every[1]],
-                                                         every[0].data[:, 1] & ENC_COUNTER_MASK),
+                 held_start(position, uptime_s, state, (every[1], frames.timestamp_s[every[1]]),
                             tick_s))
         counted = (None if stalled_first(frames, decoder, encoders, position, limit)
                    else page_counted_start(position, limit, (encoders, counters), pages, (

@@ -41,7 +41,7 @@ from odocan.host.judge.distfall import (
     distance_field,
     fell_within,
 )
-from odocan.host.judge.heldtick import TickPages, told_tick
+from odocan.host.judge.heldtick import TickPages
 from odocan.host.judge.latefall import continues_twice, tied_late
 from odocan.host.judge.liveadopted import LATE_REBOOT
 from odocan.host.judge.livegapseen import heard_status
@@ -212,10 +212,8 @@ class SourceWatch:
             fell = self._fell_in_run(t_s) if fell is None else fell
             booted = boot_tick(uptime_s, counter, t_s, pose, self.summary_s,
                                self.status_before, fell, held=status_held)
-        told = self.ticks.told if counter == 0 and uptime_s == 0 else None  # (``heldtick``)
-        tick = None if booted else told_tick(told, lambda page_s: self._fell_in_run(
-            page_s) if self.ticks.fell is None else self.ticks.fell)
-        booted = booted or tick is not None  # held past its tick's page
+        tick = None if booted or counter != 0 or uptime_s != 0 else self.ticks.told
+        booted = booted or tick is not None  # held past its tick's page (``heldtick``)
         if not booted and (self.order.passed_over(uptime_s, state) if late is None else late):
             return None  # held back, it tells no reboot (``livelatestatus``)
         broke = (None if booted or counter is None else
@@ -232,7 +230,7 @@ class SourceWatch:
                 self.offset_s = offset
                 in_run = booted and not ahead and self.pose
                 self.life_from_s = min(t_s, self.pose[0]) if in_run and self.pose else t_s
-                self.life_from_s = self.life_from_s if told is None else min(t_s, told[1])
+                self.life_from_s = self.life_from_s if tick is None else min(t_s, tick[1])
             elif broke is not None:  # the first pose after it may tell it (``hear_pose``)
                 self.ahead, self.ahead_heard = (t_s, uptime_s, state, seq, broke), [t_s]
         elif self.other_s is not None and abs(offset - self.other_s) <= UPTIME_MATCH_S:

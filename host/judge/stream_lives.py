@@ -64,7 +64,6 @@ from odocan.host.judge.samples import ENC_E2E_PAGE, AnalysisError, contract_cycl
 from odocan.host.judge.silentboot import fresh_counted_start, quiet_start
 from odocan.host.judge.sources import SourceWatch, two_sources_text
 from odocan.host.judge.stalls import silent_between, stalled_before
-from odocan.host.protocol.busfacts import ENC_COUNTER_MASK
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 
 ENCODERS_KEPT = 1 << 16  # accepted encoder frames remembered (ENC_E2E_OK is a u16)
@@ -393,8 +392,7 @@ class StreamLives:
             before = self._watch.last_uptime_s
             self._watch.pose = (pose[0], int(pose[1]), bool(pose[2])) if pose[1] >= 0 else None
             self._watch.status_before = (status[0], int(status[1])) if status[1] >= 0 else None
-            self._watch.ticks.told, self._watch.ticks.fell = tick, tick is not None and (
-                fell_in_run(self._falls[0], tick[0]))
+            self._watch.ticks.told = tick
             kind = self._watch.observe(float(t_s), int(uptime_s), name, int(counter),
                                        fell=fell_in_run(self._falls[0], float(t_s)),
                                        late=held[0], held=tuple(held[1]))
@@ -421,9 +419,8 @@ class StreamLives:
         earlier = self._encoders[self._encoders < at]
         start = int(earlier[-1]) if uptime_s == 0 and name != "INIT" and len(earlier) else at
         if tick_s is not None:  # held back behind its tick's page
-            every = self._every[0]
             start = heldboot.held_start(at, uptime_s, name, (
-                self._every[1], every.timestamp_s, every.data[:, 1] & ENC_COUNTER_MASK), tick_s)
+                self._every[1], self._every[0].timestamp_s), tick_s)
         heard = heard_encoders(self._every, self.decoder) if uptime_s == 0 else None
         named = None if heard is None else named_start(
             self._powerups, (self._encoders, self._counters), at, t_s, heard=heard, run=self._poses)
