@@ -65,27 +65,21 @@ import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.bootnamed import heard_encoders, named_start, pose_enc_rows, powerup_poses
-from odocan.host.judge.bootticks import (
-    TWIST_COUNTERS,
-    ahead_ticks,
-    boot_ticks,
-    fell_in_run,
-    poses_before,
-    status_before,
-)
+from odocan.host.judge.bootsummaries import boot_summaries as boot_summaries
+from odocan.host.judge.bootsummaries import two_sources as two_sources
 from odocan.host.judge.breaks import merged_breaks
 from odocan.host.judge.gapseen import crc_holds
 from odocan.host.judge.heldboot import held_start, held_ticks
 from odocan.host.judge.heldboot import summary_start as summary_start
-from odocan.host.judge.heldsummaries import held_evidence, summaries_held_back
+from odocan.host.judge.heldtick import tick_pages
+from odocan.host.judge.heldtick import tick_s as page_tick_s
 from odocan.host.judge.liveconfig import config_text
-from odocan.host.judge.navrestart import second_evidence
 from odocan.host.judge.pagesent import encoder_count_pages as encoder_count_pages
 from odocan.host.judge.pagesent import pages_counted_from
 from odocan.host.judge.primed import counted_start
 from odocan.host.judge.samples import AnalysisError, contract_cycle_s
 from odocan.host.judge.silentboot import fresh_counted_start, silent_start
-from odocan.host.judge.sources import SourceWatch, two_sources_text
+from odocan.host.judge.sources import two_sources_text
 from odocan.host.judge.stallfirst import merged_first
 from odocan.host.judge.stalls import silent_between
 from odocan.host.protocol import busfacts
@@ -128,7 +122,7 @@ def split_lives(frames: FrameArrays, decoder: BulkDecoder) -> list[Life]:
     silent: list[bool] = []  # primed in a silence on a frame nothing names (``silentboot``)
     limits = [b[0] for b in boots[1:]] + [len(frames)]
     for (position, uptime_s, state, _), limit, tick_s in zip(
-            boots, limits, held_ticks(frames, decoder, [b[0] for b in boots]), strict=True):
+            boots, limits, _ticks(frames, decoder, [b[0] for b in boots]), strict=True):
         start = (summary_start(position, uptime_s, state, encoders) if tick_s is None else
                  held_start(position, uptime_s, state, (every[1], frames.timestamp_s[every[1]]),
                             tick_s))
@@ -156,6 +150,15 @@ def split_lives(frames: FrameArrays, decoder: BulkDecoder) -> list[Life]:
                           t_s=float(frames.timestamp_s[position]), uptime_before_s=before_s,
                           silent=silent[k]))
     return lives
+
+
+def _ticks(frames: FrameArrays, decoder: BulkDecoder, positions: list[int]) -> list[float | None]:
+    """Per boot summary at ``positions``: the bus time of its tick when the bus held it back
+    behind its tick's page (``heldboot.held_ticks``: right behind it; else ``heldtick``: past
+    the next summary), None when it was not."""
+    pages = tick_pages(frames, decoder, np.array(positions, dtype=np.int64))
+    return [page_tick_s(held, page)
+            for held, page in zip(held_ticks(frames, decoder, positions), pages, strict=True)]
 
 
 def stalled_first(frames: FrameArrays, decoder: BulkDecoder, encoders: npt.NDArray[np.intp],
@@ -218,79 +221,6 @@ def page_counted_start(
         fresh[0], fresh[1], page, counts, (counted, fresh[2][1], fresh[2][0]))
 
 
-def two_sources(frames: FrameArrays, decoder: BulkDecoder) -> tuple[int, float] | None:
-    """Where two firmwares began to answer on one node ID (``SourceWatch``: two UPTIME offsets
-    interleave): (position, bus time) of the summary that brought the second offset; None when
-    the log has one source at a time."""
-    return _watch_summaries(frames, decoder)[1]
-
-
-def boot_summaries(
-    frames: FrameArrays, decoder: BulkDecoder
-) -> list[tuple[int, int, str, int]]:
-    """(position, UPTIME s, STATE, previous UPTIME s) of each summary that starts a new
-    firmware (module docstring)."""
-    return _watch_summaries(frames, decoder)[0]
-
-
-def _watch_summaries(
-    frames: FrameArrays, decoder: BulkDecoder
-) -> tuple[list[tuple[int, int, str, int]], tuple[int, float] | None]:
-    """``boot_summaries`` and ``two_sources`` from one pass of ``SourceWatch``."""
-    try:
-        page = decoder.decode_page(frames, "ODOM_STATUS", SUMMARY_PAGE)
-        message = decoder.message("ODOM_STATUS")
-    except DecodeError:
-        return [], None
-    if "UPTIME" not in page or "STATE" not in page or len(page["index"]) == 0:
-        return [], None
-    index = page["index"]
-    good = crc_holds(frames, decoder, index)
-    choices = dict(message.get_signal_by_name("STATE").choices or {})
-    codes, which = np.unique(page["STATE"][good], return_inverse=True)
-    names = [str(choices.get(int(code), int(code))) for code in codes.tolist()]
-    states = np.array(names, dtype=object)[which]
-    positions, times_s = index[good], page["timestamp_s"][good]
-    uptimes_s = page["UPTIME"][good].astype(np.int64)
-    counters = page["COUNTER"][good].astype(np.int64)
-    poses = poses_before(frames, decoder, positions)[0]  # their ticks' (``bootticks``)
-    statuses = status_before(frames, decoder, positions)[0]
-    falls = second_evidence(frames, decoder, TWIST_COUNTERS)[0]  # DISTANCE fell, NAV restarted
-    booted = boot_ticks(uptimes_s, counters, times_s, poses, statuses, None, falls)
-    ahead = ahead_ticks(frames, decoder, positions, uptimes_s, counters, times_s, statuses)
-    late = summaries_held_back(frames, decoder, (positions, uptimes_s, states))
-    held = held_evidence(frames, decoder, positions, bool(booted.any()))
-    watch = SourceWatch()
-    boots = []
-    changed, conflict = 0, None  # the summary of the last new offset; where two sources began
-    k, window = 0, _FIRST_WINDOW
-    while k < len(positions):  # quiet stretches at once (observe_quiet), the others one by one
-        end = min(len(positions), k + window)
-        k += watch.observe_quiet(times_s[k:end], uptimes_s[k:end], states[k:end],
-                                 booted[k:end] | ahead[k:end])
-        if k == end:
-            window *= 2
-            continue
-        window = _FIRST_WINDOW
-        before = watch.last_uptime_s
-        name = str(states[k])
-        pose_counter = int(poses[1][k])
-        watch.pose = (None if pose_counter < 0
-                      else (float(poses[0][k]), pose_counter, bool(poses[2][k])))
-        status_counter = int(statuses[1][k])
-        watch.status_before = (None if status_counter < 0
-                               else (float(statuses[0][k]), status_counter))
-        kind = watch.observe(float(times_s[k]), int(uptimes_s[k]), name, int(counters[k]),
-                             bool(ahead[k]), fell=fell_in_run(falls, float(times_s[k])),
-                             late=bool(late[k]), held=(bool(held[k, 0]), bool(held[k, 1])))
-        if kind == "reboot":
-            boots.append((int(positions[k]), int(uptimes_s[k]), name, int(before)))
-        if watch.changed_at_s == float(times_s[k]):
-            changed = k
-        if kind == "two sources" and conflict is None:
-            conflict = (int(positions[changed]), float(times_s[changed]))
-        k += 1
-    return boots, conflict
 
 
 def before_two_sources(frames: FrameArrays, decoder: BulkDecoder,
@@ -322,7 +252,6 @@ def mark_two_sources(report: dict[str, Any], t_s: float, frames_not_judged: int,
     report["passed"] = False
 
 
-_FIRST_WINDOW = 64  # summaries tried at once after one that was not quiet (doubles while quiet)
 
 
 # --- one report of the lives ----------------------------------------------------------------

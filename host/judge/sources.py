@@ -41,6 +41,7 @@ from odocan.host.judge.distfall import (
     distance_field,
     fell_within,
 )
+from odocan.host.judge.heldtick import TickPages
 from odocan.host.judge.latefall import continues_twice, tied_late
 from odocan.host.judge.liveadopted import LATE_REBOOT
 from odocan.host.judge.livegapseen import heard_status
@@ -129,6 +130,8 @@ class SourceWatch:
     pose_late: bool = False  # the latest ODOM_POSE_X of COUNTER 0 heard was held back
     status_late: tuple[bool, bool] = (False, False)  # the ODOM_STATUS frame before the latest
     # and the latest were held back (``order``; as ``status_before`` and ``status_last``)
+    ticks: TickPages = field(default_factory=TickPages)  # a boot summary held past its tick's
+    # page (``heldtick``): live, heard at ``hear_pose``, ``hear_status``; a log's: ``told`` set
 
     def on_page(self, page: str, signals: dict[str, Any], tracker: PoseTracker) -> bool:
         """An accepted ODOM_STATUS ``page`` (``"summary"``, ``"e2e_wheel_encoders"``, ...):
@@ -209,6 +212,8 @@ class SourceWatch:
             fell = self._fell_in_run(t_s) if fell is None else fell
             booted = boot_tick(uptime_s, counter, t_s, pose, self.summary_s,
                                self.status_before, fell, held=status_held)
+        tick = None if booted or counter != 0 or uptime_s != 0 else self.ticks.told
+        booted = booted or tick is not None  # held past its tick's page (``heldtick``)
         if not booted and (self.order.passed_over(uptime_s, state) if late is None else late):
             return None  # held back, it tells no reboot (``livelatestatus``)
         broke = (None if booted or counter is None else
@@ -224,6 +229,7 @@ class SourceWatch:
                 kind = "reboot"
                 self.offset_s = offset
                 self.life_from_s = self._told_from(t_s, booted and not ahead)
+                self.life_from_s = self.life_from_s if tick is None else min(t_s, tick[1])
             elif broke is not None:  # the first pose after it may tell it (``hear_pose``)
                 self.ahead, self.ahead_heard = (t_s, uptime_s, state, seq, broke), [t_s]
         elif self.other_s is not None and abs(offset - self.other_s) <= UPTIME_MATCH_S:
@@ -247,13 +253,11 @@ class SourceWatch:
         return kind
 
     def _told_from(self, t_s: float, power_up_tick: bool) -> float:
-        """Where a reboot told by the summary at bus time ``t_s`` began: the bus time of the pose
-        run's pose of COUNTER 0 when the summary was that run's ``power_up_tick`` (held back
-        behind the new life's first poses), else ``t_s``. Whether UPTIME's offset stayed within
-        ``UPTIME_MATCH_S`` or not (a life of 2 s and more): figure8 673's boot summary, held
-        back 55 ms behind its first three poses, 2.055 s after the first life's, began the new
-        life at its own bus time, and the pose of 2.041 s stayed judged against the old life's
-        reference (live 588.5 mm beyond on a correct firmware; issue #11)."""
+        """Where a reboot told by the summary at bus time ``t_s`` began: the pose run's pose of
+        COUNTER 0 when the summary was that run's ``power_up_tick``, else ``t_s``, whether
+        UPTIME's offset stayed within ``UPTIME_MATCH_S`` or not: figure8 673's boot summary,
+        held back 55 ms behind its first three poses, 2.055 s after the old life's, began the
+        new life at its own time (live 588.5 mm beyond on a correct firmware; issue #11)."""
         return min(t_s, self.pose[0]) if power_up_tick and self.pose else t_s
 
     def _fell_in_run(self, summary_s: float) -> bool:
@@ -276,6 +280,7 @@ class SourceWatch:
         self.pose = next_run(self.pose, t_s, counter, self.pose_s)
         self.pose_s = t_s
         held = self.pose_order.hear(counter, t_s)  # a hole of its sequence filled (liveheldpose)
+        self.ticks.hear_pose(t_s, counter)
         self.pose_late = held if counter == 0 else self.pose_late
         if self.ahead is not None or self.ahead_posed is not None or self.ahead_late is not None:
             self.ahead_heard.append(t_s)
@@ -325,6 +330,7 @@ class SourceWatch:
         tells whether it breaks the sequence (``bootticks.status_breaks``)."""
         self.status_before, self.status_last = self.status_last, (t_s, counter)
         self.status_late = (self.status_late[1], self.order.hear(counter))
+        self.ticks.hear_status(t_s, counter)
         if self.ahead_posed is not None or self.ahead_late is not None:
             self.ahead_heard.append(t_s)
 

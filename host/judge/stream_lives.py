@@ -54,7 +54,9 @@ from odocan.host.judge.distfall import Falls, joined, no_falls
 from odocan.host.judge.gapseen import crc_holds
 from odocan.host.judge.heldboot import summary_start
 from odocan.host.judge.heldsummaries import heard_in_chunk
+from odocan.host.judge.heldtick import tick_pages, tick_s
 from odocan.host.judge.latefall import continues_twice, fell_late
+from odocan.host.judge.lifespan import LifeSpan as LifeSpan
 from odocan.host.judge.livestreams import pose_told_first
 from odocan.host.judge.navrestart import Carried, second_evidence
 from odocan.host.judge.pagesent import Counts, StreamPages
@@ -67,20 +69,6 @@ from odocan.host.judge.stalls import silent_between, stalled_before
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 
 ENCODERS_KEPT = 1 << 16  # accepted encoder frames remembered (ENC_E2E_OK is a u16)
-
-
-@dataclass(frozen=True)
-class LifeSpan:
-    """One firmware life: frames ``[start, stop)`` of the log (``host.judge.reboots.Life``)."""
-
-    start: int
-    stop: int
-    boot: bool
-    t_s: float | None = None
-    uptime_before_s: int | None = None
-    set_pose: Any = None  # a set-pose's piece (``setposes.SetPoseCut``: ``stream_cuts``)
-    config: Any = None  # an applied config's piece (``configs.ConfigCut``)
-    silent: bool = False  # primed in a silence on a frame nothing names (``silentboot``)
 
 
 @dataclass
@@ -374,6 +362,7 @@ class StreamLives:
             return []
         if len(page["index"]) == 0:  # the chunk's latest pose and status frame still count
             heard_in_chunk(self._watch, chunk, self.decoder, page["index"], [])  # in order
+            tick_pages(chunk, self.decoder, page["index"], self._watch.ticks)
             self._ahead_posed(pose_rows(chunk, self.decoder), self._pose, -1, None)
             self._pose = poses_before(chunk, self.decoder, page["index"], self._pose)[1]
             self._status = status_before(chunk, self.decoder, page["index"], self._status)[1]
@@ -389,6 +378,7 @@ class StreamLives:
         names = [str(choices.get(int(state), int(state))) for state in page["STATE"].tolist()]
         said = list(zip(page["UPTIME"].tolist(), names, strict=True))
         late, evidence = heard_in_chunk(self._watch, chunk, self.decoder, index, said, good)
+        ticks = tick_pages(chunk, self.decoder, index[good], self._watch.ticks)  # (``heldtick``)
         carried, rows = self._pose, pose_rows(chunk, self.decoder)
         (pose_t, pose_counter, pose_new), self._pose = poses_before(
             chunk, self.decoder, index[good], self._pose)
@@ -399,19 +389,20 @@ class StreamLives:
         befores, self._held_before = heldboot.statuses_before(
             chunk, self.decoder, index[good], self._held_before)
         following = [*index[good].tolist()[1:], None]
-        for position, t_s, uptime_s, state, counter, after, pose, status, held, two in zip(
+        for position, t_s, uptime_s, state, counter, after, pose, status, held, two, tick in zip(
             index[good].tolist(), page["timestamp_s"][good].tolist(),
             page["UPTIME"][good].tolist(), page["STATE"][good].tolist(),
             page["COUNTER"][good].tolist(), following,
             zip(pose_t.tolist(), pose_counter.tolist(), pose_new.tolist(), strict=True),
             zip(status_t.tolist(), status_counter.tolist(), strict=True),
-            zip(late.tolist(), evidence.tolist(), strict=True), befores, strict=True,
+            zip(late.tolist(), evidence.tolist(), strict=True), befores, ticks, strict=True,
         ):
             name = str(choices.get(int(state), int(state)))
             events += self._posed_told(float(t_s), int(uptime_s), int(counter))
             before = self._watch.last_uptime_s
             self._watch.pose = (pose[0], int(pose[1]), bool(pose[2])) if pose[1] >= 0 else None
             self._watch.status_before = (status[0], int(status[1])) if status[1] >= 0 else None
+            self._watch.ticks.told = tick
             kind = self._watch.observe(float(t_s), int(uptime_s), name, int(counter),
                                        fell=fell_in_run(self._falls[0], float(t_s)),
                                        late=held[0], held=tuple(held[1]))
@@ -422,7 +413,8 @@ class StreamLives:
                 self.conflict = self._changed
             if kind == "reboot":
                 events.append((at, self._boot(at, int(uptime_s), float(t_s), name, int(before),
-                                              heldboot.held_tick_s(int(counter), float(t_s), two))))
+                                              tick_s(heldboot.held_tick_s(int(counter),
+                                                                          float(t_s), two), tick))))
             elif self._watch.ahead is not None:  # the first pose after it may tell it
                 self._ahead = (self._boot(at, int(uptime_s), float(t_s), name, int(before)),
                                self._watch.ahead[4], False)
