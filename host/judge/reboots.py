@@ -83,7 +83,7 @@ from odocan.host.judge.sources import two_sources_text
 from odocan.host.judge.stallfirst import merged_first
 from odocan.host.judge.stalls import silent_between
 from odocan.host.protocol import busfacts
-from odocan.host.protocol.decode import BulkDecoder, DecodeError
+from odocan.host.protocol.decode import BulkDecoder
 from odocan.host.protocol.e2e import check_frames
 
 SUMMARY_PAGE = busfacts.SUMMARY_PAGE  # ODOM_STATUS page with STATE and UPTIME
