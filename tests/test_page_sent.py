@@ -38,7 +38,7 @@ def test_counted_from_the_first_encoder_frame_sent_after_it() -> None:
     2.101 s: counted from the frame of 2.110 s (the latest before it, 2.100 s, the firmware's
     last); sent when heard: the page's own position."""
     at = np.arange(0, 20, 2, dtype=np.int64)  # positions 0, 2, .. 18
-    t_s = 2.06 + 0.01 * np.arange(10)
+    t_s = (2.06 + 0.01 * np.arange(10)).astype(np.float64)
     assert counted_from(19, 2.101, (at, t_s)) == 10
     assert counted_from(19, 2.156, (at, t_s)) == 19
     assert counted_from(9, 2.101, (at, t_s)) == 9  # frames before position 9 end at 2.10 s

@@ -233,7 +233,7 @@ def test_the_live_judges_date_the_reboot_from_its_power_up_pose(
     (UPTIME's offset beyond ``UPTIME_MATCH_S``), dated it 2.056 s, and the pose of 2.041 s stayed
     judged against the old life's reference: 588.5 mm beyond the allowance."""
     _figure8(drive)
-    first_s = {}
+    first_s: dict[str, float] = {}
     for t_s, name, s in raw_signals(drive[0], ("ODOM_POSE_X", "ODOM_STATUS")):
         told = s["COUNTER"] == 0 and (s.get("X") == s.get("HEADING") == 0 if name == "ODOM_POSE_X"
                                       else s["PAGE"] == 0 and s["UPTIME"] == 0)
