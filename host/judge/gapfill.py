@@ -111,14 +111,14 @@ def late_seq(counter: IntArray, sent_s: np.ndarray, anchor: Anchors, cycle_s: fl
     """Sender sequence numbers of refused frames (COUNTER, bus time) after accepted frames
     (``anchor``: sequence number, bus time, COUNTER; a number is its COUNTER's residue shifted
     as the anchor's, the first accepted frame being number 0 whatever its COUNTER): the number
-    of their COUNTER in (est - MAX_LATE_PERIODS, est + 1]; -1
+    of their COUNTER in [est - MAX_LATE_PERIODS, est]; -1
     where it lies further back (held back too long
     to be placed)."""
     anchor_seq, anchor_s, anchor_counter = anchor
     est = anchor_seq + np.floor((sent_s - anchor_s) / cycle_s + 0.5).astype(np.int64)
-    top = est + 1  # the highest number allowed
+    top = est  # the highest number allowed: never sent early (module docstring, "At most 15")
     seq: IntArray = top - ((top - anchor_seq - counter + anchor_counter) % COUNTER_MODULO)
-    return np.where(seq > est - MAX_LATE_PERIODS, seq, -1)
+    return np.where(seq >= est - MAX_LATE_PERIODS, seq, -1)
 
 
 def late_in_chunk(chunk: FrameArrays, decoder: BulkDecoder, enc: Encoders, offset: int,
@@ -155,10 +155,35 @@ def on_time_anchors(frames: Anchors, cycle_s: float) -> Anchors:
         return frames
     laps = lapped_numbers(seq, time_s, cycle_s)
     late_s = time_s - (seq - laps) * cycle_s
+    flagged = np.where(lap_less_one(seq - laps, time_s, counter, cycle_s),
+                       late_s + 0.5 * cycle_s, -np.inf)
+    suspect = np.concatenate((np.full(ANCHOR_FRAMES - 1, -np.inf), flagged))
+    below = sliding_window_view(suspect, ANCHOR_FRAMES).max(axis=1)  # per window
     padded = np.concatenate((np.full(ANCHOR_FRAMES - 1, np.inf), late_s))
-    best = (np.argmin(sliding_window_view(padded, ANCHOR_FRAMES), axis=1)
-            + np.arange(len(seq)) - (ANCHOR_FRAMES - 1))
+    windows = sliding_window_view(padded, ANCHOR_FRAMES)
+    kept = np.where(windows < below[:, None], np.inf, windows)
+    kept = np.where(np.isinf(kept.min(axis=1))[:, None], windows, kept)  # none left: all
+    best = np.argmin(kept, axis=1) + np.arange(len(seq)) - (ANCHOR_FRAMES - 1)
     return seq[best] + laps - laps[best], time_s[best], counter[best]
+
+
+def lap_less_one(seq: IntArray, time_s: npt.NDArray[np.float64], counter: IntArray,
+                 cycle_s: float) -> npt.NDArray[np.bool_]:
+    """Per accepted frame: whether it may be a frame held back 15 periods (a COUNTER lap less
+    one) that the E2E check took as the next one (issue #11, pmir seed 4, ``delay=0.5:150``):
+    its COUNTER one on from the accepted frame before it, heard less than half a period after
+    that one, it sits a period before that frame's place on the sender's grid, so as the least
+    late anchor it numbered every refused frame one period ahead (a frame held back 15 periods
+    a lap ahead, its counts 16 periods old filling the wrong gap). Such a frame is no anchor;
+    an on-time frame heard right after one held back half a period or more is left out with
+    it (another of the ``ANCHOR_FRAMES`` anchors the grid). The previous frame only: the
+    streamed judge knows no later one."""
+    out = np.zeros(len(seq), dtype=bool)
+    if len(seq) > 1:
+        early = np.diff(time_s) < 0.5 * cycle_s
+        one_on = (np.diff(counter) % COUNTER_MODULO == 1) & (np.diff(seq) == 1)
+        out[1:] = early & one_on
+    return out
 
 
 def lapped_numbers(seq: IntArray, time_s: npt.NDArray[np.float64], cycle_s: float) -> IntArray:
