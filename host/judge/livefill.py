@@ -7,7 +7,7 @@ errors over its known counts, not by ``gapbound``'s worst split of its travel.
 The sender numbers are the live judge's own: the accepted frames' periods summed
 (``liveplace.StallPlacer.on_encoders``). A refused frame is numbered as ``gapfill.late_seq``
 numbers it: from the least late on the sender's grid of the last ``gapfill.ANCHOR_FRAMES``
-accepted frames, the number of its COUNTER in [est - 15, est]. A frame heard after the sample
+accepted frames, the number of its COUNTER in (est - 8, est + 1]. A frame heard after the sample
 that placed the reference past its gap fills it then: ``heard`` tells the placer, which places
 that gap again within its fill allowance (``liveplace.StallPlacer``)."""
 
@@ -38,8 +38,7 @@ class LiveFill:
 
     def __init__(self) -> None:
         self.sender = 0  # the latest accepted frame's sender number
-        # (sender number, bus time, COUNTER, suspect grid place: gapfill.lap_less_one)
-        self._anchors: deque[tuple[int, float, int, float]] = deque(maxlen=ANCHOR_FRAMES)
+        self._anchors: deque[tuple[int, float, int]] = deque(maxlen=ANCHOR_FRAMES)
         self._counts: dict[int, Counts | None] = {}  # None: two frames of a number disagreed
         self._kept_from = 0  # the lowest sender number whose refused frames are all kept
         self.heard: Callable[[], None] | None = None  # told of every frame placed (liveplace)
@@ -48,13 +47,7 @@ class LiveFill:
     def accepted(self, periods: int, counter: int, t_s: float) -> None:
         """An accepted frame ``periods`` after the one before it (COUNTER, bus time s)."""
         self.sender += max(periods, 1)
-        suspect = -math.inf
-        if self._anchors:
-            _, t_before, counter_before, _ = self._anchors[-1]
-            if (periods == 1 and (counter - counter_before) % COUNTER_MODULO == 1
-                    and t_s - t_before < 0.5 * CYCLE_S):  # gapfill.lap_less_one
-                suspect = t_s - self.sender * CYCLE_S + 0.5 * CYCLE_S
-        self._anchors.append((self.sender, t_s, counter, suspect))
+        self._anchors.append((self.sender, t_s, counter))
         if len(self._counts) > 2 * KEPT_PERIODS:
             oldest = self.sender - KEPT_PERIODS
             self._counts = {s: c for s, c in self._counts.items() if s > oldest}
@@ -66,13 +59,11 @@ class LiveFill:
             self.bus.heard(-1, counter, left, right, t_s)
         if not self._anchors:
             return
-        below = max(a[3] for a in self._anchors)  # gapfill.on_time_anchors
-        kept = [a for a in self._anchors if a[1] - a[0] * CYCLE_S >= below] or self._anchors
-        seq_a, t_a, counter_a, _ = min(kept, key=lambda a: a[1] - a[0] * CYCLE_S)
+        seq_a, t_a, counter_a = min(self._anchors, key=lambda a: a[1] - a[0] * CYCLE_S)
         est = seq_a + math.floor((t_s - t_a) / CYCLE_S + 0.5)
-        top = est  # never sent early: gapfill.late_seq
+        top = est + 1
         seq = top - ((top - seq_a - counter + counter_a) % COUNTER_MODULO)
-        if seq < est - MAX_LATE_PERIODS:
+        if seq <= est - MAX_LATE_PERIODS:
             return  # held back too long to be placed
         known = self._counts.get(seq, (left, right))
         self._counts[seq] = (left, right) if known == (left, right) else None
