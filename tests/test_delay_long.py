@@ -173,13 +173,16 @@ def test_a_pose_10_mm_off_fails_across_refused_gaps(
     assert codes == [0, 1, 1]
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "issue #11: pmir seed 4, delay=0.5:150 (a correct drive, PASS): X raised 10 mm from 5.0 s "
-    "(251 frames) PASSes both analyses, on main 25423d7b too: the placement at the gap of the "
-    "log before encoder frame 273 moved the reference 9.94 mm where that gap allows 3.18 mm "
-    "(report: 89 gap placements, 10.01 mm absorbed within 7619 mm allowed); not traced "
-    "further (found by the delaylong sweep of seeds 1-10)"))
 def test_a_pose_10_mm_off_fails_pmir_4(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """pmir seed 4, ``delay=0.5:150`` (a correct drive, PASS), X raised 10 mm from 5.0 s (251
+    frames): PASSed both analyses (strict xfail, on main 25423d7b too). Frames held back 150 ms,
+    15 periods, carry a COUNTER one on from the on-time frame heard with them: the E2E check
+    took some as the next frame, and, one period before the sender's grid, they became the least
+    late anchor of ``gapfill``'s numbering (``lap_less_one``), which numbered every refused
+    frame one ahead, and the window (est - 15, est + 1] put a frame held 15 periods a lap ahead:
+    the frames 482, 483 (heard 4.98, 4.99 s) went to 498, 499, the gap before encoder frame 271
+    kept ``gapbound``'s 12.35 mm and the one before 273 was filled with counts 16 periods old
+    (3.18 mm), and the placement at 273 took the 9.94 mm within both."""
     log, _, code = _drive(tmp_path, "pmir", 4, "delay=0.5:150")
     tampered = tmp_path / "t.log"
     assert raise_x_10_mm(log, tampered, 5.0) > 100

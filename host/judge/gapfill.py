@@ -18,8 +18,8 @@ been narrower), its steps are the fine path's merged in runs over frames of know
 over any runs merged, the reference's one merged step among them). Premises, as everywhere in
 the judge: a frame whose CRC holds is the sender's (a forgery is ``samples``' twins' business:
 a filled frame must also be a plausible step from its neighbours, else the gap keeps its
-``gapbound`` allowance); a frame is held back fewer than 15 periods (``MAX_LATE_PERIODS``) and
-never sent early, so its sequence number is the one of its COUNTER in (est - 15, est + 1], est
+``gapbound`` allowance); a frame is held back at most 15 periods (``MAX_LATE_PERIODS``) and
+never sent early, so its sequence number is the one of its COUNTER in [est - 15, est], est
 its periods on the sender's grid: counted from the least late of the last ``ANCHOR_FRAMES``
 accepted frames before it on the bus (time - sequence number * cycle the least); two frames of
 one number must agree (else unknown); the firmware takes its frames in sequence order (E2E:
@@ -48,6 +48,19 @@ The bound was 8 periods (half a COUNTER cycle); a ``delay`` of 100 ms on a 10 ms
 and that absorbed a pose 10 mm off (seed 703, ``delay=0.5:100``: PASSed); 15 (twice the merge
 error's 8, one lap less one) places frames held back up to 14 periods behind the least late
 anchor (issue #11).
+
+At most 15 (pmir seed 4, ``delay=0.5:150``, 10 s: X raised 10 mm from 5.0 s PASSed both
+analyses). A frame held back 150 ms is heard with the on-time frame of the number before it,
+its COUNTER one on: E2E takes it as the next frame (``lap_less_one``), a period before the
+sender's grid, and as the least late anchor it numbered every refused frame one ahead; the
+window (est - 15, est + 1] then put frames held 15 periods a lap ahead (482, 483, heard 4.98,
+4.99 s, as 498, 499): the gap before encoder frame 271 kept ``gapbound``'s 12.35 mm, the one
+before 273 was filled with counts 16 periods old (3.18 mm), and the placement at 273 took the
+9.94 mm within both. Such frames are no anchor now (nor any frame less late than one of them),
+and the window is [est - 15, est]: a frame is never sent early, and the least late anchor is
+on time within rounding (the +1 once allowed anchors up to 1.5 periods late). The live judge
+(``livefill``) keeps the old rule: the same change there moved its error on that correct drive
+from 2.5 mm to 17.9 mm beyond its allowance (both FAIL it; not traced).
 """
 
 from __future__ import annotations
@@ -68,7 +81,8 @@ from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.protocol.e2e import crc8h2f_p02, e2e_messages
 
 COUNTER_MODULO = ENC_COUNTER_LAP  # 16
-MAX_LATE_PERIODS = 15  # a frame held back fewer periods than this (one COUNTER cycle less one)
+MAX_LATE_PERIODS = 15  # a frame held back at most this many periods (one COUNTER cycle less
+# one; was "fewer than": ``delay=...:150`` holds frames exactly 15 periods, ``lap_less_one``)
 ANCHOR_FRAMES = 64  # accepted frames an anchor is chosen among (the least late on the grid)
 Counts = tuple[int, int]  # (left, right) wire counts
 # accepted frames: sequence numbers, bus times, COUNTERs
@@ -111,14 +125,14 @@ def late_seq(counter: IntArray, sent_s: np.ndarray, anchor: Anchors, cycle_s: fl
     """Sender sequence numbers of refused frames (COUNTER, bus time) after accepted frames
     (``anchor``: sequence number, bus time, COUNTER; a number is its COUNTER's residue shifted
     as the anchor's, the first accepted frame being number 0 whatever its COUNTER): the number
-    of their COUNTER in (est - MAX_LATE_PERIODS, est + 1]; -1
+    of their COUNTER in [est - MAX_LATE_PERIODS, est]; -1
     where it lies further back (held back too long
     to be placed)."""
     anchor_seq, anchor_s, anchor_counter = anchor
     est = anchor_seq + np.floor((sent_s - anchor_s) / cycle_s + 0.5).astype(np.int64)
-    top = est + 1  # the highest number allowed
+    top = est  # the highest number allowed: never sent early (module docstring, "At most 15")
     seq: IntArray = top - ((top - anchor_seq - counter + anchor_counter) % COUNTER_MODULO)
-    return np.where(seq > est - MAX_LATE_PERIODS, seq, -1)
+    return np.where(seq >= est - MAX_LATE_PERIODS, seq, -1)
 
 
 def late_in_chunk(chunk: FrameArrays, decoder: BulkDecoder, enc: Encoders, offset: int,
@@ -149,16 +163,42 @@ def on_time_anchors(frames: Anchors, cycle_s: float) -> Anchors:
     """Per accepted frame (sequence number, bus time, COUNTER): the least late on the sender's
     grid (the least time - number * cycle) of it and the ``ANCHOR_FRAMES`` - 1 before it, its
     number in the frame's numbering (``lapped_numbers``: a lap the host's numbering gained
-    between them added)."""
+    between them added). A frame ``lap_less_one`` flags is no anchor, nor any in its window
+    less than half a period later than it on the grid (all of them: the window kept whole)."""
     seq, time_s, counter = frames
     if len(seq) == 0:
         return frames
     laps = lapped_numbers(seq, time_s, cycle_s)
     late_s = time_s - (seq - laps) * cycle_s
+    flagged = np.where(lap_less_one(seq - laps, time_s, counter, cycle_s),
+                       late_s + 0.5 * cycle_s, -np.inf)
+    suspect = np.concatenate((np.full(ANCHOR_FRAMES - 1, -np.inf), flagged))
+    below = sliding_window_view(suspect, ANCHOR_FRAMES).max(axis=1)  # per window
     padded = np.concatenate((np.full(ANCHOR_FRAMES - 1, np.inf), late_s))
-    best = (np.argmin(sliding_window_view(padded, ANCHOR_FRAMES), axis=1)
-            + np.arange(len(seq)) - (ANCHOR_FRAMES - 1))
+    windows = sliding_window_view(padded, ANCHOR_FRAMES)
+    kept = np.where(windows < below[:, None], np.inf, windows)
+    kept = np.where(np.isinf(kept.min(axis=1))[:, None], windows, kept)  # none left: all
+    best = np.argmin(kept, axis=1) + np.arange(len(seq)) - (ANCHOR_FRAMES - 1)
     return seq[best] + laps - laps[best], time_s[best], counter[best]
+
+
+def lap_less_one(seq: IntArray, time_s: npt.NDArray[np.float64], counter: IntArray,
+                 cycle_s: float) -> npt.NDArray[np.bool_]:
+    """Per accepted frame: whether it may be a frame held back 15 periods (a COUNTER lap less
+    one) that the E2E check took as the next one (issue #11, pmir seed 4, ``delay=0.5:150``):
+    its COUNTER one on from the accepted frame before it, heard less than half a period after
+    that one, it sits a period before that frame's place on the sender's grid, so as the least
+    late anchor it numbered every refused frame one period ahead (a frame held back 15 periods
+    a lap ahead, its counts 16 periods old filling the wrong gap). Such a frame is no anchor;
+    an on-time frame heard right after one held back half a period or more is left out with
+    it (another of the ``ANCHOR_FRAMES`` anchors the grid). The previous frame only: the
+    streamed judge knows no later one."""
+    out = np.zeros(len(seq), dtype=bool)
+    if len(seq) > 1:
+        early = np.diff(time_s) < 0.5 * cycle_s
+        one_on = (np.diff(counter) % COUNTER_MODULO == 1) & (np.diff(seq) == 1)
+        out[1:] = early & one_on
+    return out
 
 
 def lapped_numbers(seq: IntArray, time_s: npt.NDArray[np.float64], cycle_s: float) -> IntArray:

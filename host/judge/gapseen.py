@@ -94,6 +94,7 @@ from odocan.host.judge.gapchecked import (
     skipped_frames,
 )
 from odocan.host.judge.gapfill import (
+    ANCHOR_FRAMES,
     NO_ANCHORS,
     Anchors,
     Counts,
@@ -348,7 +349,7 @@ class PageEvidence:
         if self.first_s is None and len(enc.seq):
             self.first_s = float(enc.timestamp_s[0])
         self.late.add(*late_in_chunk(chunk, self.decoder, enc, self._offset, self._anchors))
-        self._anchors = recent_anchors(self._anchors, enc)
+        self._anchors = recent_anchors(self._anchors, enc, ANCHOR_FRAMES + 1)  # lap_less_one
         self._add_gaps(enc)
         self._add_holes(chunk, enc)
         raw = self._raw_rows(chunk)
