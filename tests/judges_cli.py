@@ -18,7 +18,11 @@ import cantools
 from cantools.database.can import Database
 
 from odocan.host.cli.app import main
+from odocan.host.judge.monitor import BusMonitor
+from odocan.host.judge.reference import Geometry
+from odocan.host.mqtt.telemetry import RobotTelemetry
 from odocan.sim.contract import DBC_PATH
+from odocan.sim.robot import load
 from tests.fw_watch import Watch, watched
 from tests.log_edit import raise_raw, raise_raw_once
 
@@ -140,3 +144,16 @@ def raw_signals(log: Path, names: tuple[str, ...]) -> list[tuple[float, str, dic
                 assert isinstance(signals, dict)
                 out.append((msg.timestamp, name, signals))
     return out
+
+
+def live_judges(robot: str, log: Path) -> tuple[BusMonitor, RobotTelemetry]:
+    """The monitor and the bridge's judge for ``robot``, each fed ``log`` frame by frame."""
+    profile = load(robot)
+    monitor = BusMonitor(profile)
+    bridge = RobotTelemetry("r1", Geometry.of(profile), "exact",
+                            counter_bits=profile.counter_bits)
+    with can.LogReader(str(log)) as reader:
+        for msg in reader:
+            monitor.feed(msg, now_s=msg.timestamp)
+            bridge.feed(msg)
+    return monitor, bridge

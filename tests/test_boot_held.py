@@ -18,21 +18,23 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import can
 import pytest
 
 from odocan.host.io.logs import iter_log, read_log
-from odocan.host.judge.monitor import BusMonitor
 from odocan.host.judge.reboots import split_lives
-from odocan.host.judge.reference import Geometry
 from odocan.host.judge.stream_e2e import StreamE2E
 from odocan.host.judge.stream_lives import StreamLives
-from odocan.host.mqtt.telemetry import RobotTelemetry
 from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.protocol.decode import BulkDecoder
-from odocan.sim.robot import load
 from tests.fw_watch import Watch
-from tests.judges_cli import STREAMS, analyze, raise_x_10_mm, watched_run, x_10_mm_off_fails
+from tests.judges_cli import (
+    STREAMS,
+    analyze,
+    live_judges,
+    raise_x_10_mm,
+    watched_run,
+    x_10_mm_off_fails,
+)
 
 FAULTS = "busoff=1.5:0.4,delay=0.2:150,reboot=4.0:0.2"
 DURATION_S = 9
@@ -68,14 +70,7 @@ def drive(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFacto
 def _live_beyond_m(log: Path, robot: str) -> tuple[float, float]:
     """The monitor's and the bridge's judges fed ``log`` frame by frame: their position errors
     beyond their allowances."""
-    profile = load(robot)
-    monitor = BusMonitor(profile)
-    bridge = RobotTelemetry("r1", Geometry.of(profile), "exact",
-                            counter_bits=profile.counter_bits)
-    with can.LogReader(str(log)) as reader:
-        for msg in reader:
-            monitor.feed(msg, now_s=msg.timestamp)
-            bridge.feed(msg)
+    monitor, bridge = live_judges(robot, log)
     return monitor.tracker.max_beyond_allowance_m, bridge.tracker.max_beyond_allowance_m
 
 

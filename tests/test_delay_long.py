@@ -111,14 +111,33 @@ def test_the_correct_firmware_passes_kobuki_still_failing(
     assert _run_and_judges(drive, capsys) == [0, 0, 0]
 
 
-def test_a_pose_10_mm_off_after_the_double_reprime_fails(
-        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    """kobuki seed 2, ``delay=0.5:150``: the hold from 4.76 s ends at the sample of 5.14 s, which
-    the firmware reached over two re-primes (``stallresume``: the reference's steps are a
-    candidate). X raised 10 mm from 5.0 s: the placement after the hold absorbs it (0.08 mm
-    beyond the allowance), the resume rule does not (6.99 mm beyond, as on main): both analyses
-    FAIL."""
-    log, _, code = _drive(tmp_path, "kobuki", 2, "delay=0.5:150")
+# X raised 10 mm from 5.0 s on a correct drive: name: robot, seed, faults; each once PASSed
+TAMPERED_AT_5_S = {
+    # the hold from 4.76 s ends at the sample of 5.14 s, which the firmware reached over two
+    # re-primes (``stallresume``: the reference's steps are a candidate): the placement after
+    # the hold absorbs the 10 mm (0.08 mm beyond the allowance), the resume rule does not (6.99
+    # mm beyond, as on main)
+    "double_reprime_kobuki_2": ("kobuki", 2, "delay=0.5:150"),
+    # 109 gaps of refused frames, each placement's gap bound summed to 2275 mm absorbed it;
+    # FAILs since the thirty-third pass's gap and late-naming rules (``gap445``, ``run698``)
+    "refused_gaps_pmir_2": ("pmir", 2, "delay=0.5:100"),
+    # frames held back 150 ms, 15 periods, carry a COUNTER one on from the on-time frame heard
+    # with them: the E2E check took some as the next frame and, one period before the sender's
+    # grid, they became the least late anchor of ``gapfill``'s numbering (``lap_less_one``),
+    # which numbered every refused frame one ahead, and the window (est - 15, est + 1] put a
+    # frame held 15 periods a lap ahead: the frames 482, 483 (heard 4.98, 4.99 s) went to 498,
+    # 499, the gap before encoder frame 271 kept ``gapbound``'s 12.35 mm and the one before 273
+    # was filled with counts 16 periods old (3.18 mm): the placement at 273 took the 9.94 mm
+    "lap_less_one_pmir_4": ("pmir", 4, "delay=0.5:150"),
+}
+
+
+@pytest.mark.parametrize("name", sorted(TAMPERED_AT_5_S))
+def test_a_pose_10_mm_off_from_5_s_fails(name: str, tmp_path: Path,
+                                         capsys: pytest.CaptureFixture[str]) -> None:
+    """X raised 10 mm from 5.0 s FAILs both analyses (each case in ``TAMPERED_AT_5_S``)."""
+    robot, seed, faults = TAMPERED_AT_5_S[name]
+    log, _, code = _drive(tmp_path, robot, seed, faults)
     tampered = tmp_path / "t.log"
     assert raise_x_10_mm(log, tampered, 5.0) > 100
     codes = [code, *both_analyses(tampered)]
@@ -157,35 +176,3 @@ def test_frames_stamped_late_in_bus_order_keep_their_place() -> None:
     late, sent = late_sends(heard, counter, POSE_PERIOD_S)
     assert not late.any()
     assert np.array_equal(sent, heard)
-
-
-def test_a_pose_10_mm_off_fails_across_refused_gaps(
-        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    """pmir seed 2, ``delay=0.5:100``, X raised 10 mm from 5.0 s: PASSed (strict xfail: 109 gaps
-    of refused frames, each placement's gap bound summed to 2275 mm absorbed the 10 mm); FAILs
-    both analyses since the thirty-third pass's gap and late-naming rules (``gap445``,
-    ``run698``: found by the full run, their XPASS)."""
-    log, _, code = _drive(tmp_path, "pmir", 2, "delay=0.5:100")
-    tampered = tmp_path / "t.log"
-    assert raise_x_10_mm(log, tampered, 5.0) > 100
-    codes = [code, *both_analyses(tampered)]
-    capsys.readouterr()
-    assert codes == [0, 1, 1]
-
-
-def test_a_pose_10_mm_off_fails_pmir_4(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    """pmir seed 4, ``delay=0.5:150`` (a correct drive, PASS), X raised 10 mm from 5.0 s (251
-    frames): PASSed both analyses (strict xfail, on main 25423d7b too). Frames held back 150 ms,
-    15 periods, carry a COUNTER one on from the on-time frame heard with them: the E2E check
-    took some as the next frame, and, one period before the sender's grid, they became the least
-    late anchor of ``gapfill``'s numbering (``lap_less_one``), which numbered every refused
-    frame one ahead, and the window (est - 15, est + 1] put a frame held 15 periods a lap ahead:
-    the frames 482, 483 (heard 4.98, 4.99 s) went to 498, 499, the gap before encoder frame 271
-    kept ``gapbound``'s 12.35 mm and the one before 273 was filled with counts 16 periods old
-    (3.18 mm), and the placement at 273 took the 9.94 mm within both."""
-    log, _, code = _drive(tmp_path, "pmir", 4, "delay=0.5:150")
-    tampered = tmp_path / "t.log"
-    assert raise_x_10_mm(log, tampered, 5.0) > 100
-    codes = [code, *both_analyses(tampered)]
-    capsys.readouterr()
-    assert codes == [0, 1, 1]

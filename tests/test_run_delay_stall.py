@@ -30,7 +30,6 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-import can
 import numpy as np
 import pytest
 
@@ -38,18 +37,17 @@ from odocan.host.io.logs import iter_log, read_log
 from odocan.host.judge.latenames import late_sends
 from odocan.host.judge.monitor import BusMonitor
 from odocan.host.judge.reboots import encoder_count_pages, split_lives
-from odocan.host.judge.reference import Geometry
 from odocan.host.judge.stream_e2e import StreamE2E
 from odocan.host.judge.stream_lives import StreamLives
 from odocan.host.mqtt.telemetry import RobotTelemetry
 from odocan.host.protocol.busfacts import POSE_PERIOD_S
 from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.protocol.decode import BulkDecoder
-from odocan.sim.robot import load
 from tests.fw_watch import Watch
 from tests.judges_cli import (
     STREAMS,
     analyze,
+    live_judges,
     raise_x_10_mm,
     raw_signals,
     reported_analyses,
@@ -214,15 +212,7 @@ def _live_beyond_m(name: str, log: Path) -> tuple[float, float]:
 
 def _live_judges(name: str, log: Path) -> tuple[BusMonitor, RobotTelemetry]:
     """The monitor and the bridge, each fed ``log`` frame by frame (``name``'s robot)."""
-    profile = load(DRIVES[name][0])
-    monitor = BusMonitor(profile)
-    bridge = RobotTelemetry("r1", Geometry.of(profile), "exact",
-                            counter_bits=profile.counter_bits)
-    with can.LogReader(str(log)) as reader:
-        for msg in reader:
-            monitor.feed(msg, now_s=msg.timestamp)
-            bridge.feed(msg)
-    return monitor, bridge
+    return live_judges(DRIVES[name][0], log)
 
 
 def test_the_live_judges_date_the_reboot_from_its_power_up_pose(
