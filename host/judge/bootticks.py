@@ -294,6 +294,14 @@ def restarts_small(counter: int, t_s: float, before: tuple[float, int] | None) -
     is the caller's (``boot_ahead``): two messages' sequences broken, not one."""
     if before is None or not 0 < counter < BOOT_POSE_FRAMES:
         return False
+    return sooner_than_one_life(counter, t_s, before)
+
+
+def sooner_than_one_life(counter: int, t_s: float, before: tuple[float, int]) -> bool:
+    """Whether an ODOM_POSE_X of E2E ``counter`` heard at bus time ``t_s`` came sooner than one
+    life could count on to it from the pose ``before`` (bus time, COUNTER): the
+    ``(counter - COUNTER before) mod 16`` frames between (16 for the same COUNTER) are sent one
+    ``POSE_PERIOD_S`` apart, never faster."""
     frames = (counter - before[1] - 1) % POSE_COUNTER_LAP + 1
     return bool(t_s - before[0] < frames * POSE_PERIOD_S - SEQUENCE_SLACK_S)
 

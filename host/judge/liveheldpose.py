@@ -14,7 +14,7 @@ late): that hole is the new life's, and the held pose of COUNTER 0 still tells i
 
 from __future__ import annotations
 
-from odocan.host.judge.bootticks import POSE_COUNTER_LAP, POSE_PERIOD_S, SEQUENCE_SLACK_S
+from odocan.host.judge.bootticks import sooner_than_one_life
 from odocan.host.judge.livelatestatus import StatusOrder
 from odocan.host.protocol.busfacts import ENC_COUNTER_MASK
 
@@ -39,12 +39,8 @@ class PoseOrder:
         """One pose of E2E ``counter`` heard at bus time ``t_s``: whether it was held back
         within a sequence unbroken since the hole it fills (no power-up tick's evidence)."""
         if not self.order.hear(counter):
-            steps = (counter - self.top - 1) % POSE_COUNTER_LAP + 1
-            self.broke[counter] = (
-                self.top >= 0
-                and counter != self.top
-                and t_s - self.top_s < steps * POSE_PERIOD_S - SEQUENCE_SLACK_S
-            )
+            self.broke[counter] = (self.top >= 0 and counter != self.top
+                                   and sooner_than_one_life(counter, t_s, (self.top_s, self.top)))
             self.top, self.top_s = counter, t_s
             return False
         ahead = [((c - counter) & ENC_COUNTER_MASK, c) for c in self.order.recent]
