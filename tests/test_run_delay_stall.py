@@ -72,26 +72,6 @@ DRIVES = {  # name: robot, scenario, seed, duration s, faults, a time past the f
     "pmir_figure8_672": ("pmir", "figure8", 672, 9, FIGURE8, PAST_FIGURE8_S),  # FAILed alike
 }
 REBOOT_S = 2.0  # figure8's reboot (1.8 s + 0.2 s)
-LIVE_671 = (
-    "not fixed: figure8 671's live judges (monitor and bridge alike) are 63.8 mm beyond their "
-    "allowance (39.8 mm first at 4.176 s, 63.8 mm at 4.536 s: between the reboot at 2.0 s and "
-    "the stall at 5.6 s), the same before and after pagesent and the sources fix; run and both "
-    "analyses PASS it. Traced in part: the new firmware (summary STATE INIT at 2.001 s) primed on "
-    "the frame heard at 2.005 s (COUNTER 3, CTRL_UPTIME 2: an old frame held back 55 ms), which "
-    "the host's E2E sequence refused (6 at 1.980 s before it), as analyze's split names it; its "
-    "first count page (OK 6, LOST 3) counts to no frame of the live window, the wait expires at "
-    "3.0 s and the life starts on the guess, the frame of 2.010 s (COUNTER 9); the firmware's "
-    "E2E check, fresh at 3, then lost most frames the host's sequence took (ENC_E2E_LOST 43 of "
-    "67 by 2.7 s), and no sample is judged live between 2.0 and 4.176 s")
-LIVE_673 = (
-    "not fixed: figure8 673's live judges (monitor and bridge alike) are 16.0 mm beyond their "
-    "allowance (first judged sample at 3.256 s, the reboot at 2.0 s): the new firmware primed on "
-    "the encoder frame of 2.000 s (COUNTER 8), which the host's E2E sequence refused (1 at "
-    "1.985 s before it); its power-up pose (2.001 s, ENC_COUNTER 8) names no frame of the live "
-    "window, the boot summary (held back 55 ms to 2.056 s) has no refused frame of its tick "
-    "(``liveboottick``), the first count page (OK 8, LOST 3, sent 2.101 s) counts to no frame of "
-    "the window, and the life starts on the guess, the frame of 2.040 s: 4 frames late. analyze "
-    "names the frame of 2.000 s by the power-up pose among every frame heard (``bootnamed``)")
 TEN_MM_SHORT_LSB = -10  # ODOM_TWIST DISTANCE's 1 mm LSBs
 DISTANCE_SPAN = (6, 2)  # ODOM_TWIST DISTANCE: bytes 6..7, little-endian
 Drive = tuple[Path, Watch, int, float]
@@ -238,13 +218,10 @@ def test_the_live_judges_pass_the_correct_firmware(drive: Drive,
     """The monitor and the bridge fed the log frame by frame: within the 0.1 mm tolerance
     (figure8 672: 21.2 mm beyond before ``pagesent``, pmir 19.8 mm; 673 and 679: 588.5 mm before
     their boot summary, held back behind the new life's first poses, withdrew them: ``sources``;
-    673 is 16.0 mm beyond for another cause, ``LIVE_673``)."""
+    671 63.8 mm and 673 16.0 mm before the host's encoder sequence restarted where the new
+    firmware primed, on an old frame it refused: ``livefreshboot``)."""
     _figure8(drive)
     name = request.node.callspec.params["drive"]
-    if name == "figure8_671":
-        request.applymarker(pytest.mark.xfail(strict=True, reason=LIVE_671))
-    if name == "figure8_673":
-        request.applymarker(pytest.mark.xfail(strict=True, reason=LIVE_673))
     beyond_m = _live_beyond_m(name, drive[0])
     assert max(beyond_m) <= 1e-4, beyond_m
 
@@ -257,4 +234,54 @@ def test_x_10_mm_off_from_the_reboot_fails_live(drive: Drive, tmp_path: Path,
     tampered = tmp_path / "t.log"
     assert raise_x_10_mm(drive[0], tampered, REBOOT_S) > 100
     beyond_m = _live_beyond_m(request.node.callspec.params["drive"], tampered)
+    assert min(beyond_m) > 5e-3, beyond_m
+
+
+FRESH_BOOTS = {  # name: robot, seed (FIGURE8's faults); the live judges' mm beyond before
+    "figure8_677": ("kobuki", 677),  # 35.6
+    "figure8_678": ("kobuki", 678),  # 24.1
+    "figure8_680": ("kobuki", 680),  # 55.9
+    "pmir_figure8_671": ("pmir", 671),  # 62.8
+    "pmir_figure8_673": ("pmir", 673),  # 17.6
+    "pmir_figure8_677": ("pmir", 677),  # 34.6
+    "pmir_figure8_678": ("pmir", 678),  # 24.0
+    "pmir_figure8_680": ("pmir", 680),  # 51.8
+}
+FreshBoot = tuple[str, Path, Watch, int]
+
+
+@pytest.fixture(scope="module", params=sorted(FRESH_BOOTS))
+def fresh_boot(request: pytest.FixtureRequest,
+               tmp_path_factory: pytest.TempPathFactory) -> FreshBoot:
+    """A figure8 drive whose new firmware primed on an old encoder frame (held back 55 ms by
+    ``delay``) the host's continuing E2E sequence refused: robot, log, watch, run's exit."""
+    robot, seed = FRESH_BOOTS[request.param]
+    log = tmp_path_factory.mktemp(request.param) / "d.log"
+    watch, code = watched_run(log, robot, "figure8", seed, 9, FIGURE8)
+    return robot, log, watch, code
+
+
+def test_the_four_judges_pass_a_life_primed_on_a_refused_frame(
+        fresh_boot: FreshBoot, capsys: pytest.CaptureFixture[str]) -> None:
+    """run, analyze whole and streamed PASS the correct firmware (within 1/1000 LSB of
+    float64), and so do the monitor and the bridge: their encoder sequence restarts where the
+    new firmware's did (``livefreshboot``; a held count page counted from its send), as
+    ``analyze`` checks each life afresh (16-64 mm beyond the allowance live before: the
+    life started on a guess, 1 to 5 frames off)."""
+    robot, log, watch, code = fresh_boot
+    assert watch.within_a_thousandth_lsb(), (watch.worst_m, watch.worst_rad)
+    codes = [code, *(analyze(log, s) for s in STREAMS)]
+    out = capsys.readouterr().out
+    beyond_m = [j.tracker.max_beyond_allowance_m for j in live_judges(robot, log)]
+    assert codes == [0, 0, 0], out[-1500:]
+    assert max(beyond_m) <= 1e-4, beyond_m
+
+
+def test_x_10_mm_off_from_a_fresh_boot_fails_live(fresh_boot: FreshBoot, tmp_path: Path) -> None:
+    """X raised 10 mm from the reboot on: the monitor and the bridge each find the position
+    more than 5 mm beyond its allowance (the fresh sequence withdraws no pose of the life)."""
+    robot, log, _, _ = fresh_boot
+    tampered = tmp_path / "t.log"
+    assert raise_x_10_mm(log, tampered, REBOOT_S) > 100
+    beyond_m = [j.tracker.max_beyond_allowance_m for j in live_judges(robot, tampered)]
     assert min(beyond_m) > 5e-3, beyond_m

@@ -26,6 +26,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
+from odocan.host.judge.livefreshboot import TWIN_S, init_restart
 from odocan.host.judge.livetwins import refused_encoders
 from odocan.host.judge.livewindow import CYCLE_S, HALF_LAP
 from odocan.host.protocol.busfacts import ENC_COUNTER_MASK
@@ -36,7 +37,6 @@ if TYPE_CHECKING:
     from odocan.host.protocol.e2e_live import E2EMonitor
 
 Frame = tuple[int, int, int, float, int]  # COUNTER, LEFT_COUNT, RIGHT_COUNT, bus time s, uptime
-TWIN_S = HALF_LAP * CYCLE_S  # a repeat nearer than this to the frame it repeats: a twin
 
 
 class BootTick:
@@ -52,6 +52,14 @@ class BootTick:
         self.frame = None
         self.status = ""
         self.can_id = -1
+        # the judge's E2E check and encoder handler (``bind``; ``livefreshboot``)
+        self.bound: tuple[E2EMonitor, Callable[[tuple[int, int, int, int], float], object]] \
+            | None = None
+
+    def bind(self, e2e: E2EMonitor,
+             take: Callable[[tuple[int, int, int, int], float], object]) -> None:
+        """The judge's E2E check and its WHEEL_ENCODERS handler (as ``boot_frame``'s)."""
+        self.bound = (e2e, take)
 
     def refused(self, can_id: int, signals: Any, t_s: float, status: str) -> None:
         """A WHEEL_ENCODERS frame (identifier ``can_id``, 11-bit) refused (``signals``: its raw
@@ -73,6 +81,7 @@ def boot_frame(tracker: PoseTracker, e2e: E2EMonitor, told: tuple[int, str, int 
     uptime_s, state, seq, t_s = told
     tick = tracker.boot_tick
     frame, tick.frame = tick.frame, None
+    init_restart(e2e, (uptime_s, state, seq))  # primes on the next (livefreshboot)
     if frame is None or uptime_s != 0 or state == "INIT" or seq is not None:
         return None
     if t_s - frame[3] >= CYCLE_S:  # not the summary's tick's frame

@@ -15,7 +15,7 @@ from odocan.host.judge.livefit import LiveFit
 from odocan.host.judge.liveplacing import place_reference
 from odocan.host.judge.livepose import FramePose, Sample
 from odocan.host.judge.liveprimed import UNTOLD_PRIME, choose_primed
-from odocan.host.judge.livewindow import Counted, primed_at, window_counts
+from odocan.host.judge.livewindow import Counted, window_counts
 from odocan.host.judge.pagesent import counted_from, sent_s
 from odocan.host.judge.primed import counted_start
 from odocan.host.judge.reference import ReferenceOdometry
@@ -161,7 +161,11 @@ class Lives:
         """``PoseTracker.on_enc_counts``' start: the page ends a wait, or proves a power-up; the
         first life's samples start from (0, 0, 0) on the frame its first count page says it
         primed on, that page's frame or one before it that its first pose allows
-        (``finish_primed``: a recorder stamping ODOM_STATUS late overcounts the page)."""
+        (``finish_primed``: a recorder stamping ODOM_STATUS late overcounts the page). A new
+        life's page waits for the next ODOM_STATUS frame, which tells its send (``on_status``),
+        also when the window cannot count it from where it was heard: held back 55 ms in order,
+        figure8 680's (OK 3, LOST 3) was dropped, and its second page (read as a first) started
+        the life 2 frames late, 20 mm beyond (issue #11)."""
         boot, tracker = self.boot, self._tracker
         started = self.power_up_proven  # by the stall (``livefirst``): not started again
         self.power_up_proven |= proven  # (``livefirst``: also when no frame was heard yet)
@@ -172,7 +176,7 @@ class Lives:
             self.finish_first(proven)
         elif boot is not None and self._named():
             self.finish_boot(boot[0])
-        elif boot is not None and primed_at(tracker.window, ok, lost) is not None:
+        elif boot is not None and len(tracker.window):  # counted from its send (on_status)
             self.page = (ok, lost, tracker.status_heard, int(tracker.window.col("seq")[-1]) + 1)
         elif proven and not started and tracker.integrator is not None:
             self.finish_boot(0, first_life=True)  # the samples judged before keep their errors

@@ -127,6 +127,7 @@ class BusMonitor:
         self.settle = SettleHold(self.e2e, self.db)
         self._e2e_configs = e2e_messages(self.db)
         self.tracker = PoseTracker(Geometry.of(robot), robot.counter_bits, integrator)
+        self.tracker.boot_tick.bind(self.e2e, self._take_encoders)  # (livefreshboot)
         self.first_after = first_after_of(self.tracker, robot, self.db)  # livestallfirst
         self.distance = LiveDistance(robot)  # ODOM_TWIST DISTANCE (host.judge.livedistance)
         self.twist = LiveTwist(Geometry.of(robot), robot.counter_bits)  # its speeds (livetwist)

@@ -44,6 +44,7 @@ from odocan.host.judge.distfall import (
 from odocan.host.judge.heldtick import TickPages
 from odocan.host.judge.latefall import continues_twice, tied_late
 from odocan.host.judge.liveadopted import LATE_REBOOT
+from odocan.host.judge.livefreshboot import powerup_heard
 from odocan.host.judge.livegapseen import heard_status
 from odocan.host.judge.liveheldpose import PoseOrder
 from odocan.host.judge.livelatestatus import StatusOrder
@@ -432,8 +433,7 @@ def pose_frame(watch: SourceWatch, message: Message, data: bytes, e2e: Any, t_s:
             watch.hear_pose(t_s, counter)
             hear_pose_frame(watch, message.name, data, t_s, tracker)  # two pose streams
             if tracker is not None:  # (bootnamed)
-                tracker.powerup.on_pose(counter, lambda: _plain_decoder(message)(data), t_s,
-                                        tracker.window.rows)
+                powerup_heard(tracker, counter, lambda: _plain_decoder(message)(data), t_s)
         elif counter is not None:
             watch.hear_status(t_s, counter)
     elif message.name == TWIST_MESSAGE:  # its DISTANCE, read when a pose may tell a reboot

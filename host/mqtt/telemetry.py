@@ -59,6 +59,7 @@ from odocan.host.judge.liveboottick import boot_frame, refused_named
 from odocan.host.judge.liveconfig import SAME_TICK_S, rebooted
 from odocan.host.judge.livedistance import LiveDistance, robot_of
 from odocan.host.judge.livefit import pose_wrong
+from odocan.host.judge.livefreshboot import powerup_heard
 from odocan.host.judge.livegapseen import heard_status
 from odocan.host.judge.livepose import FramePose, difference, pose_dict
 from odocan.host.judge.liverobot import DEFAULT, GIVEN, LiveRobot, PageWait
@@ -138,6 +139,7 @@ class RobotTelemetry(CommandFollowing):
         self.e2e.holds = True  # frames the stamps cannot decide wait for the evidence
         self.hold = BridgeHold(self)  # ... held here (host.mqtt.livehold)
         self.tracker = PoseTracker(geometry, counter_bits, integrator)
+        self.tracker.boot_tick.bind(self.e2e, self._on_encoders)  # (livefreshboot)
         self.distance = LiveDistance(robot_of(name, geometry, counter_bits))  # DISTANCE judged
         self.twist = LiveTwist(geometry, counter_bits)  # LINEAR_VEL, ANGULAR_VEL judged
         self.publish_period_s = 1.0 / publish_hz if publish_hz > 0 else math.inf
@@ -273,8 +275,7 @@ class RobotTelemetry(CommandFollowing):
             if (counter := pose_heard(data, self._pose_ids.data_ids)) is not None:
                 self.sources.hear_pose(t_s, counter)
                 hear_pose_frame(self.sources, route.name, data, t_s, self.tracker)  # two poses
-                self.tracker.powerup.on_pose(counter, lambda: route.signals(data), t_s,
-                                             self.tracker.window.rows)  # (bootnamed)
+                powerup_heard(self.tracker, counter, lambda: route.signals(data), t_s)  # bootnamed
             return
         if route.status_page is None:
             return
