@@ -176,3 +176,35 @@ def test_frames_stamped_late_in_bus_order_keep_their_place() -> None:
     late, sent = late_sends(heard, counter, POSE_PERIOD_S)
     assert not late.any()
     assert np.array_equal(sent, heard)
+
+
+# Still FAILing a correct firmware (every step within 1/1000 LSB, ``tests.fw_watch``) after
+# ``distfall`` left held-back twists out of the reboot evidence (pmir and kobuki seed 10's phantom
+# reboot at 0.151 s: ``tests/test_delay_held_twist.py``). Figures of the sweep of 2026-12-06,
+# run, analyze whole and streamed alike (beyond the allowance); the monitor and bridge in ().
+STILL_FAILING = {
+    "pmir_5": ("pmir", 5, "a lone ODOM_POSE_Y of 4.941 s naming encoder frame 253, 87.4 mm off "
+                          "the reference there: 86.0 mm beyond (live 0.05 mm); not traced"),
+    "kobuki_5": ("kobuki", 5, "75.7 mm beyond; lone halves from 4.941 s 16-58 mm off, those of "
+                              "8.46 s 143-150 mrad (live 6.33 mm); not traced"),
+    "kobuki_6": ("kobuki", 6, "ODOM_TWIST DISTANCE 1.16 mm beyond its tolerance (position "
+                              "0.088 mm beyond, within; live 7.21 mm); not traced"),
+    "kobuki_8": ("kobuki", 8, "847 mm beyond: the reference 816 mrad off the firmware's heading "
+                              "from 4.76 s, 977 mrad from 8.24 s (live 972 mm); not traced"),
+    "kobuki_10": ("kobuki", 10, "72.2 mm beyond (65.6 mm before the held-twist fix): from the "
+                                "sample of 5.93 s the reference has turned 500 mrad the firmware "
+                                "did not, across CTRL_UPTIME restarts told at 5.85 and 5.93 s and "
+                                "a firmware stall told at 5.95 s (live 17.9 mm, was 19.2); not "
+                                "traced"),
+}
+
+
+@pytest.mark.parametrize("name", sorted(STILL_FAILING))
+def test_the_correct_firmware_passes_still_failing(
+        name: str, tmp_path: Path, capsys: pytest.CaptureFixture[str],
+        request: pytest.FixtureRequest) -> None:
+    robot, seed, reason = STILL_FAILING[name]
+    request.applymarker(pytest.mark.xfail(strict=True, reason=f"issue #11: {reason}"))
+    drive = _drive(tmp_path, robot, seed, "delay=0.5:150")
+    assert drive[1].within_a_thousandth_lsb()
+    assert _run_and_judges(drive, capsys) == [0, 0, 0]

@@ -31,12 +31,24 @@ first twist heard after the next summary) are read by the summary after (``latef
 or once the new life drove farther than the old one had, no fall shows: NAV_STATUS's COUNTER
 restarting is then the second evidence (``navrestart``, joined with the falls).
 
-Kept cheap live: a judge keeps the latest twists heard (bus time, bytes: ``RECENT_TWISTS``)
-and reads them only when a summary's first pose needs the fall (``fell_within``).
+A twist the bus held back behind later twists of its sender (``--faults delay``: it fills a
+hole of the COUNTER sequence, ``host.judge.livelatestatus``'s rule) was sent before them: its
+DISTANCE below theirs is no fall, and it is left out of the comparisons (every judge: the whole
+log, the stream's chunks, the live ``RecentTwists``). Issue #11: pmir and kobuki random seed
+10, ``delay=0.5:150``: the log's own power-up twist (DISTANCE 0), held back to 0.151 s behind
+the twist of COUNTER 4 (DISTANCE 2), was taken for a fall; with the power-up pose and summary
+held back with it (each rightly no evidence) a reboot was told at 0.151 s, the reference
+restarted from (0, 0, 0) there and the correct firmware FAILed by 10.8 mm and 28.3 mrad (pmir),
+65.6 mm (kobuki) in every judge.
+
+Kept cheap live: a judge keeps the latest twists heard in order (bus time, bytes:
+``RECENT_TWISTS``) and reads them only when a summary's first pose needs the fall
+(``fell_within``).
 """
 
 from __future__ import annotations
 
+from collections import deque
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import Any, NamedTuple
@@ -45,6 +57,7 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
+from odocan.host.judge.livelatestatus import StatusOrder
 from odocan.host.protocol.busfacts import ENC_COUNTER_MASK
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.protocol.e2e import crc8h2f_p02, crc8h2f_p02_one, e2e_messages
@@ -159,12 +172,44 @@ def fell_within(field: DistanceField | None, heard: Iterable[tuple[float, bytes]
     return False
 
 
+class RecentTwists(deque[tuple[float, bytes]]):
+    """The latest ``RECENT_TWISTS`` twists heard in order (bus time, bytes), live: one the bus
+    held back (``order``: its COUNTER fills a hole, module docstring) is left out."""
+
+    def __init__(self) -> None:
+        super().__init__(maxlen=RECENT_TWISTS)
+        self.order = StatusOrder()
+
+    def hear(self, field: DistanceField | None, t_s: float, data: bytes) -> None:
+        """A twist heard at bus time ``t_s``: kept unless its CRC holds and it was held back."""
+        counter = None if field is None else field.counter(data)
+        if counter is None or not self.order.hear(counter):
+            self.append((t_s, data))
+
+
+TwistCarried = tuple[float, int, StatusOrder]  # the latest twist kept: bus time, raw, the order
+
+
+def in_order(counters: npt.NDArray[np.int64], order: StatusOrder) -> npt.NDArray[np.bool_]:
+    """Which twists of E2E ``counters`` (bus order, CRC holding) ``order`` hears in order (not
+    held back: module docstring)."""
+    return ~np.array([order.hear(c) for c in counters.tolist()], dtype=bool)
+
+
+def copied(order: StatusOrder) -> StatusOrder:
+    """A copy of ``order`` (a chunk's reading leaves the carried one as it was)."""
+    out = StatusOrder()
+    out.top, out.recent, out.said = order.top, list(order.recent), list(order.said)
+    out.filled, out.late, out.prior = list(order.filled), order.late, order.prior
+    return out
+
+
 def fall_times(frames: FrameArrays, decoder: BulkDecoder, small: int,
-               carried: tuple[float, int] | None = None
-               ) -> tuple[Falls, tuple[float, int] | None]:
+               carried: TwistCarried | None = None
+               ) -> tuple[Falls, TwistCarried | None]:
     """The twists in ``frames`` whose DISTANCE fell (``falls``; their CRC holding, any
-    sequence), and the latest twist's (bus time, raw DISTANCE) for the next chunk
-    (``carried``: the one before ``frames``)."""
+    sequence, the ones held back left out), and the latest twist's (bus time, raw DISTANCE)
+    with the sequence's order for the next chunk (``carried``: the one before ``frames``)."""
     none = no_falls()
     try:
         message = decoder.message(TWIST_MESSAGE)
@@ -185,6 +230,9 @@ def fall_times(frames: FrameArrays, decoder: BulkDecoder, small: int,
         raw |= data[:, field.byte + k].astype(np.int64) << (8 * k)
     t_s = frames.timestamp_s[rows].astype(np.float64)[good]
     raw, counter = raw[good], counter[good]
+    order = StatusOrder() if carried is None else copied(carried[2])
+    kept = in_order(counter, order)
+    t_s, raw, counter = t_s[kept], raw[kept], counter[kept]
     if carried is not None:
         t_s, raw = np.concatenate(([carried[0]], t_s)), np.concatenate(([carried[1]], raw))
         counter = np.concatenate(([0], counter))
@@ -195,7 +243,7 @@ def fall_times(frames: FrameArrays, decoder: BulkDecoder, small: int,
     fell = ((fall > 0) & (fall < field.lap // 2) & (gap >= 0.0) & (gap < FALL_GAP_S)
             & (counter[1:] < small))
     return (Falls(t_s[1:][fell], counter[1:][fell], t_s[:-1][fell]),
-            (float(t_s[-1]), int(raw[-1])))
+            (float(t_s[-1]), int(raw[-1]), order))
 
 
 def any_within(times_s: npt.NDArray[np.float64], from_s: float, to_s: float) -> bool:

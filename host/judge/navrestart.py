@@ -37,7 +37,7 @@ from collections.abc import Callable, Iterable
 import numpy as np
 
 from odocan.host.io.logs import FrameArrays
-from odocan.host.judge.distfall import Falls, fall_times, joined, no_falls
+from odocan.host.judge.distfall import Falls, TwistCarried, fall_times, joined, no_falls
 from odocan.host.protocol import busfacts
 from odocan.host.protocol.busfacts import ENC_COUNTER_MASK
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
@@ -49,7 +49,7 @@ TICK_S = busfacts.ENC_CYCLE_S  # the firmware's tick: at most one NAV_STATUS in 
 COUNTER_LAP = busfacts.ENC_COUNTER_LAP  # every E2E COUNTER's lap: 16
 SLACK_S = busfacts.POSE_CYCLE_MS / 4000  # a recorder's stamping (``bootticks``' slack)
 RESTART_COUNTERS = 3  # a new firmware's first NAV_STATUS COUNTERs read as a restart
-Carried = tuple[tuple[float, int] | None, tuple[float, int] | None]  # twist's, NAV_STATUS's
+Carried = tuple[TwistCarried | None, tuple[float, int] | None]  # twist's, NAV_STATUS's
 
 
 def restarts(before_counter: int, before_s: float, counter: int, t_s: float) -> bool:

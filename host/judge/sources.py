@@ -38,6 +38,7 @@ from odocan.host.judge.distfall import (
     RECENT_TWISTS,
     TWIST_MESSAGE,
     DistanceField,
+    RecentTwists,
     distance_field,
     fell_within,
 )
@@ -120,8 +121,8 @@ class SourceWatch:
     ahead_fall: bool = False  # ``ahead_posed`` needs the twists' DISTANCE fell (``told_ahead``)
     ahead_late: tuple[float, int, str, int | None] | None = None  # such a summary continued
     # with no fall yet: the second summary after it reads one (``latefall``, ``told_ahead``)
-    twists: deque[tuple[float, bytes]] = field(  # the latest twists heard (bus time, bytes),
-        default_factory=lambda: deque(maxlen=RECENT_TWISTS))  # read only at ``hear_pose``
+    twists: RecentTwists = field(  # the latest twists heard in order (bus time, bytes),
+        default_factory=RecentTwists)  # read only at ``hear_pose``
     nav_ids: tuple[int, ...] | None = None  # NAV_STATUS's E2E DataIDs (``navrestart``)
     navs: deque[tuple[float, bytes]] = field(  # the latest NAV_STATUS heard (bus time, bytes)
         default_factory=lambda: deque(maxlen=RECENT_TWISTS))  # read as ``twists`` are
@@ -439,7 +440,7 @@ def pose_frame(watch: SourceWatch, message: Message, data: bytes, e2e: Any, t_s:
     elif message.name == TWIST_MESSAGE:  # its DISTANCE, read when a pose may tell a reboot
         if watch.twist_field is None:
             watch.twist_field = distance_field(message, e2e)
-        watch.twists.append((t_s, data))
+        watch.twists.hear(watch.twist_field, t_s, data)  # held back: left out (distfall)
     elif message.name == NAV_MESSAGE:  # its COUNTER, read as the twists are (``navrestart``)
         watch.nav_ids = e2e.data_ids if e2e is not None else None
         watch.navs.append((t_s, data))

@@ -92,10 +92,10 @@ def _twist_kept(telemetry: RobotTelemetry, can_id: int, route: Route, plan: Plan
     sources = telemetry.sources
     if sources.twist_field is None:  # once a robot (``forced_plans`` makes them again)
         sources.twist_field = distance_field(route.message, e2e_messages(telemetry.db).get(can_id))
-    keep = sources.twists.append
+    hear, field = sources.twists.hear, sources.twist_field  # one held back: left out
 
     def twist_plan(t_s: float, data: bytes) -> list[Publication]:
-        keep((t_s, data))
+        hear(field, t_s, data)
         return plan(t_s, data)
 
     return twist_plan
