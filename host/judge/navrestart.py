@@ -38,6 +38,7 @@ import numpy as np
 
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.distfall import Falls, fall_times, joined, no_falls
+from odocan.host.judge.heldfall import Heard, unheld_falls
 from odocan.host.protocol import busfacts
 from odocan.host.protocol.busfacts import ENC_COUNTER_MASK
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
@@ -49,7 +50,8 @@ TICK_S = busfacts.ENC_CYCLE_S  # the firmware's tick: at most one NAV_STATUS in 
 COUNTER_LAP = busfacts.ENC_COUNTER_LAP  # every E2E COUNTER's lap: 16
 SLACK_S = busfacts.POSE_CYCLE_MS / 4000  # a recorder's stamping (``bootticks``' slack)
 RESTART_COUNTERS = 3  # a new firmware's first NAV_STATUS COUNTERs read as a restart
-Carried = tuple[tuple[float, int] | None, tuple[float, int] | None]  # twist's, NAV_STATUS's
+# the twist's, NAV_STATUS's, and the last twists heard (``heldfall``)
+Carried = tuple[tuple[float, int] | None, tuple[float, int] | None, Heard]
 
 
 def restarts(before_counter: int, before_s: float, counter: int, t_s: float) -> bool:
@@ -110,11 +112,13 @@ def second_evidence(frames: FrameArrays, decoder: BulkDecoder, small: int,
                     carried: Carried | None = None) -> tuple[Falls, Carried]:
     """The twists whose DISTANCE fell (``distfall.fall_times``) and the NAV_STATUS frames that
     restarted the sequence (``restart_times``) of ``frames``, in bus-time order, and what the
-    next chunk carries (``carried``: this chunk's)."""
-    twist, nav = (None, None) if carried is None else carried
+    next chunk carries (``carried``: this chunk's). A twist held back is no fall
+    (``heldfall``)."""
+    twist, nav, heard = (None, None, ()) if carried is None else carried
     falls, twist_after = fall_times(frames, decoder, small, twist)
+    falls, heard_after = unheld_falls(frames, decoder, falls, heard)
     navs, nav_after = restart_times(frames, decoder, nav)
-    return merged(falls, navs), (twist_after, nav_after)
+    return merged(falls, navs), (twist_after, nav_after, heard_after)
 
 
 def restarted_within(data_ids: tuple[int, ...] | None, heard: Iterable[tuple[float, bytes]],

@@ -20,12 +20,12 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import numpy.typing as npt
 
+from odocan.host.judge.aheadticks import boot_ahead_heard
 from odocan.host.judge.bootticks import (
     POSE_MESSAGE,
     STATUS_MESSAGE,
     TWIST_COUNTERS,
     ahead_candidate,
-    boot_ahead,
     boot_tick,
     continues_summary,
     next_run,
@@ -39,8 +39,8 @@ from odocan.host.judge.distfall import (
     TWIST_MESSAGE,
     DistanceField,
     distance_field,
-    fell_within,
 )
+from odocan.host.judge.heldfall import fell_unheld
 from odocan.host.judge.heldtick import TickPages
 from odocan.host.judge.latefall import continues_twice, tied_late
 from odocan.host.judge.liveadopted import LATE_REBOOT
@@ -266,9 +266,9 @@ class SourceWatch:
         return self.evidence(lambda t_s, counter, _before_s: tied_to_run(t_s, counter, summary_s))
 
     def evidence(self, tied: Callable[[float, int, float], bool]) -> bool:
-        """Whether a twist kept live fell (``distfall.fell_within``) or a NAV_STATUS kept live
+        """Whether a twist kept live fell (``heldfall.fell_unheld``) or a NAV_STATUS kept live
         restarted its sequence (``navrestart.restarted_within``) where ``tied`` takes it."""
-        return (fell_within(self.twist_field, self.twists, tied, TWIST_COUNTERS)
+        return (fell_unheld(self.twist_field, self.twists, tied, TWIST_COUNTERS)
                 or restarted_within(self.nav_ids, self.navs, tied))
 
     def hear_pose(self, t_s: float, counter: int) -> None:
@@ -287,8 +287,8 @@ class SourceWatch:
         ahead, self.ahead = self.ahead, None
         if ahead is None:
             return
-        sure = boot_ahead(ahead[0], ahead[4], t_s, counter, before)
-        if sure or boot_ahead(ahead[0], ahead[4], t_s, counter, before, fell=True):
+        sure = boot_ahead_heard(ahead[0], ahead[4], t_s, counter, before, held)
+        if sure or boot_ahead_heard(ahead[0], ahead[4], t_s, counter, before, held, True):
             self.ahead_posed, self.ahead_fall = ahead[:4], not sure  # fell: at ``told_ahead``
 
     def told_ahead(self, t_s: float, uptime_s: int, counter: int
