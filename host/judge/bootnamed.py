@@ -81,7 +81,8 @@ PowerUpPoses = tuple[npt.NDArray[np.int64], npt.NDArray[np.float64], npt.NDArray
 PoseRows = tuple[npt.NDArray[np.int64], npt.NDArray[np.float64], npt.NDArray[np.int64],
                  npt.NDArray[np.int64]]
 # (log positions, COUNTERs) of the encoder frames whose CRC holds (``heard_encoders``)
-Framed = tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]
+TICK_HEARD_S = busfacts.ENC_CYCLE_S / 2  # frames heard this close together: one tick's
+Framed = tuple[npt.NDArray[np.int64], npt.NDArray[np.int64], npt.NDArray[np.float64]]
 ENCODER_MESSAGE = "WHEEL_ENCODERS"
 # a held-back summary's power-up pose (``ran_on_to``): within one lap of the pose COUNTER
 HELD_WINDOW_S = (busfacts.ENC_COUNTER_MASK + 1) * busfacts.POSE_PERIOD_S
@@ -261,21 +262,30 @@ def heard_named(accepted: npt.NDArray[np.int64], heard: Framed, pose: int,
     COUNTER 10 at 6.50 s, refused; the COUNTER 10 taken at 6.355 s, while the MCU booted, was
     named: 43 mm and 85 mrad off, DISTANCE 63.5 mm; pmir random ``--seed 304 --faults
     burst=0.01:12,delay=0.1:15,reboot=6:0.5``: 33.4 mm). A taken one first: a frame refused
-    as a lap-old late copy of its COUNTER is no new firmware's first frame."""
-    at, counters = heard
+    as a lap-old late copy of its COUNTER is no new firmware's first frame, unless it came in
+    the pose's own tick (less than ``TICK_HEARD_S`` before the latest frame heard before the
+    pose) and the taken one before it: the firmware drains its frames in the tick it sends its
+    pose in, and took nothing in its boot time (kobuki random 908,
+    ``reboot=1.5:0.3,delay=0.1:200``: primed at 1.80 s on a COUNTER 0 sent at 1.60 s, held
+    back 200 ms; the on-time COUNTER 0 of 1.76 s, heard in the boot, was named, its start
+    fitted and the correct firmware FAILed)."""
+    at, counters, times = heard
     last = int(np.searchsorted(at, pose))
     lo = max(last - NAMED_SPAN, 0)
-    tail = at[lo:last][counters[lo:last] == enc_counter]
+    same = counters[lo:last] == enc_counter
+    tail = at[lo:last][same]
     if not len(tail):
         return None
+    in_tick = times[lo:last][same] > times[last - 1] - TICK_HEARD_S
+    tail = tail[in_tick] if in_tick.any() else tail
     taken = tail[np.isin(tail, accepted)]
     return int((taken if len(taken) else tail)[-1])
 
 
 def heard_encoders(every: tuple[FrameArrays, npt.NDArray[np.int64]], decoder: BulkDecoder
                    ) -> Framed:
-    """The positions and COUNTERs of the encoder frames ``every`` (the frames, their positions
-    in the log) whose CRC holds, whatever their sequence (``heard_named``)."""
+    """The positions, COUNTERs and bus times of the encoder frames ``every`` (the frames, their
+    positions in the log) whose CRC holds, whatever their sequence (``heard_named``)."""
     frames, at = every
     data = frames.data
     config = e2e_messages(decoder.db).get(decoder.message(ENCODER_MESSAGE).frame_id)
@@ -284,7 +294,8 @@ def heard_encoders(every: tuple[FrameArrays, npt.NDArray[np.int64]], decoder: Bu
         ids = np.array(config.data_ids, dtype=np.uint8)[data[:, 1] & busfacts.ENC_COUNTER_MASK]
         good = crc8h2f_p02(data, ids) == data[:, 0]
     return (at[good].astype(np.int64),
-            (data[good, 1] & busfacts.ENC_COUNTER_MASK).astype(np.int64))
+            (data[good, 1] & busfacts.ENC_COUNTER_MASK).astype(np.int64),
+            frames.timestamp_s[good].astype(np.float64))
 
 
 def named_start(poses: PowerUpPoses, encoders: tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]],

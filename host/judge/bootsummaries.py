@@ -7,9 +7,9 @@ from __future__ import annotations
 import numpy as np
 
 from odocan.host.io.logs import FrameArrays
+from odocan.host.judge.aheadticks import ahead_ticks
 from odocan.host.judge.bootticks import (
     TWIST_COUNTERS,
-    ahead_ticks,
     boot_ticks,
     fell_in_run,
     poses_before,

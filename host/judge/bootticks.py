@@ -63,11 +63,13 @@ sequence it broke; followed by a reboot whose firmware sent its pose first (it b
 sequence), the next summary is that firmware's boot summary, COUNTER 0 (told by its run). The
 live judges hold that verdict until that summary (a cycle), then start the life at the
 looked-ahead summary's encoder frame and withdraw what they judged since; the streamed
-``analyze`` holds the events after the summary across chunks (``stream_lives``).
+``analyze`` holds the events after the summary across chunks (``stream_lives``). A pose or a
+status frame the bus held back breaks no sequence there either (``aheadticks``: the summary of
+COUNTER 0 every 0.8 s of UPTIME 0, a held-back pose after it, was told a second reboot).
 A reset 32 k ticks in whose power-up pose the bus lost breaks no pose COUNTER (the old life's
 last read 15): the twist's DISTANCE going back is its second evidence (``host.judge.distfall``).
 One rule, for every judge: ``SourceWatch.observe`` (the live monitor, the bridge, the streamed
-``analyze``; ``hear_pose`` and ``told_ahead`` live) and ``boot_ticks`` and ``ahead_ticks`` (the
+``analyze``; ``hear_pose`` and ``told_ahead`` live) and ``boot_ticks`` and ``aheadticks`` (the
 whole log's quiet stretches, ``SourceWatch.observe_quiet``).
 """
 
@@ -80,8 +82,6 @@ import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.distfall import Falls, any_tied
-from odocan.host.judge.latefall import continues_twice, fell_late
-from odocan.host.judge.navrestart import second_evidence
 from odocan.host.protocol import busfacts
 from odocan.host.protocol.busfacts import ENC_COUNTER_MASK
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
@@ -313,45 +313,6 @@ def continues_summary(summary_s: float, t_s: float, uptime_s: int, counter: int)
     within two cycles (module docstring; a summary lost: not told, no PASS given for it)."""
     return (uptime_s == 0 and counter == STATUS_FRAMES_PER_CYCLE % STATUS_COUNTER_LAP
             and 0.0 < t_s - summary_s < 2 * STATUS_CYCLE_MS / 1000)
-
-
-def ahead_ticks(frames: FrameArrays, decoder: BulkDecoder, positions: npt.NDArray[np.int64],
-                uptime_s: npt.NDArray[np.int64], counters: npt.NDArray[np.int64],
-                t_s: npt.NDArray[np.float64], statuses: Latest) -> npt.NDArray[np.bool_]:
-    """``boot_ahead`` (and ``continues_summary``) of the summaries at ``positions`` (in order,
-    their CRC holding: UPTIMEs, COUNTERs, bus times; ``statuses``: ``status_before`` of each)
-    at once, their first pose after them in ``frames`` (before the next summary)."""
-    where, t_pose, counter = pose_rows(frames, decoder)
-    falls = second_evidence(frames, decoder, TWIST_COUNTERS)[0]  # ``navrestart``
-    found = np.zeros(len(positions), dtype=bool)
-    if len(where) == 0 or len(positions) == 0:
-        return found
-    k = np.searchsorted(where, positions)  # the first pose after each
-    n = len(positions)
-    for i in np.flatnonzero((uptime_s == 0) & (counters == 0) & (k < len(where))).tolist():
-        j = int(k[i])
-        if i + 1 < n and where[j] > positions[i + 1]:
-            continue
-        status = None if statuses[1][i] < 0 else (float(statuses[0][i]), int(statuses[1][i]))
-        broke = ahead_candidate(0, 0, float(t_s[i]), float(t_s[i - 1]) if i else None, status)
-        before = None if j == 0 else (float(t_pose[j - 1]), int(counter[j - 1]))
-        found[i] = (broke is not None and i + 1 < n
-                    and boot_ahead(float(t_s[i]), broke, float(t_pose[j]), int(counter[j]), before,
-                                   fell_around(falls, float(t_s[i]))
-                                   or _fell_late(falls, i, t_s, uptime_s, counters))
-                    and continues_summary(float(t_s[i]), float(t_s[i + 1]), int(uptime_s[i + 1]),
-                                          int(counters[i + 1])))
-    return found
-
-
-def _fell_late(falls: Falls, i: int, t_s: npt.NDArray[np.float64],
-               uptime_s: npt.NDArray[np.int64], counters: npt.NDArray[np.int64]) -> bool:
-    """``latefall``: the summary ``i``'s first twist heard fell by the second summary after it,
-    which continues its sequence (read there live: ``SourceWatch.told_ahead``)."""
-    if i + 2 >= len(t_s) or not continues_twice(float(t_s[i]), float(t_s[i + 2]),
-                                                int(uptime_s[i + 2]), int(counters[i + 2])):
-        return False
-    return fell_late(falls, float(t_s[i]), float(t_s[i + 2]))
 
 
 def boot_ticks(uptime_s: npt.NDArray[np.int64], counters: npt.NDArray[np.int64],

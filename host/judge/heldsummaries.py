@@ -15,6 +15,8 @@ from odocan.host.judge.liveheldpose import PoseOrder
 from odocan.host.judge.livelatestatus import StatusOrder, held_back
 from odocan.host.protocol.decode import BulkDecoder
 
+Flags = npt.NDArray[np.bool_]
+
 if TYPE_CHECKING:
     from odocan.host.judge.sources import SourceWatch
 
@@ -36,21 +38,24 @@ def summaries_held_back(frames: FrameArrays, decoder: BulkDecoder,
 
 
 def pose_zeros_held(order: PoseOrder, latest: bool, frames: FrameArrays, decoder: BulkDecoder,
-                    positions: npt.NDArray[np.int64]) -> tuple[npt.NDArray[np.bool_], bool]:
+                    positions: npt.NDArray[np.int64]
+                    ) -> tuple[npt.NDArray[np.bool_], bool, npt.NDArray[np.bool_]]:
     """Per frame at ``positions`` (in order): whether the latest ODOM_POSE_X of COUNTER 0 heard
     before it (CRC holding, whatever its sequence) was held back behind later poses of its
     sender within a sequence unbroken since, ``order`` (``liveheldpose``; the live
     ``SourceWatch.hear_pose``'s) hearing every such pose of ``frames`` in bus order; and that
     of the last of them all (``latest``: of the poses before ``frames``, a stream's earlier
     chunks). Its break of the pose sequence is no power-up tick's evidence
-    (``SourceWatch.observe``)."""
+    (``SourceWatch.observe``). And per ODOM_POSE_X row (``bootticks.pose_rows``) whether it
+    was held back (``aheadticks``)."""
     where, times, counters = pose_rows(frames, decoder)
     held = np.array([order.hear(c, t) for c, t in zip(counters.tolist(), times.tolist(),
                                                       strict=True)], dtype=bool)
     zeros = np.flatnonzero(counters == 0)
     k = np.searchsorted(where[zeros], positions) - 1  # the latest strictly before each
     found = held[zeros][np.maximum(k, 0)] if len(zeros) else np.zeros(len(positions), bool)
-    return np.where(k >= 0, found, latest), bool(held[zeros[-1]]) if len(zeros) else latest
+    return (np.where(k >= 0, found, latest), bool(held[zeros[-1]]) if len(zeros) else latest,
+            held)
 
 
 def statuses_held(order: StatusOrder, latest: bool, frames: FrameArrays, decoder: BulkDecoder,
@@ -93,15 +98,16 @@ def held_evidence(frames: FrameArrays, decoder: BulkDecoder, positions: npt.NDAr
 def heard_in_chunk(watch: SourceWatch, chunk: FrameArrays, decoder: BulkDecoder,
                    positions: npt.NDArray[np.int64], said: list[tuple[int, str]],
                    keep: npt.NDArray[np.bool_] | None = None
-                   ) -> tuple[npt.NDArray[np.bool_], npt.NDArray[np.bool_]]:
+                   ) -> tuple[Flags, Flags, Flags]:
     """A stream's chunk heard on its ``watch``'s orders, as the live ``SourceWatch`` hears it,
     per summary at chunk ``positions`` whose CRC holds at ``keep`` (``said``: each one's UPTIME
     and STATE): passed over, and ``SourceWatch.observe``'s ``held`` (``pose_zeros_held``,
-    ``statuses_held``; what the chunk's last frames were carried on ``watch``)."""
+    ``statuses_held``; what the chunk's last frames were carried on ``watch``); and per pose
+    row of the chunk whether it was held back (``aheadticks``)."""
     keep = np.ones(len(positions), bool) if keep is None else keep
-    poses, watch.pose_late = pose_zeros_held(watch.pose_order, watch.pose_late, chunk, decoder,
-                                             positions[keep])
+    poses, watch.pose_late, rows = pose_zeros_held(watch.pose_order, watch.pose_late, chunk,
+                                                   decoder, positions[keep])
     kept = [s for s, k in zip(said, keep.tolist(), strict=True) if k]
     over, statuses, watch.status_late = statuses_held(watch.order, watch.status_late[1], chunk,
                                                       decoder, (positions[keep], kept))
-    return over, np.stack((poses, statuses), axis=1)
+    return over, np.stack((poses, statuses), axis=1), rows

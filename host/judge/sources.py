@@ -20,12 +20,12 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import numpy.typing as npt
 
+from odocan.host.judge.aheadticks import boot_ahead_heard
 from odocan.host.judge.bootticks import (
     POSE_MESSAGE,
     STATUS_MESSAGE,
     TWIST_COUNTERS,
     ahead_candidate,
-    boot_ahead,
     boot_tick,
     continues_summary,
     next_run,
@@ -289,8 +289,8 @@ class SourceWatch:
         ahead, self.ahead = self.ahead, None
         if ahead is None:
             return
-        sure = boot_ahead(ahead[0], ahead[4], t_s, counter, before)
-        if sure or boot_ahead(ahead[0], ahead[4], t_s, counter, before, fell=True):
+        sure = boot_ahead_heard(ahead[0], ahead[4], t_s, counter, before, held)
+        if sure or boot_ahead_heard(ahead[0], ahead[4], t_s, counter, before, held, True):
             self.ahead_posed, self.ahead_fall = ahead[:4], not sure  # fell: at ``told_ahead``
 
     def told_ahead(self, t_s: float, uptime_s: int, counter: int

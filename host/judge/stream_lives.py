@@ -29,6 +29,7 @@ import numpy.typing as npt
 from odocan.host.io.frames import concat_frames, empty_frames
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge import bootnamed, heldboot
+from odocan.host.judge.aheadticks import boot_ahead_heard
 from odocan.host.judge.bootnamed import (
     PowerUpPoses,
     carried_on,
@@ -42,7 +43,6 @@ from odocan.host.judge.bootnamed import (
 from odocan.host.judge.bootticks import (
     BOOT_WINDOW_S,
     TWIST_COUNTERS,
-    boot_ahead,
     continues_summary,
     fell_around,
     fell_in_run,
@@ -136,6 +136,8 @@ class StreamLives:
     _poses: bootnamed.PoseRows = field(default_factory=bootnamed.pose_rows_none)  # ran_on_to
     _ahead_fall: bool = False  # the ``_ahead`` posed needs a twist's DISTANCE fallen
     _late: bool = False  # ... continued with none yet: the next summary reads a late one
+    _held: npt.NDArray[np.bool_] = field(  # per pose row of the chunk: held back (``aheadticks``)
+        default_factory=lambda: np.zeros(0, bool))
     _pages: StreamPages = field(init=False)  # the count pages, each where it was sent
     _falls: tuple[Falls, Carried | None] = field(  # the twists whose DISTANCE fell, the
         default_factory=lambda: (no_falls(), None))  # NAV_STATUS restarts (all kept), carried
@@ -361,7 +363,7 @@ class StreamLives:
             self._summaries = False
             return []
         if len(page["index"]) == 0:  # the chunk's latest pose and status frame still count
-            heard_in_chunk(self._watch, chunk, self.decoder, page["index"], [])  # in order
+            self._held = heard_in_chunk(self._watch, chunk, self.decoder, page["index"], [])[2]
             tick_pages(chunk, self.decoder, page["index"], self._watch.ticks)
             self._ahead_posed(pose_rows(chunk, self.decoder), self._pose, -1, None)
             self._pose = poses_before(chunk, self.decoder, page["index"], self._pose)[1]
@@ -377,7 +379,8 @@ class StreamLives:
         choices = dict(message.get_signal_by_name("STATE").choices or {})
         names = [str(choices.get(int(state), int(state))) for state in page["STATE"].tolist()]
         said = list(zip(page["UPTIME"].tolist(), names, strict=True))
-        late, evidence = heard_in_chunk(self._watch, chunk, self.decoder, index, said, good)
+        late, evidence, self._held = heard_in_chunk(self._watch, chunk, self.decoder, index, said,
+                                                    good)
         ticks = tick_pages(chunk, self.decoder, index[good], self._watch.ticks)  # (``heldtick``)
         carried, rows = self._pose, pose_rows(chunk, self.decoder)
         (pose_t, pose_counter, pose_new), self._pose = poses_before(
@@ -460,8 +463,9 @@ class StreamLives:
         self._ahead = None
         before = ((float(t_pose[j - 1]), int(counter[j - 1])) if j > 0 else
                   None if carried is None else (carried[3], carried[1]))
-        sure = boot_ahead(boot.t_s, broke, float(t_pose[j]), int(counter[j]), before)
-        if sure or boot_ahead(boot.t_s, broke, float(t_pose[j]), int(counter[j]), before, True):
+        pose, held = (float(t_pose[j]), int(counter[j])), bool(self._held[j])
+        sure = boot_ahead_heard(boot.t_s, broke, *pose, before, held)
+        if sure or boot_ahead_heard(boot.t_s, broke, *pose, before, held, True):
             self._ahead = (boot, broke, True)  # the next summary tells (``_posed_told``)
             self._ahead_fall = not sure  # ... its twists' DISTANCE fallen (``distfall``)
 
