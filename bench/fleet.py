@@ -99,7 +99,9 @@ def trial(n: int, seconds: float, bridge: bool, broker: BrokerURL | None, worker
     if report["bridge"]:
         extra = (f", bridge frames {report['bridge']['frames_in']}, "
                  f"dropped {report['bridge']['frames_dropped']}, "
-                 f"held for a release {report['bridge'].get('release_holds', 0)}")
+                 f"held for a release {report['bridge'].get('release_holds', 0)}, "
+                 f"of them for an overrun one's tick "
+                 f"{report['bridge'].get('release_overruns', 0)}")
     print(f"  N={n:4d}: deadline_miss_ratio {ratio:.4f} ({report['late_ticks']} late of "
           f"{report['ticks']}, worst {report['max_lateness_ms']:.1f} ms, "
           f"{report['skipped_releases']} skipped{extra}); CPU per robot-tick: fleet+bridge "

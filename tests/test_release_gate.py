@@ -58,6 +58,60 @@ def test_clear_returns_after_the_release_and_counts_the_hold() -> None:
     assert gate.holds == 1
 
 
+@pytest.mark.parametrize(("left_s", "overrun"), [
+    (0.0010, False),  # ahead: ``hold_s``'s case
+    (-0.0005, True),  # just overrun, its tick not run yet: the tick first
+    (-0.0049, True),
+    (-0.0051, False),  # more than half a period past: late anyway, no wait (not starved)
+])
+def test_an_overrun_release_is_waited_for_until_its_tick(left_s: float, overrun: bool) -> None:
+    clock = FakeClock(100.0)
+    gate = ReleaseGate(margin_s=0.0015, clock=clock, overrun_s=0.005)
+    assert not gate.overrun()  # no clock yet
+    gate.next_s = 100.0 + left_s
+    assert gate.overrun() is overrun
+    gate.next_s = 100.0 + 0.0095  # the tick ran: the clock told the next release
+    assert not gate.overrun()
+
+
+def test_work_after_an_overrun_release_resumes_only_once_its_tick_ran() -> None:
+    """Two waiting tasks (the bridge's slices and its periodic turn) resume after the clock
+    tells the next release, not before; each wait is counted."""
+    clock = FakeClock(100.0)
+    gate = ReleaseGate(margin_s=0.0015, clock=clock, overrun_s=5.0)  # no timeout in this test
+    order: list[str] = []
+
+    async def work(name: str) -> None:
+        await gate.clear()
+        order.append(name)
+
+    async def main() -> None:
+        gate.next_s = 100.0 - 0.0004  # a slice overran the release by 0.4 ms
+        waiting = [asyncio.create_task(work("slice")), asyncio.create_task(work("periodic"))]
+        for _ in range(5):
+            await asyncio.sleep(0)  # the loop turns; the tick has not run yet
+        order.append("tick")
+        gate.next_s = 100.0 + 0.0096  # the tick ran, the next release told
+        await asyncio.gather(*waiting)
+
+    asyncio.run(main())
+    assert order == ["tick", "slice", "periodic"]
+    assert (gate.holds, gate.overruns) == (2, 2)
+
+
+def test_an_overrun_wait_ends_without_a_tick() -> None:
+    """A clock that stopped (the run's end) tells no release: the wait ends after ``overrun_s``
+    instead of holding the bridge for good."""
+    gate = ReleaseGate(overrun_s=0.01)
+
+    async def main() -> None:
+        gate.next_s = time.monotonic() - 0.001
+        await asyncio.wait_for(gate.clear(), timeout=5.0)
+
+    asyncio.run(main())
+    assert gate.overruns == 1
+
+
 @pytest.mark.parametrize("fraction", [0.0, 0.25, 0.5, 0.75])
 @pytest.mark.parametrize("now_s", [5.0, 5.0037, 5.0099, 123.4567891])
 def test_phased_start_lies_on_its_fraction_within_a_period(fraction: float, now_s: float) -> None:

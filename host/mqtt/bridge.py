@@ -351,6 +351,7 @@ class Bridge:
             **totals,
             **self.stalls.counters(),  # commands a broker held for us may be lost (stallwatch)
             "release_holds": 0 if self.gate is None else self.gate.holds,  # (sim.releasegate)
+            "release_overruns": 0 if self.gate is None else self.gate.overruns,
         }
 
     async def _consume(self) -> None:
