@@ -52,7 +52,8 @@ class LiveFloodNames:
             sseq, left, right = 0, counts[0], counts[1]
         else:
             step = (counter - last[1]) & ENC_COUNTER_MASK
-            laps = max(0, math.floor(((t_s - last[2]) / CYCLE_S - step) / ENC_COUNTER_LAP + 0.5))
+            laps = math.floor(((t_s - last[2]) / CYCLE_S - step) / ENC_COUNTER_LAP + 0.5)
+            laps = laps if laps > 0 else 0  # ``max(0, laps)`` written out (per encoder frame)
             sseq = last[0] + step + ENC_COUNTER_LAP * laps
             half, wrap = 1 << (bits - 1), 1 << bits  # ``_wrapped`` in line (per encoder frame)
             left = last[5] + ((counts[0] - last[3] + half) % wrap) - half

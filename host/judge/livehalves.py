@@ -44,7 +44,8 @@ class HalfPairs:
         if name in self._unsettled:
             self._settle(name)
         self._unsettled[name] = half
-        self.unsettled_from_s = min(self.unsettled_from_s, half.t_s)  # (NaN: never due)
+        from_s = self.unsettled_from_s  # ``min`` written out (a C call per half; NaN: never due)
+        self.unsettled_from_s = half.t_s if half.t_s < from_s else from_s
 
     def settle_due(self, t_s: float) -> None:
         """Bus time is ``t_s``: settle the halves heard ``QUEUED_GAP_S`` or more before, in the

@@ -348,8 +348,11 @@ class ErrorStats:
         self.marks.append((t_s, self.samples, self.max_dpos_m, self.max_dheading_rad))
         self.latest = difference(a, b)
         self.samples += 1
-        self.max_dpos_m = max(self.max_dpos_m, self.latest["dpos_m"])
-        self.max_dheading_rad = max(self.max_dheading_rad, abs(self.latest["dheading_rad"]))
+        dpos_m, dheading_rad = self.latest["dpos_m"], abs(self.latest["dheading_rad"])
+        if dpos_m > self.max_dpos_m:  # ``max`` written out (per sample)
+            self.max_dpos_m = dpos_m
+        if dheading_rad > self.max_dheading_rad:
+            self.max_dheading_rad = dheading_rad
 
     def withdraw_from(self, t_s: float) -> None:
         """The pairs added from bus time ``t_s`` on were not one life's (a reboot told late,

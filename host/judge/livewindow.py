@@ -122,7 +122,8 @@ def _sender_step(window: deque[tuple[float, ...]], j: int) -> int | None:
     counter, t_s, prev_t = row[2], row[3], prev[3]
     step = int(counter - prev[2]) & ENC_COUNTER_MASK
     dt = t_s - prev_t
-    laps = max(0, math.floor((dt / CYCLE_S - step) / ENC_COUNTER_LAP + 0.5))
+    laps = math.floor((dt / CYCLE_S - step) / ENC_COUNTER_LAP + 0.5)
+    laps = laps if laps > 0 else 0  # ``max(0, laps)`` written out (per frame named)
     if step and (0 <= dt < QUEUED_GAP_S  # queued
                  or (j < -1 and 0 <= window[j + 1][3] - t_s < QUEUED_GAP_S)):
         # a step of 0 is widened by the time alone, as ``sender_seq`` widens it
