@@ -212,7 +212,7 @@ class LiveDistance:
         e = -1 if e >= 0 and tracker.twins.twinned(e) else e
         resend = (e >= 0 and e == self._running and self._judged_last  # resentdistance.py
                   and not may_alias_live(e, t_s, tracker))
-        first, self._running = e > self._running, max(self._running, e)
+        first, self._running = e > self._running, e if e > self._running else self._running
         last_t, last_heard = self._last_twist
         if last_t != last_t and (talked := tracker.first.talked_before(t_s)) is not None:
             last_t, last_heard = talked  # the first: after the firmware's ODOM_STATUS (livefirst)

@@ -46,7 +46,7 @@ class LiveFill:
 
     def accepted(self, periods: int, counter: int, t_s: float) -> None:
         """An accepted frame ``periods`` after the one before it (COUNTER, bus time s)."""
-        self.sender += max(periods, 1)
+        self.sender += 1 if periods < 1 else periods  # ``max(periods, 1)`` (per frame)
         self._anchors.append((self.sender, t_s, counter))
         if len(self._counts) > 2 * KEPT_PERIODS:
             oldest = self.sender - KEPT_PERIODS

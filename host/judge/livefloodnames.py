@@ -52,10 +52,12 @@ class LiveFloodNames:
             sseq, left, right = 0, counts[0], counts[1]
         else:
             step = (counter - last[1]) & ENC_COUNTER_MASK
-            laps = max(0, math.floor(((t_s - last[2]) / CYCLE_S - step) / ENC_COUNTER_LAP + 0.5))
+            laps = math.floor(((t_s - last[2]) / CYCLE_S - step) / ENC_COUNTER_LAP + 0.5)
+            laps = laps if laps > 0 else 0  # ``max(0, laps)`` written out (per encoder frame)
             sseq = last[0] + step + ENC_COUNTER_LAP * laps
-            left = last[5] + _wrapped(counts[0] - last[3], bits)
-            right = last[6] + _wrapped(counts[1] - last[4], bits)
+            half, wrap = 1 << (bits - 1), 1 << bits  # ``_wrapped`` in line (per encoder frame)
+            left = last[5] + ((counts[0] - last[3] + half) % wrap) - half
+            right = last[6] + ((counts[1] - last[4] + half) % wrap) - half
         self._last = (sseq, counter, t_s, counts[0], counts[1], left, right)
         self._kept[sseq] = (seq, t_s, left, right)
         self._order.append(sseq)
@@ -121,9 +123,3 @@ def beyond_why(floods: LiveFloodNames) -> str | None:
     return (f"{floods.beyond} pose{'' if floods.beyond == 1 else 's'} made in a sender's flood "
             f"named a frame more than {ENC_WINDOW} encoder frames before the latest, beyond the "
             "live window: not judged (analyze judges it)")
-
-
-def _wrapped(step: int, bits: int) -> int:
-    """A count step mod ``2**bits``, the nearest."""
-    half = 1 << (bits - 1)
-    return ((step + half) % (1 << bits)) - half

@@ -44,7 +44,8 @@ class HalfPairs:
         if name in self._unsettled:
             self._settle(name)
         self._unsettled[name] = half
-        self.unsettled_from_s = min(self.unsettled_from_s, half.t_s)  # (NaN: never due)
+        from_s = self.unsettled_from_s  # ``min`` written out (a C call per half; NaN: never due)
+        self.unsettled_from_s = half.t_s if half.t_s < from_s else from_s
 
     def settle_due(self, t_s: float) -> None:
         """Bus time is ``t_s``: settle the halves heard ``QUEUED_GAP_S`` or more before, in the
@@ -106,11 +107,16 @@ class HalfPairs:
         halves looked at are those not sampled (``_xs_waiting``: a few, where ``_xs`` keeps up
         to two encoder windows' worth, which a scan per pair made a tenth of a bridge's CPU)."""
         lone: list[tuple[int, str, Half]] = []
-        for s in [k for k in self._xs_waiting if k < seq]:
-            self._xs_waiting.pop(s)
-            lone.append((s, "x", self._xs.pop(s)))
-        for s in [k for k in self._ys if k < seq]:
-            lone.append((s, "y", self._ys.pop(s)[0]))
+        # plain loops over the keys (per pair: a comprehension is a call in CPython 3.11), the
+        # usual pair's X alone waiting and no Y: none lone
+        for s in list(self._xs_waiting):
+            if s < seq:
+                self._xs_waiting.pop(s)
+                lone.append((s, "x", self._xs.pop(s)))
+        if self._ys:
+            for s in list(self._ys):
+                if s < seq:
+                    lone.append((s, "y", self._ys.pop(s)[0]))
         if len(lone) > 1:
             lone.sort(key=lambda item: (item[0], item[1]))
         for s, name, half in lone:

@@ -103,8 +103,11 @@ class KeptWatch:
         made once it has ``NARROW_SAMPLES`` + 1 samples after its APPLY."""
         if self._floor is None:
             self._floor = tracker.enc_seq
-        if (tracker.geometry, tracker.integrator) != self._robot:  # a config applied
-            self._robot = (tracker.geometry, tracker.integrator)
+        robot, kept = (tracker.geometry, tracker.integrator), self._robot
+        # the robot kept as heard last: an equal Geometry made again (each PROFILE page's speed
+        # bound, ``PoseTracker.take_speed_bound``) compared once, then by identity (per sample)
+        self._robot = robot
+        if robot != kept:  # a config applied
             self._recent.clear()
             for check in self._open:
                 check.why = "a config applied between the poses around the APPLY"

@@ -76,10 +76,14 @@ class StatusOrder:
                     nearest, self.prior = ahead, said
             return True
         self.top = counter
-        self.filled = [c for c in self.filled  # holes still behind it
-                       if 0 < (counter - c) & ENC_COUNTER_MASK <= HELD_BACK_MAX]
-        self.recent = [*self.recent[1 - RECENT:], counter]
-        self.said = [*self.said[1 - RECENT:], None]
+        if self.filled:  # (none, the usual frame: no list made)
+            self.filled = [c for c in self.filled  # holes still behind it
+                           if 0 < (counter - c) & ENC_COUNTER_MASK <= HELD_BACK_MAX]
+        recent, sayings = self.recent, self.said  # the latest ``RECENT``, in place (per frame)
+        recent.append(counter)
+        sayings.append(None)
+        if len(recent) > RECENT:
+            del recent[0], sayings[0]
         return False
 
     def passed_over(self, uptime_s: int, state: str) -> bool:

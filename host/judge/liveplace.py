@@ -164,7 +164,7 @@ class StallPlacer:
         gap = self._on_encoders(seq, frame, prev, bits)
         self._before = prev
         self.skips.heard(seq, self.fill.sender, frame[1], frame[2])
-        self.bus.heard(seq, *frame)
+        self.bus.heard(seq, frame[0], frame[1], frame[2], frame[3])  # (by position: per frame)
         periods = self.periods - self.moved  # the stamps' numbering: sums kept
         self.seen.on_encoders(seq, frame[3], periods)
         if self.dark.dark:  # (else ``on_encoders`` has nothing to note: no dark gap)
@@ -207,11 +207,11 @@ class StallPlacer:
             self._abs_ring[seq % ABS_KEPT] = (seq, *self._abs_counts)
             self.fill.accepted(1, counter, t_s)
             return False
-        abs_left, abs_right = self._abs_counts
-        half, wrap = 1 << (bits - 1), 1 << bits  # ``wrap_delta`` in line (per encoder frame)
-        self._abs_counts = (abs_left + abs((left - int(prev[4]) + half) % wrap - half),
-                            abs_right + abs((right - int(prev[5]) + half) % wrap - half))
-        self._abs_ring[seq % ABS_KEPT] = (seq, *self._abs_counts)  # a fixed ring: no growth
+        (abs_left, abs_right), half, wrap = self._abs_counts, 1 << (bits - 1), 1 << bits  # wrap
+        abs_left += abs((left - int(prev[4]) + half) % wrap - half)
+        abs_right += abs((right - int(prev[5]) + half) % wrap - half)
+        self._abs_counts, self._abs_ring[seq % ABS_KEPT] = (abs_left, abs_right), (  # a fixed
+            seq, abs_left, abs_right)  # ring: no growth (``wrap_delta`` in line, per frame)
         periods = (counter - int(prev[2])) & MASK
         if periods == 1 and t_s - float(prev[3]) < 8.0 * CYCLE_S:
             self.fill.accepted(1, counter, t_s)

@@ -121,7 +121,11 @@ class StepGate:
         refused, (0, 0) when it re-primes on a controller restart."""
         seq, counter, left, right, heard, uptime, t_s = heard_frame
         self._seq += heard
-        self._hear(t_s)
+        # within half a period of the frame heard before: its burst, sharing its doubt; else its
+        # own, doubted from that frame after 1.5 periods of silence (per frame of two gates)
+        gap_s, heard_t, self._heard_t = t_s - self._heard_t, self._heard_t, t_s
+        self._origin_t = ((heard_t if gap_s >= DOUBTED_GAP_S else -1.0) if gap_s >= HALF_CYCLE_S
+                          else self._origin_t)
         if self.bits < WIRE_BITS and ((left | right) & WIRE_MASK) >> self.bits:
             return None  # beyond the counters' width: refused outright (lossgate.beyond_width)
         frame = (counter, left, right)
@@ -170,15 +174,6 @@ class StepGate:
         self._prev_origin_t = self._origin_t
         self._restarted(seq, t_s, by_uptime=False)
         return self._delta(first, frame)
-
-    def _hear(self, t_s: float) -> None:
-        """A frame heard at bus time ``t_s``: within half a period of the frame before, it is of
-        that one's burst and shares its doubt; else its own burst, doubted from the frame
-        before when a period and a half or more of silence lies between them."""
-        gap_s = t_s - self._heard_t
-        if gap_s >= HALF_CYCLE_S:
-            self._origin_t = self._heard_t if gap_s >= DOUBTED_GAP_S else -1.0
-        self._heard_t = t_s
 
     def _doubted(self, periods: int, since_s: float, d_left: int, d_right: int) -> bool:
         """Whether a step the bound refused over ``periods`` lies within it over the periods
@@ -353,8 +348,11 @@ class ErrorStats:
         self.marks.append((t_s, self.samples, self.max_dpos_m, self.max_dheading_rad))
         self.latest = difference(a, b)
         self.samples += 1
-        self.max_dpos_m = max(self.max_dpos_m, self.latest["dpos_m"])
-        self.max_dheading_rad = max(self.max_dheading_rad, abs(self.latest["dheading_rad"]))
+        dpos_m, dheading_rad = self.latest["dpos_m"], abs(self.latest["dheading_rad"])
+        if dpos_m > self.max_dpos_m:  # ``max`` written out (per sample)
+            self.max_dpos_m = dpos_m
+        if dheading_rad > self.max_dheading_rad:
+            self.max_dheading_rad = dheading_rad
 
     def withdraw_from(self, t_s: float) -> None:
         """The pairs added from bus time ``t_s`` on were not one life's (a reboot told late,

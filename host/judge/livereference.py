@@ -43,7 +43,7 @@ class RawReference:
         stepped; a first frame primes) and keep its pose at the frame; returns the step."""
         step = self.gate.step(frame)
         if step is not None:
-            ref.step_deltas(*step)
+            ref.step_deltas(step[0], step[1])  # (by position: no tuple unpacked per frame)
         if self.blind:  # nothing compared (liverobot)
             return step
         seq = frame[0]  # ``ref.heading_rad`` in line (per encoder frame): ``_heading_at``'s sum;

@@ -111,8 +111,11 @@ class TwinWatch:
         recent = self._recent[data[1] & COUNTER_MASK]
         while recent and t_s - recent[0][0] >= PAIR_WINDOW_S:
             recent.popleft()
-        other = next(((t, p) for t, d, p in recent
-                      if d != data and abs(t_s - t) < PAIR_WINDOW_S), None)
+        other: tuple[float, int] | None = None  # the first kept that pairs (no generator)
+        for t, d, p in recent:
+            if d != data and abs(t_s - t) < PAIR_WINDOW_S:
+                other = (t, p)
+                break
         recent.append((t_s, data, position))
         self.last_paired = other is not None
         if other is None:

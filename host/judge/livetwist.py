@@ -63,13 +63,16 @@ def excess(value: float, a: Band, b: Band, zero: bool) -> float:
     if not (-math.inf < lo < math.inf and -math.inf < hi < math.inf):
         return math.nan
     if zero:
-        lo, hi = min(lo, 0.0), max(hi, 0.0)
+        lo, hi = 0.0 if lo > 0.0 else lo, 0.0 if hi < 0.0 else hi  # ``min``, ``max``
     low, high = TWIST_RANGE
     lo = low if lo < low else high if lo > high else lo
     hi = low if hi < low else high if hi > high else hi
-    slack = TWIST_LSB + TWIST_RELATIVE * max(abs(lo), abs(hi))
+    lo_abs, hi_abs = abs(lo), abs(hi)  # ``max``es written out (per twist frame)
+    slack = TWIST_LSB + TWIST_RELATIVE * (hi_abs if hi_abs > lo_abs else lo_abs)
     slack += b_gap if b_gap > a_gap else a_gap
-    return max(0.0, value - hi - slack, lo - slack - value)
+    above, below = value - hi - slack, lo - slack - value
+    most = above if above > 0.0 else 0.0
+    return below if below > most else most
 
 
 class LiveTwist:
@@ -174,7 +177,7 @@ class LiveTwist:
             self._since += 1
         if t_s - last_t >= TWIST_SILENCE_S:
             self._since = 0
-        self._since = min(self._since, 2)
+        self._since = 2 if self._since > 2 else self._since  # ``min`` (per twist frame)
         self._taken += 1
         if self._taken < 3 or self.suspended:
             return

@@ -118,11 +118,12 @@ def _sender_step(window: deque[tuple[float, ...]], j: int) -> int | None:
     times show unless frame ``j`` queued (less than ``QUEUED_GAP_CYCLES`` from a neighbour)
     with a step other than 0; None where it queued after such a gap: whether that gap is a hole
     of the log (``senderseq.pose_skips``) the rows kept here cannot tell."""
-    _, _, counter, t_s = window[j][:4]
-    _, _, prev_counter, prev_t = window[j - 1][:4]
-    step = int(counter - prev_counter) & ENC_COUNTER_MASK
+    row, prev = window[j], window[j - 1]  # (by index: no slice made per frame named)
+    counter, t_s, prev_t = row[2], row[3], prev[3]
+    step = int(counter - prev[2]) & ENC_COUNTER_MASK
     dt = t_s - prev_t
-    laps = max(0, math.floor((dt / CYCLE_S - step) / ENC_COUNTER_LAP + 0.5))
+    laps = math.floor((dt / CYCLE_S - step) / ENC_COUNTER_LAP + 0.5)
+    laps = laps if laps > 0 else 0  # ``max(0, laps)`` written out (per frame named)
     if step and (0 <= dt < QUEUED_GAP_S  # queued
                  or (j < -1 and 0 <= window[j + 1][3] - t_s < QUEUED_GAP_S)):
         # a step of 0 is widened by the time alone, as ``sender_seq`` widens it
@@ -150,6 +151,12 @@ class Columns:
         self.last_named: tuple[int, int] = (-1, -1)  # a half's pos and the seq it named
 
     def append(self, *row: float) -> None:
+        self.rows.append(row)
+        self._count += 1
+        self._unflushed.append(row)  # copied into ``_data`` when a column is read
+
+    def append_row(self, row: tuple[float, ...]) -> None:
+        """``append`` of a row made as a tuple already (per encoder frame: none unpacked)."""
         self.rows.append(row)
         self._count += 1
         self._unflushed.append(row)  # copied into ``_data`` when a column is read

@@ -171,7 +171,7 @@ class PoseTracker:
                                    self.counter_bits):
             self._gap(t_s)
         row = (self.enc_seq, self._pos, counter, t_s, left, right, self.placer.periods, uptime)
-        self.window.append(*row)
+        self.window.append_row(row)
         self.reprime.quiet.heard(self.window.rows)  # kept when the firmware fell silent
         if self.enc_seq % ENC_WINDOW == 0:
             self._forget(self.enc_seq - ENC_WINDOW)
@@ -263,8 +263,10 @@ class PoseTracker:
         result)."""
         if self.fast_path:
             plain = named_plain(halves.rows, self.window, pos)
-            if plain is not None:
-                return self.floods.follow(plain, halves.rows, pos), False
+            if plain is not None:  # (no rename of a flood: ``follow`` keeps it, not called)
+                floods = self.floods
+                return (plain if floods.renamed is None
+                        else floods.follow(plain, halves.rows, pos)), False
         seq, queued = named_in_window(halves, self.window, pos)
         return self.floods.follow(seq, halves.rows, pos), queued  # (livefloodnames)
 

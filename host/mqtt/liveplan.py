@@ -77,9 +77,17 @@ def _encoder_heard(telemetry: RobotTelemetry, route: Route, plan: Plan) -> Plan:
     """WHEEL_ENCODERS' plan, each frame heard first, before its E2E check, by the live gapseen
     (``livegapseen.heard_encoder``: ``gapchecked``'s count of the frames logged)."""
     message = route.message
+    if message.name != "WHEEL_ENCODERS":  # (a route of another name: ``heard_encoder`` as is)
+        def any_plan(t_s: float, data: bytes) -> list[Publication]:
+            heard_encoder(telemetry.tracker, message, data)
+            return plan(t_s, data)
+
+        return any_plan
+    length = message.length  # ``heard_encoder``'s test, its cantools properties read once
 
     def encoder_plan(t_s: float, data: bytes) -> list[Publication]:
-        heard_encoder(telemetry.tracker, message, data)
+        if len(data) == length:
+            telemetry.tracker.placer.seen.heard_encoder()
         return plan(t_s, data)
 
     return encoder_plan

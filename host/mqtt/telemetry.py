@@ -325,12 +325,12 @@ class RobotTelemetry(CommandFollowing):
 
     @takes("COUNTER", "LEFT_COUNT", "RIGHT_COUNT", "CTRL_UPTIME", advances=True)
     def _on_encoders(self, s: tuple[Any, ...], t_s: float) -> list[Publication]:
-        frame = (int(s[0]), int(s[1]), int(s[2]), t_s, int(s[3]))
-        self.tracker.on_encoders(*frame)
-        if self.robot.unjudged is not None:  # the page contradicts the default (liverobot)
-            return []
-        self.distance.on_encoders(self.tracker, *frame)
-        self.twist.on_encoders(self.tracker, *frame)
+        counter, left, right, uptime = int(s[0]), int(s[1]), int(s[2]), int(s[3])  # (no *args)
+        self.tracker.on_encoders(counter, left, right, t_s, uptime)
+        if self.robot.page_heard and self.robot.unjudged is not None:  # a page said (liverobot)
+            return []  # (``unjudged`` only after a page: the property read only then)
+        self.distance.on_encoders(self.tracker, counter, left, right, t_s, uptime)
+        self.twist.on_encoders(self.tracker, counter, left, right, t_s, uptime)
         return []
 
     @takes("ENC_COUNTER", "X", "HEADING", "COUNTER", advances=True)
@@ -346,7 +346,7 @@ class RobotTelemetry(CommandFollowing):
         enc_counter, linear, angular, distance, counter = s
         self._twist = {"linear_vel_m_s": linear, "angular_vel_rad_s": angular,
                        "distance_m": distance}
-        if self.robot.unjudged is not None:  # published, not judged (liverobot)
+        if self.robot.page_heard and self.robot.unjudged is not None:  # published, not judged
             return []
         self.distance.on_twist(self.tracker, int(enc_counter), round(distance * 1e3), t_s,
                                int(counter))
