@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING
 
+from odocan.host.judge.livelatehalves import named_sent
 from odocan.host.judge.livelone import judge_lone_live
 from odocan.host.judge.liveresent import judge_resend
 from odocan.host.judge.livewindow import HALF_WINDOW, QUEUED_GAP_S, Columns, Half
@@ -36,10 +37,16 @@ class HalfPairs:
         self._xs_waiting: dict[int, Half] = {}  # those of them not sampled yet (``_lone_before``)
         self._ys: dict[int, tuple[Half, bool]] = {}  # settled Y halves (and queued) waiting
         self.sampled: set[int] = set()  # encoder frames an on-board sample was made of
+        self._late: dict[int, float] = {}  # halves held back on the bus: place, send time s
 
-    def heard(self, name: str, half: Half) -> None:
+    def heard(self, name: str, half: Half, sent_s: float | None = None) -> None:
         """A half of message ``name`` ("x", "y"; its ``pos`` set) heard: the one before it of
-        that message settled (its successor is heard: it is known whether it queued)."""
+        that message settled (its successor is heard: it is known whether it queued).
+        ``sent_s``: held back on the bus, sent then (``livelatehalves``): kept among the
+        halves (its neighbours' rules see it, as ``match_encoder`` sees every half), named
+        where it was sent."""
+        if sent_s is not None:
+            self._late[half.pos] = sent_s
         self.halves[name].append(half.pos, half.enc_counter, half.counter, half.t_s)
         if name in self._unsettled:
             self._settle(name)
@@ -73,7 +80,12 @@ class HalfPairs:
         self.unsettled_from_s = (math.inf if not rest else next(iter(rest.values())).t_s
                                  if len(rest) == 1 else min(h.t_s for h in rest.values()))
         tracker = self._tracker
-        seq, queued = tracker.named(self.halves[name], half.pos)
+        sent_s = self._late.pop(half.pos, None) if self._late else None
+        if sent_s is None:
+            seq, queued = tracker.named(self.halves[name], half.pos)
+        else:  # held back on the bus: named where sent, in frame order (livelatehalves)
+            seq, queued = named_sent(tracker.window.rows, half.enc_counter, sent_s), False
+            seq = seq if seq > tracker.stall.last_compared else -1
         last = tracker.last_pair  # (``judge_resend`` judges only a frame sampled last)
         if seq < 0 or tracker.twins.twinned(seq) or (
                 last is not None and last[0].seq == seq and judge_resend(name, seq, half, tracker)):

@@ -31,6 +31,7 @@ from odocan.host.judge.livefit import LiveFit
 from odocan.host.judge.livefloodnames import LiveFloodNames
 from odocan.host.judge.livehalves import HalfPairs
 from odocan.host.judge.livelaphold import LapHold
+from odocan.host.judge.livelatehalves import LateHalves
 from odocan.host.judge.livelosses import LiveAllowance
 from odocan.host.judge.livenewstart import NewStartHold
 from odocan.host.judge.liveplace import StallPlacer
@@ -93,6 +94,7 @@ class PoseTracker:
         self.twins = TwinWatch(self.window.rows)  # frames with a twin: their poses left out
         self.boot_tick = BootTick()  # the latest refused since the last taken (liveboottick)
         self.pairs = HalfPairs(self)  # the pose halves heard, settled and paired (livehalves)
+        self.late = LateHalves()  # ... those held back on the bus left out (livelatehalves)
         self.settled: list[Sample] = []  # samples settled since ``take_samples``
         self.fit = LiveFit(0.0, 0.0, exact=True)  # the start narrowed (host.judge.livefit)
         self.placer = StallPlacer()  # the placements after stalls (host.judge.liveplace)
@@ -247,7 +249,7 @@ class PoseTracker:
         self.reprime.quiet.since = 0  # the firmware talked (``reprimereplay.QuietFrames``)
         self._pos += 1
         half.pos = self._pos
-        self.pairs.heard(name, half)
+        self.pairs.heard(name, half, self.late.heard(name, half.t_s, half.counter))
 
     def take_place(self) -> int:
         """The place of a frame heard besides the encoder frames and pose halves (an ODOM_TWIST:
