@@ -85,11 +85,7 @@ class StepGate:
         self._prev_t = 0.0  # its bus time (s)
         self._told = told
         self._held: Held | None = None  # a restart's first frame, until the next confirms it
-        # ``step_periods.doubted_bound_periods``: the bus time of the frame heard before the
-        # latest, of the frame before the latest's burst (frames heard within half a period of
-        # each other; -1.0: nothing to doubt), and the latter of the last accepted frame
-        self._heard_t: float = math.inf
-        self._origin_t: float = -1.0
+        # ``step_periods.doubt_origin_s`` of the last accepted frame (-1.0: nothing to doubt)
         self._prev_origin_t: float = -1.0
 
     def rebound(self, geometry: Geometry) -> None:
@@ -121,7 +117,6 @@ class StepGate:
         refused, (0, 0) when it re-primes on a controller restart."""
         seq, counter, left, right, heard, uptime, t_s = heard_frame
         self._seq += heard
-        self._hear(t_s)
         if self.bits < WIRE_BITS and ((left | right) & WIRE_MASK) >> self.bits:
             return None  # beyond the counters' width: refused outright (lossgate.beyond_width)
         frame = (counter, left, right)
@@ -132,7 +127,8 @@ class StepGate:
         prev_seq, self._prev_seq = self._prev_seq, self._seq
         last_uptime, self.uptime = self.uptime, uptime
         last_t, self._prev_t = self._prev_t, t_s
-        origin_t, self._prev_origin_t = self._prev_origin_t, self._origin_t
+        origin_t = self._prev_origin_t
+        self._prev_origin_t = _taken_origin(t_s, last_t, origin_t) if prev else -1.0
         if prev is None:
             return None
         if uptime and last_uptime and (uptime < last_uptime or (
@@ -167,18 +163,9 @@ class StepGate:
         if len(self._refused) < RESYNC_FRAMES:
             return None
         first, self._refused, self.prev, self.uptime = self._refused[0], [], frame, uptime
-        self._prev_origin_t = self._origin_t
+        self._prev_origin_t = _taken_origin(t_s, last_t, origin_t)
         self._restarted(seq, t_s, by_uptime=False)
         return self._delta(first, frame)
-
-    def _hear(self, t_s: float) -> None:
-        """A frame heard at bus time ``t_s``: within half a period of the frame before, it is of
-        that one's burst and shares its doubt; else its own burst, doubted from the frame
-        before when a period and a half or more of silence lies between them."""
-        gap_s = t_s - self._heard_t
-        if gap_s >= HALF_CYCLE_S:
-            self._origin_t = self._heard_t if gap_s >= DOUBTED_GAP_S else -1.0
-        self._heard_t = t_s
 
     def _doubted(self, periods: int, since_s: float, d_left: int, d_right: int) -> bool:
         """Whether a step the bound refused over ``periods`` lies within it over the periods
@@ -228,8 +215,8 @@ class StepGate:
         first, seq, _, held_t = held
         self._held, self._refused = None, []
         self._restarted(seq, held_t, by_uptime=True)
+        self._prev_origin_t = _taken_origin(t_s, self._prev_t, self._prev_origin_t)
         self.prev, self._prev_seq, self.uptime, self._prev_t = frame, self._seq, uptime, t_s
-        self._prev_origin_t = self._origin_t
         return self._delta(first, frame)
 
     def _restarted(self, seq: int, t_s: float, *, by_uptime: bool,
@@ -295,6 +282,18 @@ def _unproven(_a_s: float, _b_s: float) -> int | None:
 
 # below this silence ``aged`` is the last CTRL_UPTIME itself (the per-frame test skips it)
 AGED_AFTER_S = (PERIODS_PER_S + RESTART_SLACK_PERIODS - 0.5) * CYCLE_S
+
+
+def _taken_origin(t_s: float, last_t: float, last_origin_t: float) -> float:
+    """``step_periods.doubt_origin_s`` of a frame taken at bus time ``t_s`` after the frame taken
+    last (at ``last_t``, its own origin ``last_origin_t``): within half a period of it, in its
+    burst, that one's origin; else that one's time after a silence of a period and a half or
+    more (refused frames heard between do not count: the firmware counts from its last
+    acceptance), -1.0 (nothing to doubt) after less."""
+    gap_s = t_s - last_t
+    if gap_s < HALF_CYCLE_S:
+        return last_origin_t
+    return last_t if gap_s >= DOUBTED_GAP_S else -1.0
 
 
 def aged(uptime: int, elapsed_s: float) -> int:
