@@ -85,8 +85,9 @@ class StepGate:
         self._prev_t = 0.0  # its bus time (s)
         self._told = told
         self._held: Held | None = None  # a restart's first frame, until the next confirms it
-        # ``step_periods.doubt_origin_s`` of the last accepted frame (-1.0: nothing to doubt)
-        self._prev_origin_t: float = -1.0
+        # the last accepted frame's bus time and ``step_periods.doubt_origin_s`` (-1.0: nothing
+        # to doubt); ``_prev_t`` stays at the frame before a counter restart's run, this does not
+        self._doubt: tuple[float, float] = (0.0, -1.0)
 
     def rebound(self, geometry: Geometry) -> None:
         """Gate the next frames with ``geometry``'s speed bound (the firmware's, from its PROFILE
@@ -127,8 +128,9 @@ class StepGate:
         prev_seq, self._prev_seq = self._prev_seq, self._seq
         last_uptime, self.uptime = self.uptime, uptime
         last_t, self._prev_t = self._prev_t, t_s
-        origin_t = self._prev_origin_t
-        self._prev_origin_t = _taken_origin(t_s, last_t, origin_t) if prev else -1.0
+        doubt = self._doubt
+        origin_t = doubt[1]
+        self._doubt = (t_s, _taken_origin(t_s, *doubt) if prev else -1.0)
         if prev is None:
             return None
         if uptime and last_uptime and (uptime < last_uptime or (
@@ -137,7 +139,7 @@ class StepGate:
                 and in_window(counter - prev[0], t_s - last_t, CYCLE_S) \
                 and self._young(frame, uptime):
             self.prev, self._prev_seq, self.uptime = prev, prev_seq, last_uptime  # held
-            self._prev_t, self._prev_origin_t = last_t, origin_t
+            self._prev_t, self._doubt = last_t, doubt
             self._held = (frame, seq, uptime, t_s)
             return None
         periods = self._seq - prev_seq
@@ -157,13 +159,13 @@ class StepGate:
                 self._refused = []
             return d_left, d_right
         self.prev, self._prev_seq, self.uptime = prev, prev_seq, last_uptime  # refused: kept
-        self._prev_t, self._prev_origin_t = last_t, origin_t
+        self._prev_t, self._doubt = last_t, doubt
         consistent = bool(self._refused) and self._plausible(self._refused[-1], frame)
         self._refused = [*self._refused, frame] if consistent else [frame]
         if len(self._refused) < RESYNC_FRAMES:
             return None
         first, self._refused, self.prev, self.uptime = self._refused[0], [], frame, uptime
-        self._prev_origin_t = _taken_origin(t_s, last_t, origin_t)
+        self._doubt = (t_s, _taken_origin(t_s, *doubt))
         self._restarted(seq, t_s, by_uptime=False)
         return self._delta(first, frame)
 
@@ -215,7 +217,7 @@ class StepGate:
         first, seq, _, held_t = held
         self._held, self._refused = None, []
         self._restarted(seq, held_t, by_uptime=True)
-        self._prev_origin_t = _taken_origin(t_s, self._prev_t, self._prev_origin_t)
+        self._doubt = (t_s, _taken_origin(t_s, *self._doubt))
         self.prev, self._prev_seq, self.uptime, self._prev_t = frame, self._seq, uptime, t_s
         return self._delta(first, frame)
 
