@@ -85,12 +85,9 @@ class StepGate:
         self._prev_t = 0.0  # its bus time (s)
         self._told = told
         self._held: Held | None = None  # a restart's first frame, until the next confirms it
-        # ``step_periods.doubted_bound_periods``: the bus time of the frame heard before the
-        # latest, of the frame before the latest's burst (frames heard within half a period of
-        # each other; -1.0: nothing to doubt), and the latter of the last accepted frame
-        self._heard_t: float = math.inf
-        self._origin_t: float = -1.0
-        self._prev_origin_t: float = -1.0
+        # the last accepted frame's bus time and ``step_periods.doubt_origin_s`` (-1.0: nothing
+        # to doubt); ``_prev_t`` stays at the frame before a counter restart's run, this does not
+        self._doubt: tuple[float, float] = (0.0, -1.0)
 
     def rebound(self, geometry: Geometry) -> None:
         """Gate the next frames with ``geometry``'s speed bound (the firmware's, from its PROFILE
@@ -121,11 +118,6 @@ class StepGate:
         refused, (0, 0) when it re-primes on a controller restart."""
         seq, counter, left, right, heard, uptime, t_s = heard_frame
         self._seq += heard
-        # within half a period of the frame heard before: its burst, sharing its doubt; else its
-        # own, doubted from that frame after 1.5 periods of silence (per frame of two gates)
-        gap_s, heard_t, self._heard_t = t_s - self._heard_t, self._heard_t, t_s
-        self._origin_t = ((heard_t if gap_s >= DOUBTED_GAP_S else -1.0) if gap_s >= HALF_CYCLE_S
-                          else self._origin_t)
         if self.bits < WIRE_BITS and ((left | right) & WIRE_MASK) >> self.bits:
             return None  # beyond the counters' width: refused outright (lossgate.beyond_width)
         frame = (counter, left, right)
@@ -136,7 +128,9 @@ class StepGate:
         prev_seq, self._prev_seq = self._prev_seq, self._seq
         last_uptime, self.uptime = self.uptime, uptime
         last_t, self._prev_t = self._prev_t, t_s
-        origin_t, self._prev_origin_t = self._prev_origin_t, self._origin_t
+        doubt = self._doubt
+        origin_t = doubt[1]
+        self._doubt = (t_s, _taken_origin(t_s, *doubt) if prev else -1.0)
         if prev is None:
             return None
         if uptime and last_uptime and (uptime < last_uptime or (
@@ -145,7 +139,7 @@ class StepGate:
                 and in_window(counter - prev[0], t_s - last_t, CYCLE_S) \
                 and self._young(frame, uptime):
             self.prev, self._prev_seq, self.uptime = prev, prev_seq, last_uptime  # held
-            self._prev_t, self._prev_origin_t = last_t, origin_t
+            self._prev_t, self._doubt = last_t, doubt
             self._held = (frame, seq, uptime, t_s)
             return None
         periods = self._seq - prev_seq
@@ -165,13 +159,13 @@ class StepGate:
                 self._refused = []
             return d_left, d_right
         self.prev, self._prev_seq, self.uptime = prev, prev_seq, last_uptime  # refused: kept
-        self._prev_t, self._prev_origin_t = last_t, origin_t
+        self._prev_t, self._doubt = last_t, doubt
         consistent = bool(self._refused) and self._plausible(self._refused[-1], frame)
         self._refused = [*self._refused, frame] if consistent else [frame]
         if len(self._refused) < RESYNC_FRAMES:
             return None
         first, self._refused, self.prev, self.uptime = self._refused[0], [], frame, uptime
-        self._prev_origin_t = self._origin_t
+        self._doubt = (t_s, _taken_origin(t_s, *doubt))
         self._restarted(seq, t_s, by_uptime=False)
         return self._delta(first, frame)
 
@@ -223,8 +217,8 @@ class StepGate:
         first, seq, _, held_t = held
         self._held, self._refused = None, []
         self._restarted(seq, held_t, by_uptime=True)
+        self._doubt = (t_s, _taken_origin(t_s, *self._doubt))
         self.prev, self._prev_seq, self.uptime, self._prev_t = frame, self._seq, uptime, t_s
-        self._prev_origin_t = self._origin_t
         return self._delta(first, frame)
 
     def _restarted(self, seq: int, t_s: float, *, by_uptime: bool,
@@ -290,6 +284,18 @@ def _unproven(_a_s: float, _b_s: float) -> int | None:
 
 # below this silence ``aged`` is the last CTRL_UPTIME itself (the per-frame test skips it)
 AGED_AFTER_S = (PERIODS_PER_S + RESTART_SLACK_PERIODS - 0.5) * CYCLE_S
+
+
+def _taken_origin(t_s: float, last_t: float, last_origin_t: float) -> float:
+    """``step_periods.doubt_origin_s`` of a frame taken at bus time ``t_s`` after the frame taken
+    last (at ``last_t``, its own origin ``last_origin_t``): within half a period of it, in its
+    burst, that one's origin; else that one's time after a silence of a period and a half or
+    more (refused frames heard between do not count: the firmware counts from its last
+    acceptance), -1.0 (nothing to doubt) after less."""
+    gap_s = t_s - last_t
+    if gap_s < HALF_CYCLE_S:
+        return last_origin_t
+    return last_t if gap_s >= DOUBTED_GAP_S else -1.0
 
 
 def aged(uptime: int, elapsed_s: float) -> int:

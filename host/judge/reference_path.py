@@ -52,7 +52,11 @@ from odocan.host.judge.stallreprime import (
     stall_reprimes,
 )
 from odocan.host.judge.stallrestart import Window, stall_windows, told_otherwise
-from odocan.host.judge.step_periods import DOUBTED, step_bound_periods
+from odocan.host.judge.step_periods import (
+    doubted_bound_periods,
+    pair_bound_periods,
+    step_bound_periods,
+)
 from odocan.host.judge.unseenrestart import heading_offsets, restarted_path, unseen_restarts
 from odocan.host.judge.unseenrestart import restart_detail as restart_detail
 from odocan.sim.robot import RobotProfile
@@ -217,12 +221,14 @@ class Steps:
     by_uptime: list[int] = field(default_factory=list)  # of them, a controller restart's or
     ambiguous: list[int] = field(default_factory=list)  # an ambiguous step's (``ambiguity``)
     open_from: int | None = None  # the last accepted frame when the log ends in a refusal run
+    taken_before: dict[int, int] = field(default_factory=dict)  # after refusals: the frame
+    # taken before (``step_periods.doubt_origin_s``; elsewhere the frame before)
 
 
 def firmware_steps(
     enc: Encoders, e0: int, geometry: Geometry, bits: int, max_wheel_speed_mm_s: SpeedBound,
     *, through: dict[int, int] | None = None, resets: Resets | None = None,
-    stalled: tuple[Window, ...] = (),
+    stalled: tuple[Window, ...] = (), first_origin_s: float | None = None,
 ) -> Steps:
     """The steps as firmware/ecu.py takes them: a frame whose step from the last accepted one
     exceeds the robot's maximum wheel speed (``max_wheel_speed_mm_s``; ``PROFILE_SPEED``: the
@@ -241,7 +247,8 @@ def firmware_steps(
     encoder frame after) the firmware's longest step there, its pages' (``holetaken``): shorter
     than an ambiguous step, the gap is no ambiguous step (the firmware took frames in it).
     ``resets``: the firmware's COUNTER_RESET word, followed within a period of the threshold,
-    and where a stall (``stalled``: ``stallrestart.stall_windows``) leaves a restart unproven."""
+    and where a stall (``stalled``: ``stallrestart.stall_windows``) leaves a restart unproven.
+    ``first_origin_s``: the doubt origin of frame ``e0`` (``step_periods.doubt_origin_s``)."""
     left, right = enc.left[e0:], enc.right[e0:]
     seq = enc.seq[e0:]
     steps = Steps(wrap_delta(np.diff(left), bits), wrap_delta(np.diff(right), bits))
@@ -273,7 +280,9 @@ def firmware_steps(
         return abs(d[0]) <= periods * bound[0] and abs(d[1]) <= periods * bound[1]
 
     def plausible(a: int, b: int) -> bool:  # from the last accepted frame: periods widened
-        return any(within(a, b, rule(seq, stamps, enc.cycle_s, a, b)) for rule in DOUBTED)
+        return within(a, b, pair_bound_periods(seq, stamps, enc.cycle_s, a, b)) or within(
+            a, b, doubted_bound_periods(seq, stamps, enc.cycle_s, a, b, steps.taken_before,
+                                        first_origin_s))
 
     def consistent(a: int, b: int) -> bool:  # among refused frames: the sequence's periods
         return within(a, b, max(1, int(seq[b] - seq[a])))
@@ -313,6 +322,7 @@ def _walk(steps: Steps, bad: Any, restart: Any, rules: tuple[Any, Any, Any]) -> 
             k = _reprime(steps, first_bad + 1, ambiguous=True)  # ``ambiguity``
             continue
         k = _refusals(steps, first_bad, n_frames, plausibility, delta, restarted)
+        steps.taken_before[k] = first_bad
         if k == n_frames:
             steps.open_from = first_bad
     return steps

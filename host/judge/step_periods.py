@@ -15,6 +15,8 @@ frame pair's ``sender_seq``, ``liveplace``)."""
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 import numpy as np
 
 from odocan.host.judge.samples import FloatArray, IntArray
@@ -54,27 +56,46 @@ def pair_bound_periods(seq: IntArray, timestamp_s: FloatArray, cycle_s: float | 
 
 
 def doubted_bound_periods(seq: IntArray, timestamp_s: FloatArray, cycle_s: float | None,
-                          a: int, b: int) -> int:
+                          a: int, b: int, taken_before: Mapping[int, int] | None = None,
+                          first_origin_s: float | None = None) -> int:
     """The firmware's ``sampledoubt.doubted_periods`` as the judges count them: the step from
     frame ``a`` (the last accepted) to frame ``b``, its sequence step, widened by the bus time
-    since the frame before ``a``: ``a`` may have waited out the silence before it (a delayed
-    frame held in a bus-off sender's transmit buffer goes out first at the recovery), its sample
-    no earlier than that frame's. Frames heard within half a period of each other (the held
-    frames go out back to back: the firmware takes them in one tick) share the first one's
-    doubt (``sampledoubt.accepted_doubt``): the bus time since the frame before the first. 0 (no
-    second chance) when that first frame is the log's first, or came within a period and a half
-    of the one before (nothing to doubt), or without bus times."""
+    since the doubt's origin (``doubt_origin_s``): ``a`` may have waited out the silence before
+    it (a delayed frame held in a bus-off sender's transmit buffer goes out first at the
+    recovery), its sample no earlier than the frame taken before it. 0 (no second chance) where
+    there is no origin, or without bus times."""
     if cycle_s is None:
         return 0
-    first = a
-    while first > 0 and timestamp_s[first] - timestamp_s[first - 1] < 0.5 * cycle_s:
-        first -= 1
-    if first == 0 or timestamp_s[first] - timestamp_s[first - 1] < 1.5 * cycle_s:
+    origin_s = doubt_origin_s(timestamp_s, cycle_s, a, taken_before, first_origin_s)
+    if origin_s is None:
         return 0
     return int(widened_periods(np.array([int(seq[b] - seq[a])]),
-                               np.array([float(timestamp_s[b] - timestamp_s[first - 1])]),
-                               cycle_s)[0])
+                               np.array([float(timestamp_s[b] - origin_s)]), cycle_s)[0])
 
 
-DOUBTED = (pair_bound_periods, doubted_bound_periods)  # the bound's periods, then the second
-# chance's (``reference_path.firmware_steps``)
+def doubt_origin_s(timestamp_s: FloatArray, cycle_s: float, a: int,
+                   taken_before: Mapping[int, int] | None = None,
+                   first_origin_s: float | None = None) -> float | None:
+    """The bus time an accepted frame ``a``'s doubt counts from (``sampledoubt.accepted_doubt``):
+    that of the frame the firmware took before it, ``taken_before`` (frame ``k - 1`` where it
+    names none: a frame taken after refused ones was judged against the last one taken, and the
+    firmware counts its doubt from that one's acceptance, not from the refused frames heard
+    between; issue #11, pmir random 5, ``delay=0.5:150``: COUNTER 13 taken 9 periods after
+    COUNTER 5 over two refused frames, the late COUNTER 14 after it taken over 17 periods, which
+    the judges, counting from the refused COUNTER 9 heard 4 periods before, refused: the
+    reference stepped 84 mm at once three frames on, and a correct firmware FAILed 86 mm).
+    Frames taken within half a period of each other (the held frames go out back to back: the
+    firmware takes them in one tick) share the first one's doubt; None (nothing to doubt) when
+    that one came within a period and a half of the frame taken before it, or is frame 0 of the
+    frames given (``first_origin_s``: its origin, carried by the streamed judge)."""
+    before = taken_before or {}
+    k = a
+    while True:
+        p = before.get(k, k - 1)
+        if p < 0:
+            return first_origin_s
+        gap_s = float(timestamp_s[k] - timestamp_s[p])
+        if gap_s >= 0.5 * cycle_s:
+            return float(timestamp_s[p]) if gap_s >= 1.5 * cycle_s else None
+        k = p
+

@@ -72,6 +72,7 @@ from odocan.host.judge.samples import (
     match_encoder,
     named_targets,
 )
+from odocan.host.judge.step_periods import doubt_origin_s
 from odocan.host.judge.stream_e2e import StreamE2E as StreamE2E  # re-exported (its old home)
 from odocan.host.protocol.busfacts import ENC_COUNTER_LAP as LAP
 from odocan.host.protocol.busfacts import ENC_COUNTER_MASK
@@ -396,6 +397,7 @@ class StreamReference:
     _window: dict[str, np.ndarray] = field(default_factory=dict)  # left, right, seq, g, t, uptime
     _sums: tuple[int, int, float, float, float, float] = (0, 0, 0.0, 0.0, 0.0, 0.0)
     _count: int = 0  # encoder frames fed
+    _origin_s: float | None = None  # the carried frame's doubt origin (``doubt_origin_s``)
     left_out: tuple[tuple[int, int], ...] = ()  # re-primes' steps (f, r] (``stream_reprime``)
     last_steps: tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]] | None = None  # the
     # firmware's step into each frame of the last chunk fed (d_left, d_right; host.judge.distance)
@@ -417,7 +419,8 @@ class StreamReference:
         window = Encoders(index=win["g"], counter=win["counter"], seq=win["seq"],
                           left=win["left"], right=win["right"],
                           timestamp_s=win["t"], cycle_s=enc.cycle_s, uptime=win["uptime"])
-        steps = firmware_steps(window, 0, self.geometry, self.bits, self.max_wheel_speed_mm_s)
+        steps = firmware_steps(window, 0, self.geometry, self.bits, self.max_wheel_speed_mm_s,
+                               first_origin_s=self._origin_s)
         self.refused += steps.refused - max(0, carried - 1)  # carried refusals counted before
         self.reprimed += [int(win["g"][k]) for k in steps.reprimed]  # decided in this window
         self.by_uptime += [int(win["g"][k]) for k in steps.by_uptime]
@@ -427,6 +430,8 @@ class StreamReference:
                                           steps.d_right[skip:]))
         last = steps.open_from if steps.open_from is not None else len(win["g"]) - 1
         self._window = {k: v[last:] for k, v in win.items()}
+        self._origin_s = None if enc.cycle_s is None else doubt_origin_s(
+            win["t"], enc.cycle_s, last, steps.taken_before, self._origin_s)
         first = np.zeros(1 if first_chunk else 0, dtype=np.int64)  # no step into frame 0
         self.last_steps = (np.concatenate((first, steps.d_left[skip:])),
                            np.concatenate((first, steps.d_right[skip:])))
