@@ -145,8 +145,7 @@ class LateScan:
 
     def feed(self, t_new: list[float], c_new: list[int]) -> tuple[list[bool], list[float]]:
         """The next frames' stamps and COUNTERs: per frame, late and its send time."""
-        t, c, late, times = (list(self.tail[0]), list(self.tail[1]), list(self.tail[2]),
-                             list(self.tail[3]))
+        t, c, late, times = self.tail  # extended in place (the live judge feeds one frame)
         first = len(t)
         t += t_new
         c += c_new
@@ -174,9 +173,12 @@ class LateScan:
             times.append(sent_s if is_late and sent_s is not None else t[k])
             if sent_s is None or heard or (ordered and not is_late):
                 self.top = (t[k], c[k])  # heard in order, or a repeat of a send heard
-        keep = max(len(t) - SLOT_FRAMES, 0)
-        self.tail = (t[keep:], c[keep:], late[keep:], times[keep:])
-        return late[first:], times[first:]
+        out = late[first:], times[first:]
+        if len(t) >= 2 * SLOT_FRAMES:  # the last ``SLOT_FRAMES`` or more kept, cut in batches
+            keep = len(t) - SLOT_FRAMES
+            for kept in self.tail:
+                del kept[:keep]
+        return out
 
     def _sent_time(self, t_s: float, c: int) -> tuple[bool, float, bool]:
         """``sent_times``' reading of the next frame from the latest-sent frame fed before
