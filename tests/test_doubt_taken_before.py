@@ -109,12 +109,18 @@ def test_the_streamed_reference_carries_the_doubt(cut: int) -> None:
 
 def test_the_live_gate_steps_as_the_firmware_did() -> None:
     """The monitor's and the bridge's gate: the late COUNTER 14 taken, as the firmware did."""
-    gate = StepGate(Geometry.of(load("pmir")), 16, RestartLog(lambda _seq, _uptime: None))
-    heard = [1, *np.diff(SEQ).tolist()]
-    steps = [gate.step((s, c, lc, rc, h, 0, t)) for s, c, lc, rc, h, t in
-             zip(SEQ, COUNTER, LEFT, RIGHT, heard, T_S, strict=True)]
-    assert [None if d is None else d[0] for d in steps] == [
+    assert _gate_lefts("pmir", SEQ, COUNTER, LEFT, RIGHT, T_S) == [
         None, *(d or None for d in FIRMWARE_LEFT)]
+
+
+def _gate_lefts(robot: str, seq: list[int], counter: list[int], left: list[int],
+                right: list[int], t_s: list[float]) -> list[int | None]:
+    """The live gate's left-wheel step per frame (None: refused or held), fed in order."""
+    gate = StepGate(Geometry.of(load(robot)), 16, RestartLog(lambda _seq, _uptime: None))
+    heard = [1, *np.diff(seq).tolist()]
+    steps = [gate.step((s, c, lc, rc, h, 0, t)) for s, c, lc, rc, h, t in
+             zip(seq, counter, left, right, heard, t_s, strict=True)]
+    return [None if d is None else d[0] for d in steps]
 
 
 # kobuki random 2, delay=0.5:150, from 5.84 s: the firmware took COUNTER 8, re-primed on 9 over
@@ -138,11 +144,7 @@ def test_a_restart_run_s_frame_is_the_frame_taken_before() -> None:
     periods to COUNTER 5, which it took over 17, 963 counts, where the firmware refused it;
     kobuki 2 live: 4.12 mm beyond in the first cut of this rule, 0.04 mm on main and now)."""
     seq, counter, t_s, left, right = (list(c) for c in zip(*RESTARTS, strict=True))
-    gate = StepGate(Geometry.of(load("kobuki")), 16, RestartLog(lambda _seq, _uptime: None))
-    heard = [1, *np.diff(seq).tolist()]
-    steps = [gate.step((s, c, lc, rc, h, 0, t)) for s, c, t, lc, rc, h in
-             zip(seq, counter, t_s, left, right, heard, strict=True)]
-    assert [None if d is None else d[0] for d in steps] == [
+    assert _gate_lefts("kobuki", seq, counter, left, right, t_s) == [
         None, *(d or None for d in RESTARTS_LEFT)]
     n = len(seq)
     enc = Encoders(index=np.arange(n, dtype=np.int64), counter=np.array(counter),

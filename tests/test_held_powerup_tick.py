@@ -68,28 +68,34 @@ LOST_STATUS_REBOOT = [
 ]
 
 
-def _watched(heard: list[tuple[str, float, int]]) -> list[str | None]:
-    """``SourceWatch`` fed as the monitor and the bridge feed it: what each summary told."""
-    watch, kinds = SourceWatch(), []
+def watched(heard: list[tuple[str, float, int]], ahead: bool = False) -> list[str | None]:
+    """``SourceWatch`` fed as the monitor and the bridge feed it (``ahead``: its
+    ``told_ahead`` asked before each summary is observed, "reboot" when it tells one): what each
+    summary told."""
+    watch, kinds = SourceWatch(), list[str | None]()
     for kind, t_s, counter in heard:
         if kind == POSE:
             watch.hear_pose(t_s, counter)
             continue
         watch.hear_status(t_s, counter)
-        if kind == SUMMARY:
+        if kind != SUMMARY:
+            continue
+        if ahead and watch.told_ahead(t_s, 0, counter) is not None:
+            kinds.append("reboot")
+        else:
             kinds.append(watch.observe(t_s, 0, "OK", counter))
     return kinds
 
 
 @pytest.mark.parametrize("heard", [HELD_TICK, HELD_ZERO], ids=["696", "690"])
 def test_frames_held_back_tell_no_power_up_tick(heard: list[tuple[str, float, int]]) -> None:
-    assert _watched(heard) == [None] * sum(kind == SUMMARY for kind, _, _ in heard)
+    assert watched(heard) == [None] * sum(kind == SUMMARY for kind, _, _ in heard)
 
 
 def test_a_reboot_whose_old_status_counter_0_was_lost_is_still_one() -> None:
     """Its summary fills a hole of the status sequence, but its pose of COUNTER 0 repeats one
     heard in order: a new firmware."""
-    assert _watched(LOST_STATUS_REBOOT) == [None, "reboot"]
+    assert watched(LOST_STATUS_REBOOT) == [None, "reboot"]
 
 
 # seed 696 reboot=0.2:0.2's 0.1 .. 0.551 s: the old life's own tick held back to 0.151 s, the
@@ -142,7 +148,7 @@ def test_an_old_lifes_page_in_sequence_tells_no_reboot() -> None:
         (POSE, 0.82, 5),
         (SUMMARY, 0.85, 0),
     ]
-    assert _watched(heard) == [None, None]
+    assert watched(heard) == [None, None]
 
 
 def _run(log: Path, seed: int, faults: str) -> tuple[int, dict[str, Any]]:

@@ -25,9 +25,8 @@ import pytest
 
 from odocan.host.cli.app import main
 from odocan.host.judge.livelatestatus import StatusOrder
-from odocan.host.judge.sources import SourceWatch
 from tests.judges_cli import STREAMS, analyze, live_judges, watched_run, x_10_mm_off_fails
-from tests.test_held_powerup_tick import reboots_told
+from tests.test_held_powerup_tick import PAGE, POSE, SUMMARY, reboots_told, watched
 
 FAULTS = "reboot=1.5:0.3,delay=0.1:200"
 
@@ -110,7 +109,6 @@ def test_x_10_mm_off_after_the_reboot_fails(
     assert x_10_mm_off_fails(log, tmp_path / "t.log", powerup_s + 0.3, 200) == []
 
 
-POSE, SUMMARY, PAGE = "pose", "summary", "page"
 # seed 906's 2.401 .. 2.701 s as heard (kind, bus time s, E2E COUNTER), UPTIME 0 throughout
 HEARD_906 = [
     (POSE, 2.401, 14), (SUMMARY, 2.401, 12), (PAGE, 2.401, 13), (POSE, 2.421, 15),
@@ -126,27 +124,12 @@ NEW_AT_2_64 = [*HEARD_906[:4], (POSE, 2.441, 0), *HEARD_906[4:13], (SUMMARY, 2.6
                (PAGE, 2.601, 1), (POSE, 2.641, 0), (POSE, 2.661, 1), (SUMMARY, 2.701, 2)]
 
 
-def _watched(heard: list[tuple[str, float, int]]) -> list[str | None]:
-    """``SourceWatch`` fed as the monitor and the bridge feed it (``told_ahead`` before each
-    summary is observed): what each summary told."""
-    watch, kinds = SourceWatch(), []
-    for kind, t_s, counter in heard:
-        if kind == POSE:
-            watch.hear_pose(t_s, counter)
-            continue
-        watch.hear_status(t_s, counter)
-        if kind == SUMMARY:
-            told = watch.told_ahead(t_s, 0, counter)
-            kinds.append("reboot" if told is not None else watch.observe(t_s, 0, "OK", counter))
-    return kinds
-
-
 def test_a_held_back_pose_after_a_lapped_summary_tells_no_power_up() -> None:
-    assert _watched(HEARD_906) == [None] * 4
+    assert watched(HEARD_906, ahead=True) == [None] * 4
 
 
 def test_a_pose_of_counter_0_in_order_after_it_still_does() -> None:
-    assert _watched(NEW_AT_2_64) == [None, None, None, "reboot"]
+    assert watched(NEW_AT_2_64, ahead=True) == [None, None, None, "reboot"]
 
 
 # seed 695's twists from 1.381 s as heard (bus time s, E2E COUNTER): COUNTER 10 held back from
