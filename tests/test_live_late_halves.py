@@ -22,7 +22,9 @@ from pathlib import Path
 
 import pytest
 
+from odocan.host.judge.latenames import LateScan
 from odocan.host.judge.livelatehalves import LateHalves, named_sent
+from odocan.host.protocol.busfacts import POSE_PERIOD_S
 from tests.judges_cli import both_analyses, live_judges, raise_x_10_mm, watched_run
 
 FAULTS = "delay=0.5:150"
@@ -128,3 +130,19 @@ def test_x_10_mm_off_fails_live(drive: tuple[str, Path], tmp_path: Path) -> None
     assert raise_x_10_mm(log, tampered, TAMPER_FROM_S) > 100
     beyond_m = [j.tracker.max_beyond_allowance_m for j in live_judges(robot, tampered)]
     assert min(beyond_m) > 5e-3, beyond_m
+
+
+def test_bus_time_going_back_starts_the_scan_afresh() -> None:
+    """A new time base (a rig restarted, a bus replayed: tests/test_mqtt_robustness.py's fuzz of
+    10 s, then a rig from 0 s) is no lateness: the frames heard in order after it are not read
+    late. Fed to one scan across the jump, every one of them is (the case this guards)."""
+    before = [(9.0 + 0.02 * k, k % 16) for k in range(40)]
+    after = [(0.001 + 0.02 * k, (k + 9) % 16) for k in range(40)]  # 7..12 on: all read late
+    halves = LateHalves()
+    for t_s, counter in before:
+        halves.heard("x", t_s, counter)
+    assert [halves.heard("x", t_s, c) for t_s, c in after] == [None] * len(after)
+    one = LateScan(POSE_PERIOD_S)
+    one.feed(*map(list, zip(*before, strict=True)))
+    late, _ = one.feed(*map(list, zip(*after, strict=True)))
+    assert all(late)

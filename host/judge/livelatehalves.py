@@ -22,6 +22,7 @@ left, and X 10 mm off from 5 s PASSed.
 
 from __future__ import annotations
 
+import math
 from collections import deque
 
 from odocan.host.judge.latenames import LateScan
@@ -35,12 +36,19 @@ class LateHalves:
     """One ``LateScan`` per pose message, fed each CRC-right frame once, in bus order."""
 
     def __init__(self, period_s: float = POSE_PERIOD_S) -> None:
+        self.period_s = period_s
         self._scans = {"x": LateScan(period_s), "y": LateScan(period_s)}
+        self._last_s = {"x": -math.inf, "y": -math.inf}  # each half's latest bus time
 
     def heard(self, half: str, t_s: float, counter: int) -> float | None:
         """A CRC-right frame of pose half ``half`` ("x", "y") at bus time ``t_s`` with E2E
         COUNTER ``counter``: when it was sent if it was held back (``LateScan``'s reading), else
-        None."""
+        None. Bus time going back by more than a period is a new time base (a rig restarted, a
+        bus replayed), not lateness: the half's scan starts afresh there (else every frame after
+        reads late against the old base, and its poses are named where they were not sent)."""
+        if t_s < self._last_s[half] - self.period_s:
+            self._scans[half] = LateScan(self.period_s)
+        self._last_s[half] = t_s
         late, sent_s = self._scans[half].feed([t_s], [counter])
         return sent_s[0] if late[0] else None
 
