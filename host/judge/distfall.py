@@ -196,14 +196,6 @@ def in_order(counters: npt.NDArray[np.int64], order: StatusOrder) -> npt.NDArray
     return ~np.array([order.hear(c) for c in counters.tolist()], dtype=bool)
 
 
-def copied(order: StatusOrder) -> StatusOrder:
-    """A copy of ``order`` (a chunk's reading leaves the carried one as it was)."""
-    out = StatusOrder()
-    out.top, out.recent, out.said = order.top, list(order.recent), list(order.said)
-    out.filled, out.late, out.prior = list(order.filled), order.late, order.prior
-    return out
-
-
 def fall_times(frames: FrameArrays, decoder: BulkDecoder, small: int,
                carried: TwistCarried | None = None
                ) -> tuple[Falls, TwistCarried | None]:
@@ -230,7 +222,7 @@ def fall_times(frames: FrameArrays, decoder: BulkDecoder, small: int,
         raw |= data[:, field.byte + k].astype(np.int64) << (8 * k)
     t_s = frames.timestamp_s[rows].astype(np.float64)[good]
     raw, counter = raw[good], counter[good]
-    order = StatusOrder() if carried is None else copied(carried[2])
+    order = StatusOrder() if carried is None else carried[2].copy()
     kept = in_order(counter, order)
     t_s, raw, counter = t_s[kept], raw[kept], counter[kept]
     if carried is not None:

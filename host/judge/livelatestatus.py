@@ -61,6 +61,14 @@ class StatusOrder:
         self.late = False
         self.prior = None
 
+    def copy(self) -> StatusOrder:
+        """A copy that hears on without changing this one (a stream chunk's reading leaves
+        the order it carried as it was)."""
+        out = StatusOrder()
+        out.top, out.recent, out.said = self.top, list(self.recent), list(self.said)
+        out.filled, out.late, out.prior = list(self.filled), self.late, self.prior
+        return out
+
     def hear(self, counter: int) -> bool:
         """One frame's E2E ``counter``: whether it was held back (kept in ``late``)."""
         behind = (self.top - counter) & ENC_COUNTER_MASK
