@@ -19,8 +19,10 @@ lint: $(BIN)/odocan
 	$(BIN)/ruff check .
 	$(BIN)/mypy
 
+# One pytest worker per core (pytest-xdist), a whole test file on one worker: the files keep their
+# module fixtures, and every socket test already takes a fresh group and port (tests/udp_pair.py).
 test: lint
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest -n auto --dist loadfile
 
 bench: $(BIN)/odocan
 	for b in bench/*.py; do $(BIN)/python $$b || exit 1; done

@@ -24,7 +24,9 @@ def _encode(sent: float) -> object:
     return CommandEncoder().encode("set_pose", payload)
 
 
-@pytest.mark.parametrize("sent", [time.time() * 1000.0, 1e300, time.time() + 2 * 86_400.0])
+# Named ids: xdist's workers collect at different times, and must collect the same tests.
+@pytest.mark.parametrize("sent", [time.time() * 1000.0, 1e300, time.time() + 2 * 86_400.0],
+                         ids=["milliseconds", "1e300", "two_days_ahead"])
 def test_a_stamp_a_day_or_more_ahead_is_refused_with_its_reason(sent: float) -> None:
     with pytest.raises(CommandRejected) as caught:
         _encode(sent)
