@@ -17,7 +17,7 @@ from odocan.host.judge.bootticks import (
 )
 from odocan.host.judge.gapseen import crc_holds
 from odocan.host.judge.heldsummaries import held_evidence, summaries_held_back
-from odocan.host.judge.heldtick import tick_pages
+from odocan.host.judge.heldtick import tick_pages, told_tick
 from odocan.host.judge.navrestart import second_evidence
 from odocan.host.judge.sources import SourceWatch
 from odocan.host.protocol import busfacts
@@ -96,7 +96,8 @@ def _watch_summaries(
         watch.status_before = (
             None if status_counter < 0 else (float(statuses[0][k]), status_counter)
         )
-        watch.ticks.told = ticks[k]
+        tick = watch.ticks.told = told_tick(ticks[k], lambda page_s: fell_in_run(falls, page_s))
+        watch.ticks.fell = tick is not None  # (``heldtick``)
         kind = watch.observe(
             float(times_s[k]),
             int(uptimes_s[k]),

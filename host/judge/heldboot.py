@@ -34,6 +34,7 @@ from odocan.host.judge.bootticks import BOOT_WINDOW_S, status_rows
 from odocan.host.protocol.busfacts import ENC_COUNTER_MASK, STATUS_CYCLE_S
 from odocan.host.protocol.decode import BulkDecoder
 
+STAMP_S = 1e-6  # a log's stamp resolution (candump's): frames stamped together
 TICK_PAGE_COUNTER = 1  # the power-up tick's rotating page: sent right after its summary
 OLD_SEQUENCE_S = 2 * STATUS_CYCLE_S  # a page this soon after a COUNTER 0 continues its sequence
 
@@ -81,18 +82,39 @@ def statuses_before(frames: FrameArrays, decoder: BulkDecoder, positions: npt.ND
 
 def held_start(position: int, uptime_s: int, state: str,
                encoders: tuple[npt.NDArray[np.int64], npt.NDArray[np.float64]],
-               tick_s: float) -> int:
+               tick_s: float, counters: npt.NDArray[np.int64] | None = None) -> int:
     """``reboots.summary_start`` of a summary at log ``position`` whose tick was heard at
     ``tick_s`` (``held_tick_s``): UPTIME 0 and not INIT, the latest encoder frame (``encoders``:
     every one on the bus, its position and bus time: the new firmware's E2E check starts afresh
-    and takes it whatever the whole log's check said) heard before the tick; else the first
-    heard after it and before the summary, or the summary itself when none was."""
+    and takes it whatever the whole log's check said) heard before the tick, of those stamped
+    with it the last that check takes (``counters``, their E2E COUNTERs: ``fresh_last``); else
+    the first heard after it and before the summary, or the summary itself when none was."""
     at, t = encoders
     if uptime_s == 0 and state != "INIT":
-        earlier = at[t < tick_s]
-        return int(earlier[-1]) if len(earlier) else position
+        earlier = np.flatnonzero(t < tick_s)
+        if not len(earlier):
+            return position
+        if counters is None:
+            return int(at[earlier[-1]])
+        together = earlier[t[earlier] >= t[earlier[-1]] - STAMP_S]
+        return int(at[together[fresh_last(counters[together])]])
     later = at[(t > tick_s) & (at < position)]
     return int(later[0]) if len(later) else position
+
+
+def fresh_last(counters: npt.NDArray[np.int64]) -> int:
+    """The index of the last of encoder frames stamped together (E2E ``counters``, bus order) a
+    fresh E2E check draining them at once takes: the first, then each a COUNTER step on from the
+    last taken (no time passed: its delta window is one step; firmware/e2e.py). Kobuki random
+    696 ``reboot=0.5:0.3,delay=0.1:150``: COUNTER 1 sent at 0.65 s and the on-time COUNTER 0,
+    both stamped 0.800 s in that order: the new firmware primed on the 1 (its power-up pose
+    names it) and refused the 0; the latest, the 0, started the life a frame off its prime, so
+    its count page proved no power-up and a power-up pose 10 mm off was fitted (PASS)."""
+    taken = 0
+    for k in range(1, len(counters)):
+        if (int(counters[k]) - int(counters[taken])) & ENC_COUNTER_MASK == 1:
+            taken = k
+    return taken
 
 
 def held_ticks(frames: FrameArrays, decoder: BulkDecoder, positions: list[int]

@@ -26,14 +26,26 @@ faster than their cycle), so an old firmware's page is not taken; a page right a
 held back is read against the in-order frame before the hole, not against that frame (kobuki
 random 696: the old life's own tick of 0.001 s, summary and page, came 150 ms late at 0.151 s).
 
+A new firmware up in the old life's COUNTER phase breaks no sequence (kobuki and pmir random
+692, 696, 700 ``reboot=0.5:0.3,delay=0.1:150``: up at 0.801 s, its page of COUNTER 1 400 ms
+after the old COUNTER 9, its pose of COUNTER 0 320 ms after the old 8; its summary heard at
+0.951 s): the twists' DISTANCE that fell in the pose run before the page (``told_tick``'s
+``fell``: ``bootticks.fell_in_run`` read at the page, ``boot_tick``'s second evidence) tells it
+as well; no judge told a reboot and the correct firmware FAILed (2.654 .. 81.09 mm beyond a
+resume). A summary of COUNTER 0 held back with its page (or its page lost) is dated by the
+in-order frame it fills a hole before (``dated_tick``) and needs that fall too. A page whose
+summary comes ``HELD_S`` or more after it is not its tick's (a joint wrap's page of the old
+life, 9.6 s, stood for a boot summary at 10.3 s).
+
 One rule for every judge: the whole log (``tick_pages``), the streamed ``analyze`` (a
 ``TickPages`` carried across chunks, ``tick_pages``) and the live ones (``SourceWatch``'s
-``hear_pose``, ``hear_status``).
+``hear_pose``, ``hear_status``); the offline ones read ``told_tick`` before ``observe``.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 import numpy.typing as npt
@@ -42,6 +54,7 @@ from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.bootticks import (
     BOOT_POSE_FRAMES,
     BOOT_WINDOW_S,
+    STATUS_FRAMES_PER_CYCLE,
     next_run,
     pose_rows,
     status_breaks,
@@ -49,11 +62,16 @@ from odocan.host.judge.bootticks import (
 )
 from odocan.host.judge.liveheldpose import PoseOrder
 from odocan.host.judge.livelatestatus import HELD_BACK_MAX, StatusOrder
-from odocan.host.protocol.busfacts import ENC_COUNTER_MASK
+from odocan.host.protocol.busfacts import ENC_COUNTER_MASK, STATUS_CYCLE_S
 from odocan.host.protocol.decode import BulkDecoder
 
 TICK_PAGE_COUNTER = 1  # the power-up tick's rotating page: sent right after its summary
-Tick = tuple[float, float]  # a held boot summary's tick: the page's bus time, the run's start
+# a summary heard this long after its tick's page or later is not that tick's (it fills no hole)
+HELD_S = HELD_BACK_MAX * STATUS_CYCLE_S / STATUS_FRAMES_PER_CYCLE
+STAMP_S = 1e-6  # a log's stamp resolution: a dated send read no sooner than its tick's frames
+# a held boot summary's tick: the page's bus time, the run's start, whether the page broke the
+# status sequence (else the twists' DISTANCE must have fallen in the run: ``fell``)
+Tick = tuple[float, float, bool]
 
 
 class TickPages:
@@ -70,6 +88,7 @@ class TickPages:
         self.top: tuple[float, int] | None = None  # the latest in-order ODOM_STATUS frame
         self.page: Tick | None = None  # a tick page heard, its summary not yet
         self.told: Tick | None = None  # the tick of the ODOM_STATUS frame heard last
+        self.fell: bool | None = None  # a log's: whether DISTANCE fell in its run (None: live)
 
     def hear_pose(self, t_s: float, counter: int) -> None:
         """An ODOM_POSE_X of E2E ``counter`` heard at bus time ``t_s``: on the run."""
@@ -83,7 +102,9 @@ class TickPages:
         late = self.status.hear(counter)
         self.told = None
         if counter == 0 and self.page is not None:  # the held summary of the page's tick
-            self.told, self.page = self.page, None
+            self.told, self.page = (self.page if t_s - self.page[0] < HELD_S else None), None
+        elif counter == 0 and late and self.top is not None:  # dated by the frames after it
+            self.told = dated_tick(self.top)
         if late:
             return
         top, self.top = self.top, (t_s, counter)
@@ -91,14 +112,20 @@ class TickPages:
             HELD_BACK_MAX
         ):
             self.page = None  # past where its summary could fill a hole
-        if counter == TICK_PAGE_COUNTER and self._ticked(t_s, top):
-            self.page = (t_s, self.run[0]) if self.run is not None else None
+        if counter == TICK_PAGE_COUNTER and self._in_run(t_s):
+            self.page = (t_s, self.run[0], self._broke(t_s, top)) if self.run else None
 
-    def _ticked(self, t_s: float, top: tuple[float, int] | None) -> bool:
+    @staticmethod
+    def _broke(t_s: float, top: tuple[float, int] | None) -> bool:
         """Whether a page of COUNTER 1 heard in order at ``t_s`` after the in-order frame
-        ``top`` is a power-up tick's (module docstring)."""
-        if top is None or top[1] == TICK_PAGE_COUNTER or not status_breaks(top[1], t_s - top[0]):
-            return False
+        ``top`` breaks the status sequence (module docstring)."""
+        return (
+            top is not None and top[1] != TICK_PAGE_COUNTER and status_breaks(top[1], t_s - top[0])
+        )
+
+    def _in_run(self, t_s: float) -> bool:
+        """Whether a pose run of COUNTER 0, not held back, began less than ``BOOT_WINDOW_S``
+        before ``t_s``, its latest COUNTER below ``BOOT_POSE_FRAMES``."""
         run = self.run
         return (
             run is not None
@@ -107,6 +134,19 @@ class TickPages:
             and 0 <= run[1] < BOOT_POSE_FRAMES
             and 0.0 <= t_s - run[0] < BOOT_WINDOW_S
         )
+
+
+def dated_tick(top: tuple[float, int]) -> Tick:
+    """The tick of a summary of COUNTER 0 held back behind the in-order ODOM_STATUS frame
+    ``top`` (bus time, COUNTER: it fills a hole of the sequence, ``livelatestatus``), its page
+    of COUNTER 1 held back too or lost: sent ``top``'s COUNTER's cycles before it (two frames a
+    cycle, the summary first; lost frames take no time away, a stall makes it sooner), its
+    page not read (it broke nothing). Kobuki random 692 ``reboot=0.5:0.3,delay=0.1:150``: the
+    new firmware's power-up pose, summary and page sent at 0.801 s all heard at 0.951 s, after
+    the page of COUNTER 3 of 0.901 s; its twist of COUNTER 0 at 0.801 s, DISTANCE 0 where the
+    old life's read 85 mm, was heard in order (``told_tick``'s ``fell``)."""
+    sent_s = top[0] - (top[1] // STATUS_FRAMES_PER_CYCLE) * STATUS_CYCLE_S + STAMP_S
+    return sent_s, sent_s, False
 
 
 def tick_pages(
@@ -150,3 +190,10 @@ def tick_s(held_s: float | None, tick: Tick | None) -> float | None:
     behind its page) when known, else its page's (``tick``: past the next summary), else None
     (it was not held back behind its page)."""
     return held_s if held_s is not None else None if tick is None else tick[0]
+
+
+def told_tick(tick: Tick | None, fell: Callable[[float], bool]) -> Tick | None:
+    """``tick`` when it tells a power-up tick: its page broke the status sequence, or ``fell``
+    (the twists' DISTANCE fell in the pose run before the page, read at its bus time:
+    ``bootticks.fell_in_run``, as ``boot_tick``'s ``fell``); else None."""
+    return tick if tick is not None and (tick[2] or fell(tick[0])) else None

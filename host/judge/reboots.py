@@ -67,13 +67,15 @@ from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.bootnamed import heard_encoders, named_start, pose_enc_rows, powerup_poses
 from odocan.host.judge.bootsummaries import boot_summaries as boot_summaries
 from odocan.host.judge.bootsummaries import two_sources as two_sources
+from odocan.host.judge.bootticks import TWIST_COUNTERS, fell_in_run
 from odocan.host.judge.breaks import merged_breaks
 from odocan.host.judge.gapseen import crc_holds
 from odocan.host.judge.heldboot import held_start, held_ticks
 from odocan.host.judge.heldboot import summary_start as summary_start
-from odocan.host.judge.heldtick import tick_pages
+from odocan.host.judge.heldtick import tick_pages, told_tick
 from odocan.host.judge.heldtick import tick_s as page_tick_s
 from odocan.host.judge.liveconfig import config_text
+from odocan.host.judge.navrestart import second_evidence
 from odocan.host.judge.pagesent import encoder_count_pages as encoder_count_pages
 from odocan.host.judge.pagesent import pages_counted_from
 from odocan.host.judge.primed import counted_start
@@ -86,6 +88,7 @@ from odocan.host.protocol import busfacts
 from odocan.host.protocol.decode import BulkDecoder
 from odocan.host.protocol.e2e import check_frames
 
+ENC_MASK = busfacts.ENC_COUNTER_MASK
 SUMMARY_PAGE = busfacts.SUMMARY_PAGE  # ODOM_STATUS page with STATE and UPTIME
 
 
@@ -125,7 +128,7 @@ def split_lives(frames: FrameArrays, decoder: BulkDecoder) -> list[Life]:
             boots, limits, _ticks(frames, decoder, [b[0] for b in boots]), strict=True):
         start = (summary_start(position, uptime_s, state, encoders) if tick_s is None else
                  held_start(position, uptime_s, state, (every[1], frames.timestamp_s[every[1]]),
-                            tick_s))
+                            tick_s, every[0].data[:, 1].astype(np.int64) & ENC_MASK))
         counted = (None if stalled_first(frames, decoder, encoders, position, limit)
                    else page_counted_start(position, limit, (encoders, counters), pages, (
                        every, decoder, (starts[-1] if starts else 0,
@@ -156,7 +159,9 @@ def _ticks(frames: FrameArrays, decoder: BulkDecoder, positions: list[int]) -> l
     """Per boot summary at ``positions``: the bus time of its tick when the bus held it back
     behind its tick's page (``heldboot.held_ticks``: right behind it; else ``heldtick``: past
     the next summary), None when it was not."""
-    pages = tick_pages(frames, decoder, np.array(positions, dtype=np.int64))
+    falls = second_evidence(frames, decoder, TWIST_COUNTERS)[0]  # ``bootsummaries``' own
+    pages = [told_tick(page, lambda page_s: fell_in_run(falls, page_s)) for page in
+             tick_pages(frames, decoder, np.array(positions, dtype=np.int64))]
     return [page_tick_s(held, page)
             for held, page in zip(held_ticks(frames, decoder, positions), pages, strict=True)]
 

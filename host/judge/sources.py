@@ -42,7 +42,7 @@ from odocan.host.judge.distfall import (
     distance_field,
     fell_within,
 )
-from odocan.host.judge.heldtick import TickPages
+from odocan.host.judge.heldtick import TickPages, told_tick
 from odocan.host.judge.latefall import continues_twice, tied_late
 from odocan.host.judge.liveadopted import LATE_REBOOT
 from odocan.host.judge.livefreshboot import powerup_heard
@@ -204,8 +204,7 @@ class SourceWatch:
         0.801 s right after a summary of COUNTER 12 held back: each was told a reboot by every
         judge. A summary the first pose after it may tell is kept in ``ahead`` (live:
         ``hear_pose``, ``told_ahead``)."""
-        offset = uptime_s - t_s
-        kind = None
+        offset, kind = uptime_s - t_s, None
         pose_held, status_held = (self.pose_late, any(self.status_late)) if held is None else held
         pose = (self.pose[0], self.pose[1], False) if pose_held and self.pose else self.pose
         booted = counter is not None and boot_tick(uptime_s, counter, t_s, pose, self.summary_s,
@@ -214,8 +213,9 @@ class SourceWatch:
             fell = self._fell_in_run(t_s) if fell is None else fell
             booted = boot_tick(uptime_s, counter, t_s, pose, self.summary_s,
                                self.status_before, fell, held=status_held)
-        tick = None if booted or counter != 0 or uptime_s != 0 else self.ticks.told
-        booted = booted or tick is not None  # held past its tick's page (``heldtick``)
+        tick = None if booted or counter != 0 or uptime_s != 0 else told_tick(  # (``heldtick``)
+            self.ticks.told, lambda s: self._fell_in_run(s) if self.ticks.fell is None else True)
+        booted = booted or tick is not None  # held past its tick's page
         if not booted and (self.order.passed_over(uptime_s, state) if late is None else late):
             return None  # held back, it tells no reboot (``livelatestatus``)
         broke = (None if booted or counter is None else

@@ -54,7 +54,7 @@ from odocan.host.judge.distfall import Falls, joined, no_falls
 from odocan.host.judge.gapseen import crc_holds
 from odocan.host.judge.heldboot import summary_start
 from odocan.host.judge.heldsummaries import heard_in_chunk
-from odocan.host.judge.heldtick import tick_pages, tick_s
+from odocan.host.judge.heldtick import tick_pages, tick_s, told_tick
 from odocan.host.judge.latefall import continues_twice, fell_late
 from odocan.host.judge.lifespan import LifeSpan as LifeSpan
 from odocan.host.judge.livestreams import pose_told_first
@@ -66,6 +66,7 @@ from odocan.host.judge.samples import AnalysisError, contract_cycle_s
 from odocan.host.judge.silentboot import fresh_counted_start, quiet_start
 from odocan.host.judge.sources import SourceWatch, two_sources_text
 from odocan.host.judge.stalls import silent_between, stalled_before
+from odocan.host.protocol.busfacts import ENC_COUNTER_MASK
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 
 ENCODERS_KEPT = 1 << 16  # accepted encoder frames remembered (ENC_E2E_OK is a u16)
@@ -405,7 +406,8 @@ class StreamLives:
             before = self._watch.last_uptime_s
             self._watch.pose = (pose[0], int(pose[1]), bool(pose[2])) if pose[1] >= 0 else None
             self._watch.status_before = (status[0], int(status[1])) if status[1] >= 0 else None
-            self._watch.ticks.told = tick
+            tick = told_tick(tick, lambda page_s: fell_in_run(self._falls[0], page_s))
+            self._watch.ticks.told, self._watch.ticks.fell = tick, tick is not None
             kind = self._watch.observe(float(t_s), int(uptime_s), name, int(counter),
                                        fell=fell_in_run(self._falls[0], float(t_s)),
                                        late=held[0], held=tuple(held[1]))
@@ -432,8 +434,9 @@ class StreamLives:
         earlier = self._encoders[self._encoders < at]
         start = int(earlier[-1]) if uptime_s == 0 and name != "INIT" and len(earlier) else at
         if tick_s is not None:  # held back behind its tick's page
-            start = heldboot.held_start(at, uptime_s, name, (
-                self._every[1], self._every[0].timestamp_s), tick_s)
+            every, mask = self._every[0], ENC_COUNTER_MASK
+            start = heldboot.held_start(at, uptime_s, name, (self._every[1], every.timestamp_s),
+                                        tick_s, every.data[:, 1].astype(np.int64) & mask)
         heard = heard_encoders(self._every, self.decoder) if uptime_s == 0 else None
         named = None if heard is None else named_start(
             self._powerups, (self._encoders, self._counters), at, t_s, heard=heard, run=self._poses)
