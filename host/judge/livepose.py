@@ -86,7 +86,7 @@ class StepGate:
         self._told = told
         self._held: Held | None = None  # a restart's first frame, until the next confirms it
         # the last accepted frame's bus time and ``step_periods.doubt_origin_s`` (-1.0: nothing
-        # to doubt); ``_prev_t`` stays at the frame before a counter restart's run, this does not
+        # to doubt)
         self._doubt: tuple[float, float] = (0.0, -1.0)
 
     def rebound(self, geometry: Geometry) -> None:
@@ -165,6 +165,7 @@ class StepGate:
         if len(self._refused) < RESYNC_FRAMES:
             return None
         first, self._refused, self.prev, self.uptime = self._refused[0], [], frame, uptime
+        self._prev_seq, self._prev_t = self._seq, t_s  # the next step counts from this frame
         self._doubt = (t_s, _taken_origin(t_s, *doubt))
         self._restarted(seq, t_s, by_uptime=False)
         return self._delta(first, frame)
