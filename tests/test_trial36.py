@@ -43,6 +43,11 @@ DISTANCE_FAILS: dict[str, tuple[Spec, str]] = {
                        "issue #11: run, analyze whole and streamed FAIL by ODOM_TWIST DISTANCE "
                        "8.411 mm beyond (figure8 seed 6 too, the same 8.411 mm: the stall's "
                        "merged step, not the delay's draw); the live monitor OK, 0.065 mm"),
+    "kobuki_random_6": (("kobuki", "random", 6, STALL_DELAY),
+                        "issue #11: run, analyze whole and streamed FAIL by ODOM_TWIST DISTANCE "
+                        "7.194 mm beyond (kobuki random 5: 1.001 mm; pmir square 5 and 6: "
+                        "4.973 mm); the live monitor OK, 0.061 mm. stall_breaks empty again; "
+                        "14.9..15.9 mm below, 'down' 7.677 mm (skips from frame 189)"),
 }
 DELAY_DROP = "delay=0.2:40,drop=0.02"
 LIVE_TAMPERS: dict[str, tuple[Spec, str]] = {
