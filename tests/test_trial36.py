@@ -1,0 +1,137 @@
+"""The thirty-sixth pass's outside trial (issue #11) with fault mixes a test rig would use
+(10 s drives, Python firmware, every step watched by ``tests.fw_watch``): the wrong verdicts it
+found, pinned as strict xfails with their figures and traced cause.
+
+* ``stall_delay_distance``: ``stall=2:0.05,delay=0.1:30`` (a 50 ms halt under a 10 % 30 ms
+  delay) FAILs a correct firmware by ODOM_TWIST DISTANCE in ``run`` and both ``analyze``
+  readings, while the live monitor says OK. Either fault alone PASSes (pmir random 5 and 6),
+  and so do ``stall=2:0.1,delay=0.1:30`` and ``stall=2:0.05,delay=0.1:20`` there.
+* ``delay_drop_live_tamper``: ``delay=0.2:40,drop=0.02``: ``analyze`` FAILs a pose 10 mm off
+  from 5 s on (9.84 mm beyond), the live monitor and the bridge's judge do not.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import pytest
+
+from odocan.firmware import odometry as fo
+from odocan.sim.robot import load
+from tests.fw_watch import Watch
+from tests.judges_cli import both_analyses, live_judges, raise_x_10_mm, watched_run
+
+Spec = tuple[str, str, int, str]  # robot, scenario, seed, faults (10 s drives)
+STALL_DELAY = "stall=2:0.05,delay=0.1:30"
+DISTANCE_FAILS: dict[str, tuple[Spec, str]] = {
+    "pmir_random_5": (("pmir", "random", 5, STALL_DELAY),
+                      "issue #11: run, analyze whole and streamed FAIL by ODOM_TWIST DISTANCE "
+                      "2.294 mm beyond (the pose within 0.0633 mm; the live monitor OK, "
+                      "0.077 mm). The firmware sums |dS| of its steps exactly (asserted) and is "
+                      "3.2..4.2 mm below the reference after the 50 ms stall at 2 s: it took "
+                      "the stall's frames as one step. distance.DistanceJudge.stall_breaks is "
+                      "empty (the stall under the 30 ms delay is not seen as one), so the only "
+                      "'down' allowance is the skip at encoder frame 184, 0.942 mm"),
+    "pmir_random_6": (("pmir", "random", 6, STALL_DELAY),
+                      "issue #11: run, analyze whole and streamed FAIL by ODOM_TWIST DISTANCE "
+                      "6.015 mm beyond (the pose within 0.0636 mm; the live monitor OK, "
+                      "0.061 mm). The firmware 14.5..15.5 mm below the reference after the "
+                      "50 ms stall at 2 s, 'down' allowed 8.482 mm (skips from encoder frame "
+                      "189); DistanceJudge.stall_breaks empty: the stall is not seen"),
+    "pmir_figure8_5": (("pmir", "figure8", 5, STALL_DELAY),
+                       "issue #11: run, analyze whole and streamed FAIL by ODOM_TWIST DISTANCE "
+                       "8.411 mm beyond (figure8 seed 6 too, the same 8.411 mm: the stall's "
+                       "merged step, not the delay's draw); the live monitor OK, 0.065 mm"),
+    "kobuki_random_6": (("kobuki", "random", 6, STALL_DELAY),
+                        "issue #11: run, analyze whole and streamed FAIL by ODOM_TWIST DISTANCE "
+                        "7.194 mm beyond (kobuki random 5: 1.001 mm; pmir square 5 and 6: "
+                        "4.973 mm); the live monitor OK, 0.061 mm. stall_breaks empty again; "
+                        "14.9..15.9 mm below, 'down' 7.677 mm (skips from frame 189)"),
+}
+DELAY_DROP = "delay=0.2:40,drop=0.02"
+LIVE_TAMPERS: dict[str, tuple[Spec, str]] = {
+    "pmir_random_5": (("pmir", "random", 5, DELAY_DROP),
+                      "issue #11: X 10 mm off from 5 s on: analyze FAILs it (9.84 mm beyond) "
+                      "but the monitor and the bridge's judge stay within 0.077 mm, OK: "
+                      "'placed again ... after 1 stall (allowed 32.0977 mm) and 145 gaps (up "
+                      "to 10.0486 mm taken in, allowed 32.0977 mm)'. No stall was injected: "
+                      "the live judges read one from the delays, and its 32 mm placement "
+                      "budget swallows the tamper (analyze allows 6.581 mm)"),
+    "pmir_figure8_5": (("pmir", "figure8", 5, DELAY_DROP),
+                       "issue #11: X 10 mm off from 5 s on: analyze FAILs it (9.84 mm beyond) "
+                       "but the monitor and the bridge's judge stay within 0.087 mm, OK: "
+                       "'after 1 stall (allowed 32.0069 mm) and 145 gaps (up to 10.0484 mm "
+                       "taken in, allowed 269.3392 mm)'; no stall injected (analyze: 6.623 mm "
+                       "allowed on the drive, 200.6 on the tampered log, yet FAILs it)"),
+}
+TAMPER_FROM_S = 5.0
+Drive = tuple[Path, Watch, int, list[tuple[float, float]]]  # log, watch, run's exit, paths
+
+
+def _drive(spec: Spec, log: Path) -> Drive:
+    """``watched_run`` of ``spec`` (10 s) with, per step, the firmware's path (its
+    ``distance_q40_m``, m) and the float64 sum of |dS| of its steps so far."""
+    robot, scenario, seed, faults = spec
+    params = load(robot).firmware_params()
+    m_left, m_right = (2 * math.pi * params[f"wheel_radius_{side}_nm"] * 1e-9
+                       / params["counts_per_rev"] for side in ("left", "right"))
+    original = fo.Odometry.step_deltas
+    recorded: list[tuple[float, float]] = []
+
+    def record_inside(odo: fo.Odometry, d_left: int, d_right: int) -> None:
+        original(odo, d_left, d_right)
+        path = recorded[-1][1] if recorded else 0.0
+        path += abs(0.5 * (d_left * m_left + d_right * m_right))
+        recorded.append((odo.distance_q40_m / 2**40, path))
+
+    with pytest.MonkeyPatch.context() as monkeypatch:
+        monkeypatch.setattr(fo.Odometry, "step_deltas", record_inside)
+        watch, code = watched_run(log, robot, scenario, seed, 10, faults)
+    return log, watch, code, recorded
+
+
+@pytest.fixture(scope="module")
+def drives(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Drive]:
+    """Each spec's drive, recorded once (keyed by table and name)."""
+    made: dict[str, Drive] = {}
+    for table, specs in (("distance", DISTANCE_FAILS), ("tamper", LIVE_TAMPERS)):
+        for name, (spec, _) in specs.items():
+            made[f"{table}/{name}"] = _drive(spec, tmp_path_factory.mktemp(name) / "d.log")
+    return made
+
+
+@pytest.mark.parametrize("key", [f"distance/{n}" for n in DISTANCE_FAILS]
+                         + [f"tamper/{n}" for n in LIVE_TAMPERS])
+def test_the_firmware_integrates_and_sums_its_path_right(drives: dict[str, Drive],
+                                                         key: str) -> None:
+    """Every step within 1/1000 LSB of float64, and its DISTANCE the sum of |dS| of its steps
+    (within 1 µm)."""
+    _, watch, _, paths = drives[key]
+    assert watch.steps > 400, watch.steps
+    assert watch.within_a_thousandth_lsb(), (watch.worst_m, watch.worst_rad)
+    assert max(abs(q40 - f64) for q40, f64 in paths) < 1e-6
+
+
+@pytest.mark.parametrize("name", [
+    pytest.param(n, marks=pytest.mark.xfail(strict=True, reason=why))
+    for n, (_, why) in DISTANCE_FAILS.items()])
+def test_run_and_both_analyzes_pass_the_stall_under_delay(
+        drives: dict[str, Drive], name: str) -> None:
+    log, _, code, _ = drives[f"distance/{name}"]
+    assert [code, *both_analyses(log)] == [0, 0, 0]
+
+
+@pytest.mark.parametrize("name", [
+    pytest.param(n, marks=pytest.mark.xfail(strict=True, reason=why))
+    for n, (_, why) in LIVE_TAMPERS.items()])
+def test_the_live_judges_fail_a_pose_10_mm_off(drives: dict[str, Drive], name: str,
+                                               tmp_path: Path) -> None:
+    log, _, code, _ = drives[f"tamper/{name}"]
+    assert code == 0
+    tampered = tmp_path / "tampered.log"
+    assert raise_x_10_mm(log, tampered, TAMPER_FROM_S) > 100
+    assert both_analyses(tampered) == [1, 1]  # analyze FAILs it (not the xfail's cause)
+    monitor, bridge = live_judges(LIVE_TAMPERS[name][0][0], tampered)
+    beyond_m = (monitor.tracker.max_beyond_allowance_m, bridge.tracker.max_beyond_allowance_m)
+    assert min(beyond_m) > 5e-3, beyond_m
