@@ -47,9 +47,9 @@ DRIVES = {  # name: (robot, seed, faults), each FAILed on main
 # 4.03 s, 40589) and 5 (4.20 s, sent 4.05 s, 40491), its bound refused both steps, it REPEATED
 # the on-time 5 (4.21 s, 39732) and stepped +329 left counts to the late 11 of 4.26 s (40200).
 # The poses prove the late 5 skipped; the host read that as an E2E refusal, took the on-time 5
-# and stepped 39871 -> 39732 -> 40200 (-139, +468): the same pose, 278 counts more path. Every
-# reading's window takes the late 5 after a frame the firmware's check took last (the 3, one on
-# from the proven 2): the skip is the bound's (``e2e_evidence._bound_skip``). With the poses'
+# and stepped 39871 -> 39732 -> 40200 (-139, +468): the same pose, 278 counts more path. The
+# readings' one window (2) takes the late 5 after a frame the firmware's check took last (the 3,
+# one on from the proven 2): the skip is the bound's (``e2e_evidence._bound_skip``). With the poses'
 # chain mended past late pose frames alone (the on-time 5 then proven skipped too), the pose
 # FAILed by 57.3 mm: the late 15 of 5.75 s, so read as the check's, left the host's refusal run
 # at two frames where the firmware's three re-primed it (COUNTER_RESET) on the late stream.

@@ -6,7 +6,7 @@ A pose's ENC_COUNTER names the frame the firmware integrated last, so a frame it
 (``pose_evidence``'s ``skipped``) was refused by the E2E check *or* taken by it and refused by the
 plausibility bound (``firmware.encoders``: a step beyond the robot's maximum wheel speed over its
 periods). The second moves the E2E check's last COUNTER on to that frame; ``settle`` reads a proof
-of a skip as the first, but where every reading's window takes the frame after one the firmware's
+of a skip as the first, but where the readings' one window takes the frame after one the firmware's
 check took last (``e2e_evidence._bound_skip``). On pmir figure8, seed 82,
 ``delay=0.3:55,busoff=1:1``: after the 1 s bus-off the firmware took COUNTER 3, then the frames
 sampled at the recovery, COUNTER 9 and 15 a lap and 6 periods on, passed its E2E window (6 periods)
