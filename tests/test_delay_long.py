@@ -39,23 +39,20 @@ DRIVES = {  # name: (robot, seed, faults), each FAILed on main
     "pmir_2": ("pmir", 2, "delay=0.5:150"),  # 0.57 mm (a late chain read in order)
     "kobuki_1": ("kobuki", 1, "delay=0.5:150"),  # 44.2 mm
     "kobuki_2": ("kobuki", 2, "delay=0.5:150"),  # 7.4 mm; then 0.097 mm at a resume (below)
+    "kobuki_3": ("kobuki", 3, "delay=0.5:150"),  # 3.8 mm; then 17.0 mm (a skip the bound's)
     "kobuki_6": ("kobuki", 6, "delay=0.5:100"),  # 58.8 mm
 }
-SKIPPED_BY_PLAUSIBILITY = (
-    "issue #11: kobuki seed 3, delay=0.5:150: ODOM_TWIST DISTANCE 17.0 mm off (3.8 mm on main, "
-    "59 samples then, 181 now): the firmware's E2E took the late COUNTER 5 of 4.20 s (sent "
-    "4.05 s; OKSOMELOST), refused its step as implausible and then the on-time COUNTER 5 of "
-    "4.21 s as REPEATED. The host's E2E takes the same two frames' verdicts without the pose "
-    "evidence, but e2e_evidence's 'skipped' (the poses after 4.20 s name the frame before it) "
-    "refuses the late one, and the on-time one is then taken into the reference: the evidence "
-    "cannot tell an E2E refusal from a plausibility one. Traced (delaylong, fw records): "
-    "after the on-time COUNTER 2 of 4.18 s (LEFT 39871) the firmware's E2E took the late 3 "
-    "(4.18 s, 40589) and 5 (4.20 s, 40491), its bound refused both, REPEATED the on-time 5 "
-    "(4.21 s, 39732) and stepped +329 left counts to the late 11 of 4.26 s (40200); the host "
-    "steps 39871 -> 39732 -> 40200 (-139, +468): the same pose (absolute counts), 278 counts "
-    "more path, DISTANCE 42.8 mm beyond on main 25423d7b's summary line. "
-    "e2e_implausible.by_stamps reads skips as the bound's only when a later frame proven taken "
-    "is refused by every window, which no frame here is")
+# Was a strict xfail (kobuki seed 3, delay=0.5:150): ODOM_TWIST DISTANCE 17.0 mm off. After the
+# on-time COUNTER 2 of 4.18 s (LEFT 39871) the firmware's E2E check took the late 3 (4.18 s, sent
+# 4.03 s, 40589) and 5 (4.20 s, sent 4.05 s, 40491), its bound refused both steps, it REPEATED
+# the on-time 5 (4.21 s, 39732) and stepped +329 left counts to the late 11 of 4.26 s (40200).
+# The poses prove the late 5 skipped; the host read that as an E2E refusal, took the on-time 5
+# and stepped 39871 -> 39732 -> 40200 (-139, +468): the same pose, 278 counts more path. The
+# readings' one window (2) takes the late 5 after a frame the firmware's check took last (the 3,
+# one on from the proven 2): the skip is the bound's (``e2e_evidence._bound_skip``). With the poses'
+# chain mended past late pose frames alone (the on-time 5 then proven skipped too), the pose
+# FAILed by 57.3 mm: the late 15 of 5.75 s, so read as the check's, left the host's refusal run
+# at two frames where the firmware's three re-primed it (COUNTER_RESET) on the late stream.
 # Was a strict xfail (kobuki seed 2, delay=0.5:150): the first sample after a hold, at 5.14 s,
 # 0.097 mm beyond the resume rule's every candidate (stallfirst.resume_across). The firmware
 # re-primed twice across the hold (COUNTER_RESET on the first of three late frames, 150 ms old,
@@ -92,7 +89,7 @@ def test_the_correct_firmware_passes(drive: Drive, capsys: pytest.CaptureFixture
     assert _run_and_judges(drive, capsys) == [0, 0, 0]
 
 
-@pytest.mark.parametrize("name", ["pmir_1", "kobuki_1"])
+@pytest.mark.parametrize("name", ["pmir_1", "kobuki_1", "kobuki_3"])
 def test_a_pose_10_mm_off_fails_by_its_position(
         name: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     robot, seed, faults = DRIVES[name]
@@ -100,16 +97,6 @@ def test_a_pose_10_mm_off_fails_by_its_position(
     wrong = x_10_mm_off_fails(log, tmp_path / "t.log", 5.0, 100)
     capsys.readouterr()
     assert wrong == []
-
-
-@pytest.mark.parametrize(("seed", "reason"), [(3, SKIPPED_BY_PLAUSIBILITY)])
-def test_the_correct_firmware_passes_kobuki_still_failing(
-        seed: int, reason: str, tmp_path: Path, capsys: pytest.CaptureFixture[str],
-        request: pytest.FixtureRequest) -> None:
-    request.applymarker(pytest.mark.xfail(strict=True, reason=reason))
-    drive = _drive(tmp_path, "kobuki", seed, "delay=0.5:150")
-    assert drive[1].within_a_thousandth_lsb()
-    assert _run_and_judges(drive, capsys) == [0, 0, 0]
 
 
 # X raised 10 mm from 5.0 s on a correct drive: name: robot, seed, faults; each once PASSed

@@ -11,7 +11,11 @@ once by each). Around each drive's fault they must be the same frames:
   9 was skipped as an E2E refusal and took 4, 5 and 7 (``host.protocol.e2e_implausible``);
 * kobuki figure8 446, ``busoff=2:0.3,delay=0.3:55``: the firmware refused the COUNTER 7 of
   2.31 s, two cycles after the 7 of 1.99 s, as a repeat; the host took it as a new cycle
-  (``host.protocol.e2e_repeats``).
+  (``host.protocol.e2e_repeats``);
+* kobuki random 3, ``delay=0.5:150``: the firmware's E2E check took the late COUNTER 5 of 4.20 s
+  (its bound refused the step) and refused the on-time 5 of 4.21 s as a repeat; the host read the
+  poses' proof that the late 5 was skipped as an E2E refusal and took the on-time 5
+  (``host.protocol.e2e_evidence._bound_skip``).
 
 And the rules' pieces on hand-made sequences; the halt's restart rule
 (``host.judge.stallrestart``) on its own.
@@ -35,7 +39,14 @@ from odocan.host.judge.stallrestart import proven, stall_windows, told_otherwise
 from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.protocol.decode import BulkDecoder
 from odocan.host.protocol.e2e import check_frames
-from odocan.host.protocol.e2e_evidence import S_LOST, S_OK, S_REPEATED, S_WRONG
+from odocan.host.protocol.e2e_evidence import (
+    S_LOST,
+    S_OK,
+    S_REPEATED,
+    S_WRONG,
+    Evidence,
+    settle,
+)
 from odocan.host.protocol.e2e_implausible import Readings, by_stamps
 from odocan.host.protocol.e2e_pages import OkPages
 from odocan.host.protocol.e2e_repeats import new_cycles_taken, repeats_by_pages
@@ -45,6 +56,9 @@ from tests.judges_cli import watched_run
 DRIVES = {
     "late_frame_a_lap_on": (("pmir", "figure8", 82, 10, "delay=0.3:55,busoff=1:1"), (0.9, 3.0)),
     "busoff_two_cycles": (("kobuki", "figure8", 446, 8, "busoff=2:0.3,delay=0.3:55"), (1.9, 3.0)),
+    # the late COUNTER 5 of 4.20 s and 15 of 5.75 s, proven skipped, taken by the firmware's
+    # E2E check and refused by its bound (``e2e_evidence._bound_skip``)
+    "late_skips_the_bound_s": (("kobuki", "random", 3, 10, "delay=0.5:150"), (3.9, 6.2)),
 }
 Taken = tuple[Path, list[bytes]]  # the log, the encoder payloads the firmware's E2E took
 
@@ -113,6 +127,28 @@ def test_a_skip_the_bound_made_is_taken_where_it_leads_to_the_proven_frame() -> 
     # nor where the proven frame stays out of every window
     assert by_stamps(5, [0, 2, 3], frozenset({0, 5}), frozenset({1}),
                      _readings(counters, [0, 6, 5, 1, 0, 1])) is None
+
+
+def _settled(periods: tuple[list[int], list[int], list[int]], taken: set[int]) -> list[int]:
+    """The kobuki 3 pattern: the on-time 2 (proven taken), the late 3 and 5 (proven skipped),
+    the on-time 5, the late 11 (proven taken)."""
+    n = len(periods[0])
+    status = settle(np.ones(n, dtype=bool), np.array([2, 3, 5, 5, 11], dtype=np.int64),
+                    tuple(np.array(p, dtype=np.int64) for p in periods),  # type: ignore[arg-type]
+                    Evidence(frozenset(taken), frozenset({1, 2})), 0, np.zeros(n, dtype=bool))
+    return [int(code) for code in status]
+
+
+def test_a_skip_every_window_takes_after_the_firmware_s_last_frame_is_the_bound_s() -> None:
+    strict = [0, 0, 2, 1, 7]
+    assert _settled((strict, strict, strict), {0, 4}) == [S_OK, S_OK, S_LOST, S_REPEATED,
+                                                            S_LOST]
+    # readings that differ (a starved recorder's stamps), even where each takes the 5: the
+    # stamps are not the bus's, the skip is the check's
+    for wide, narrow in (([0, 0, 3, 1, 7], strict), (strict, [0, 0, 1, 1, 7])):
+        assert _settled((strict, wide, narrow), {0, 4}) == [S_OK, S_OK, S_WRONG, S_LOST, S_LOST]
+    # the frame before the skip not known the firmware's last (nothing proven taken): as before
+    assert _settled((strict, strict, strict), {4}) == [S_OK, S_OK, S_WRONG, S_LOST, S_LOST]
 
 
 def _pages(repeated: list[int], at: list[int]) -> OkPages:

@@ -39,8 +39,10 @@ frames on time after it).
 The evidence also decides where the three readings agree but it speaks otherwise: the host's
 last frame is then not the firmware's (a jittered stamp widened the host's window by a period in
 a lock-out, and it took a frame the firmware refused: every later verdict of the lock-out was
-against the wrong COUNTER). A frame proven skipped is refused; a frame proven taken that every
-window refuses takes back the host's frames since the firmware's last (``e2e_retract``).
+against the wrong COUNTER). A frame proven skipped is refused, unless the readings' one window
+takes it after a frame the firmware's check took last: then its plausibility bound refused it
+(``_bound_skip``); a frame proven taken that every window refuses takes back the host's frames
+since the firmware's last (``e2e_retract``).
 
 The status codes are ``host.protocol.e2e``'s (``_STATUS`` order: ok, oksomelost, repeated,
 wrong_sequence, crc_error).
@@ -307,6 +309,7 @@ def settle(crc_ok: npt.NDArray[np.bool_], counter: IntArray,
     status = np.full(n, S_CRC, dtype=np.int8)
     windows = [0, 0, 0]
     waiting, last, last_s = True, 0, math.nan
+    anchored = False  # the last frame taken is the firmware's E2E check's last (``_bound_skip``)
     columns = [p.tolist() for p in periods]
     ok, counters = crc_ok.tolist(), (counter & ENC_COUNTER_MASK).tolist()
     late = released.tolist()
@@ -330,6 +333,8 @@ def settle(crc_ok: npt.NDArray[np.bool_], counter: IntArray,
         else:
             which = chosen[j] if chosen[j] >= 0 else int(late[j - 1]) if j else 0
             code = _by_window_or_evidence(j, delta, windows[which], evidence)
+            if code == S_WRONG and anchored and _bound_skip(j, delta, windows, evidence):
+                code = S_LOST  # taken by the E2E check, refused by the plausibility bound
             if j in evidence.taken and delta > max(windows):  # the host's last is not its
                 code = _taken_back(j, taken, counters, ok, cums, max_delta_init, evidence,
                                    status)
@@ -339,6 +344,7 @@ def settle(crc_ok: npt.NDArray[np.bool_], counter: IntArray,
         status[j] = code
         if code != S_WRONG:
             taken.append(j)
+            anchored = j in evidence.taken or (anchored and (delta == 1 or _exact(delta, windows)))
             waiting, last, windows = False, counters[j], [max_delta_init] * 3
             last_s = stamps[j] if stamps else math.nan
         else:
@@ -377,6 +383,29 @@ def _retaken(j: int, taken: list[int], evidence: Evidence, status: npt.NDArray[n
     taken.extend(retaken.taken)
     step = (frames.counters[j] - frames.counters[taken[-1]]) & ENC_COUNTER_MASK
     return S_OK if step == 1 else S_LOST
+
+
+def _bound_skip(j: int, delta: int, windows: list[int], evidence: Evidence) -> bool:
+    """Whether frame ``j``, ``delta`` COUNTERs after the host's last taken frame (the firmware E2E
+    check's last: proven taken, or reached from such a frame by steps the readings' one window
+    takes), proven skipped, was rather taken by the E2E check and refused by the plausibility bound
+    (``e2e_implausible``): the three readings' windows are one and take it (``_exact``), so the
+    stamps say the check took it. Such a frame moves the check's COUNTER on, and the frames on time
+    after it are its repeats or out of sequence (issue #11: kobuki, seed 3, ``delay=0.5:150``: the
+    late COUNTER 5 of 4.20 s, sent 4.05 s, 2 after the late 3 the check took after the on-time 2;
+    the bound refused both, and the firmware refused the on-time 5 of 4.21 s as REPEATED. The host
+    read the skip as the check's and took that 5, 278 counts of path the firmware never drove:
+    ODOM_TWIST DISTANCE 17.0 mm off a right firmware)."""
+    return j in evidence.skipped and _exact(delta, windows)
+
+
+def _exact(delta: int, windows: list[int]) -> bool:
+    """Whether the three readings' ``windows`` are one (the stamps since the last frame taken
+    are the bus's: a starved recorder's would read otherwise) and take a frame ``delta``
+    COUNTERs on (issue #11: on a starved capture of kobuki, seed 3, ``delay=0.1:15,seed=7``,
+    the COUNTER 12 of 3.35 s, 2 after the proven 10, every reading took and the firmware's
+    check refused: the robot standing, no bound refuses a step; its windows read 4, 4 and 2)."""
+    return windows[0] == windows[1] == windows[2] >= delta
 
 
 def _by_window_or_evidence(j: int, delta: int, window: int, evidence: Evidence) -> int:

@@ -3,17 +3,18 @@ the same (its plausibility bound refused the step), for ``host.protocol.e2e_evid
 (issue #11: a FAIL must never blame a correct firmware).
 
 A pose's ENC_COUNTER names the frame the firmware integrated last, so a frame it skipped
-(``pose_evidence``'s ``skipped``) was refused by the E2E check *or* taken by it and refused by
-the plausibility bound (``firmware.encoders``: a step beyond the robot's maximum wheel speed over
-its periods). The second moves the E2E check's last COUNTER on to that frame; ``settle`` reads
-every proof of a skip as the first. On pmir figure8, seed 82, ``delay=0.3:55,busoff=1:1``: after
-the 1 s bus-off the firmware took COUNTER 3, then the frames sampled at the recovery, COUNTER 9
-and 15 a lap and 6 periods on, passed its E2E window (6 periods) and were refused by the bound
-(their step read over 6 periods where 22 passed), so it refused the on-time 4, 5 and 7 (WRONG
-SEQUENCE from 9 and 15) and took the late COUNTER 2 (3 on from 15). The host refused 9 as the
-poses' skip, took 4, 5 and 7 (a step back in counts from them), and then 2, which the poses
-prove taken, as a lap on from 7: its reference stepped back and forth through a frame 11
-periods off, ODOM_TWIST DISTANCE 24.5 mm off a right firmware.
+(``pose_evidence``'s ``skipped``) was refused by the E2E check *or* taken by it and refused by the
+plausibility bound (``firmware.encoders``: a step beyond the robot's maximum wheel speed over its
+periods). The second moves the E2E check's last COUNTER on to that frame; ``settle`` reads a proof
+of a skip as the first, but where the readings' one window takes the frame after one the firmware's
+check took last (``e2e_evidence._bound_skip``). On pmir figure8, seed 82,
+``delay=0.3:55,busoff=1:1``: after the 1 s bus-off the firmware took COUNTER 3, then the frames
+sampled at the recovery, COUNTER 9 and 15 a lap and 6 periods on, passed its E2E window (6 periods)
+and were refused by the bound (their step read over 6 periods where 22 passed), so it refused the
+on-time 4, 5 and 7 (WRONG SEQUENCE from 9 and 15) and took the late COUNTER 2 (3 on from 15). The
+host refused 9 as the poses' skip, took 4, 5 and 7 (a step back in counts from them), and then 2,
+which the poses prove taken, as a lap on from 7: its reference stepped back and forth through a
+frame 11 periods off, ODOM_TWIST DISTANCE 24.5 mm off a right firmware.
 
 The sign: the poses prove a frame taken that every window refuses from the host's last frame,
 and ``e2e_retract.firmware_last`` finds no frame the host took that the firmware could have
