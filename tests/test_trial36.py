@@ -20,7 +20,13 @@ import pytest
 from odocan.firmware import odometry as fo
 from odocan.sim.robot import load
 from tests.fw_watch import Watch
-from tests.judges_cli import both_analyses, live_judges, raise_x_10_mm, watched_run
+from tests.judges_cli import (
+    both_analyses,
+    live_judges,
+    raise_x_10_mm,
+    reported_analyses,
+    watched_run,
+)
 
 Spec = tuple[str, str, int, str]  # robot, scenario, seed, faults (10 s drives)
 STALL_DELAY = "stall=2:0.05,delay=0.1:30"
@@ -119,14 +125,19 @@ def test_run_and_both_analyzes_pass_the_stall_under_delay(
 
 
 @pytest.mark.parametrize("name", LIVE_TAMPERS)
-def test_the_live_judges_pass_the_drive(drives: dict[str, Drive], name: str) -> None:
+def test_the_live_judges_pass_the_drive(drives: dict[str, Drive], name: str,
+                                        tmp_path: Path) -> None:
     """The untampered drive: run and both analyzes PASS it, and the live judges too (within
-    their allowance, no wrong episode)."""
+    their allowance, no wrong episode), placing the reference after no more stalls than
+    ``analyze`` does (none was injected: the delays are no hold)."""
     log, _, code, _ = drives[f"tamper/{name}"]
-    assert [code, *both_analyses(log)] == [0, 0, 0]
+    judged = reported_analyses(log, tmp_path)
+    assert [code, *(c for _, c, _ in judged)] == [0, 0, 0]
+    stalls = max(r["reference_breaks"]["stall_placements"] for _, _, r in judged)
     for judge in live_judges(LIVE_TAMPERS[name][0], log):
         assert judge.tracker.wrongs.count == 0, judge.tracker.wrongs.summary()
         assert judge.tracker.max_beyond_allowance_m < 1e-4
+        assert judge.tracker.placer.placements.stalls <= stalls
 
 
 @pytest.mark.parametrize("name", LIVE_TAMPERS)
