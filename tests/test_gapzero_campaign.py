@@ -133,20 +133,8 @@ def test_a_correct_firmware_never_fails(tmp_path: Path, monkeypatch: pytest.Monk
     assert same
 
 
-LIVE_KEEPS = {(0, "wrap"): (
-    "issue #11: the live judges keep an allowance the whole-log judge withdraws: on seed 0's "
-    "wrapping firmware gapchecked's proof (the E2E counts, refusals included, grew by the log's "
-    "frames) takes 140.9 mm beyond the allowance whole log, while the monitor and the bridge, "
-    "with the same spans proven (livegapseen), show 0.066 mm: their placements do not lose it "
-    "(not yet found why; a suspect: StallPlacer.withdraw lowers the budgets only, not a part's "
-    "own step bound). All FAIL it (its heading 25.1 rad off)")}
-
-
 @pytest.mark.parametrize(("seed", "firmware"), [
-    pytest.param(seed, firmware, marks=[pytest.mark.xfail(
-        strict=True, reason=LIVE_KEEPS[(seed, firmware)])]
-        if (seed, firmware) in LIVE_KEEPS else [])
-    for seed in SEEDS for firmware in ("wrap", "drop")])
+    (seed, firmware) for seed in SEEDS for firmware in ("wrap", "drop")])
 def test_a_wrong_firmware_fails_when_its_pose_is_wrong(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, seed: int, firmware: str
 ) -> None:

@@ -144,9 +144,11 @@ FIRST_AFTER_BUS_OFF = {"kobuki652": (0.2, 3.1), "pmir411": (0.3, 3.0)}
 PMIR_411_FIRST_AFTER = (
     "issue #11: +10 mm from the first pose after the bus-off (pmir 411: 3.403 s) PASSes both "
     "live judges (0.045 mm beyond) where analyze FAILs it (9.94 mm beyond): the live placement "
-    "at the bus-off's gap takes the 10 mm within its step bound (StallPlacer: 1917 mm at frame "
-    "183, a gap the pages prove missed, withdrawn from the budget but not from the step's "
-    "bound), and the next placements' bound cannot move it back; from 3.6 s on the tamper "
+    "at the bus-off's gap takes the 10 mm (9.984 asked) within its step bound (StallPlacer: "
+    "1904.9 mm at frame 183, its gaps at 179, 180, 181 and 182: 3.26, 12.46, 1885.9 and 3.26 "
+    "mm). Since a withdrawal lowers the step's bound too (trial36's fix) this is no longer the "
+    "cause: the live pages withdraw none of those gaps (StallPlacer._lower never called for "
+    "them), and the next placements' bound cannot move it back; from 3.6 s on the tamper "
     "FAILs live. kobuki 652's (795 mm at frame 148, gapbound's) FAILs live since the merge "
     "with live24 (the live pages' proofs and DISTANCE hold; not traced further)")
 

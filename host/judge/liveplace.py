@@ -7,14 +7,15 @@ its ``gapbound`` allowance, as ``analyze`` places it; or twice the merge allowan
 frames when every frame it lacks was heard refused by E2E (``gapfill``; ``livefill``; a stall's
 span holding such gaps: ``spanfill``). A part of the latest placement that the firmware's pages
 later prove it took as the reference did (``host.judge.livegapseen``) has its allowance
-withdrawn (``withdraw``), as ``analyze`` gives it none. Each placement's step from the one before
-is bounded too, by its own parts' allowances (``breaks.placed_step``); a gap placed before its
-held-back frame was heard takes the fill's allowance for its step when the frame comes
-(``_refill``), as ``analyze``, which knows the frames past the sample, bounds it. A placement
-never leaves the sample closer to the reference than the firmware's own poses and the frames
-the bus carried prove it off (``_narrow``, ``host.judge.liveholdstep``): the live E2E model,
-which decides each frame before the poses that prove it wrong are heard, can make gaps the
-firmware never had."""
+withdrawn (``withdraw``) from the budgets and its step's bound, as ``analyze`` gives it none
+(issue #11: a pose raised 10 mm at a 12.4 mm gap PASSed live, withdrawn from the budgets only).
+Each placement's step from the one before is bounded too, by its own parts' allowances
+(``breaks.placed_step``); a gap placed before its held-back frame was heard takes the fill's
+allowance for its step when the frame comes (``_refill``), as ``analyze``, which knows the
+frames past the sample, bounds it. A placement never leaves the sample closer to the reference
+than the firmware's own poses and the frames the bus carried prove it off (``_narrow``,
+``host.judge.liveholdstep``): the live E2E model, which decides each frame before the poses that
+prove it wrong are heard, can make gaps the firmware never had."""
 
 from __future__ import annotations
 
@@ -370,9 +371,8 @@ class StallPlacer:
         skipped = self.skips.lowered(self._parts, seen, reprimed)
         if not proven and not skipped:
             return False
-        for part in proven:  # the budgets only: its step's bound stays (the whole-log
-            # judge's proof may not reach as far, and the judges say one thing)
-            self._lower(part, part[3], 0.0)
+        for part in proven:  # in the budgets and its step's bound, as analyze gives it none
+            self._lower(part, part[3], part[3])  # (module docstring)
         for part, allowance_m in skipped:  # kept, with its allowance lowered
             self._parts[self._parts.index(part)] = (*part[:3], allowance_m, part[4])
             self._lower(part, part[3] - allowance_m, part[3] - allowance_m)
