@@ -53,6 +53,7 @@ class BootTick:
         self.frame = None
         self.status = ""
         self.can_id = -1
+        self.behind = False  # ``frame`` kept behind frames taken after it (``taken``)
         # the judge's E2E check and encoder handler (``bind``; ``livefreshboot``)
         self.bound: tuple[E2EMonitor, Callable[[tuple[int, int, int, int], float], object]] \
             | None = None
@@ -69,6 +70,21 @@ class BootTick:
         self.frame = (int(signals["COUNTER"]), int(signals["LEFT_COUNT"]),
                       int(signals["RIGHT_COUNT"]), t_s, int(signals.get("CTRL_UPTIME", 0)))
         self.status = status
+        self.behind = False
+
+    def taken(self, counter: int, t_s: float) -> None:
+        """A WHEEL_ENCODERS frame of COUNTER ``counter`` taken at bus time ``t_s``: the refused
+        frame is forgotten, unless the taken one goes back from it less than a cycle after it
+        (a late frame, which a new firmware primed on the refused one refuses as old: kobuki
+        random 696 ``reboot=0.2:0.2,delay=0.1:150``, the power-up pose naming COUNTER 9 at
+        0.401 s, the host's sequence having taken COUNTER 8 after it); kept ``behind`` them for
+        the power-up pose's rule alone (``livefreshboot``), not the summary's."""
+        frame = self.frame
+        if frame is not None and t_s - frame[3] < CYCLE_S \
+                and (counter - frame[0]) & ENC_COUNTER_MASK >= HALF_LAP:
+            self.behind = True
+            return
+        self.frame, self.behind = None, False
 
 
 def boot_frame(tracker: PoseTracker, e2e: E2EMonitor, told: tuple[int, str, int | None, float],
@@ -81,7 +97,7 @@ def boot_frame(tracker: PoseTracker, e2e: E2EMonitor, told: tuple[int, str, int 
     when the summary's rule names an accepted frame (or none)."""
     uptime_s, state, seq, t_s = told
     tick = tracker.boot_tick
-    frame, tick.frame = tick.frame, None
+    frame, tick.frame = (None if tick.behind else tick.frame), None
     init_restart(e2e, (uptime_s, state, seq))  # primes on the next (livefreshboot)
     if frame is None or uptime_s != 0 or state == "INIT" or seq is not None:
         return None

@@ -76,3 +76,4 @@ def _retake_named(tracker: PoseTracker, s: Any, t_s: float) -> None:
     tick.frame = None
     e2e.retake(tick.can_id, frame[0], frame[3])
     take((frame[0], frame[1], frame[2], frame[4]), frame[3])
+    tracker.late.restart()  # its pose sequences start at this pose (livelatehalves)

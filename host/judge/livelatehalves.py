@@ -52,6 +52,14 @@ class LateHalves:
         late, sent_s = self._scans[half].feed([t_s], [counter])
         return sent_s[0] if late[0] else None
 
+    def restart(self) -> None:
+        """A new firmware's pose sequences start now (its power-up pose, ``livefreshboot``):
+        each half's scan starts afresh, as ``analyze`` reads each life's frames on their own
+        (else the new life's COUNTERs, behind the old life's, read late: kobuki random 696
+        ``reboot=0.2:0.2,delay=0.1:150``, its X halves named 80 ms back, paired with the Y
+        halves of the frames 16 before theirs)."""
+        self._scans = {half: LateScan(self.period_s) for half in self._scans}
+
     def refused(self, name: str, t_s: float, counter: int) -> None:
         """A CRC-right frame of message ``name`` the host's E2E refused: a pose half's read in
         its sequence too (``sent_places`` reads every CRC-right frame)."""

@@ -111,8 +111,12 @@ class SettleHold:
         cut_s = held[-1][0].timestamp - TAIL_S if again is not None else math.inf
         tail = [k for k, (msg, _) in enumerate(held) if msg.timestamp > cut_s]
         cut = tail[0] if tail else len(held)
-        for (msg, now_s), verdict in zip(held[:cut], verdicts[:cut], strict=True):
+        retakes = self._e2e.retakes
+        for k, ((msg, now_s), verdict) in enumerate(zip(held[:cut], verdicts[:cut], strict=True)):
             feed(msg, now_s, verdict)
+            if self._e2e.retakes != retakes:  # a new firmware's first frame taken: the rest
+                self._judge_anew(held[k + 1:], feed, again)  # judged from it (livefreshboot)
+                return
         if unsettled and cut < len(held):  # held on, from the state the frames fed left
             self._start = self._e2e.last_taken(self.can_id)
             self.held, self.until_s = held[cut:], cut_s + HOLD_S
@@ -120,6 +124,22 @@ class SettleHold:
         for msg, now_s in held[cut:]:
             assert again is not None
             again(msg, now_s)
+
+    @staticmethod
+    def _judge_anew(rest: list[tuple[can.Message, float]], feed: Feed, again: Again | None
+                    ) -> None:
+        """The frames of a hold after one whose feed retook a refused encoder frame (a rebooted
+        firmware primed on it, ``E2EMonitor.retake``): the hold's verdicts, judged from the
+        sequence before, no longer hold; each is judged again from the sequence restarted
+        there (``again``, or ``feed`` without a verdict when the watch ends). kobuki random
+        696 ``reboot=0.2:0.2,delay=0.1:150``: the power-up pose of 0.401 s retook COUNTER 9,
+        held back from 0.25 s, and the hold still took the on-time COUNTER 9 of 0.41 s and
+        refused the held-back COUNTER 10 the firmware took: 1.6 mm beyond."""
+        for msg, now_s in rest:
+            if again is None:
+                feed(msg, now_s, None)
+            else:
+                again(msg, now_s)
 
     def _verdicts(self, held: list[tuple[can.Message, float]]
                   ) -> tuple[list[bool | None], bool]:

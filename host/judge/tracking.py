@@ -165,7 +165,7 @@ class PoseTracker:
         self.advance(t_s)
         self.enc_seq += 1
         self._pos += 1
-        self.boot_tick.frame = None  # a frame taken after it (liveboottick)
+        self.boot_tick.taken(counter, t_s)  # a frame taken after it (liveboottick)
         prev = self.window.rows[-1] if self.window.rows else None  # (no __len__ call)
         if self.choice.pending is not None and prev is not None:  # a hole: the choice first
             self.choice.ahead(counter, t_s, prev)

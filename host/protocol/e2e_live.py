@@ -116,6 +116,7 @@ class E2EMonitor:
         self._live: dict[int, _Live] = {}  # protected messages heard: what ``check`` needs
         self._unknown = dict.fromkeys(UNKNOWN_KEYS, 0)
         self.holds: bool = False  # "held" for a frame the stamps cannot decide (docstring)
+        self.retakes = 0  # ``retake``s made (a hold's verdicts after one are stale: livesettle)
         self._held_s: float | None = None  # the bus time of the frame held last
         cycle_s = min((c.cycle_s for c in self._configs.values()
                        if c.min_periods == 0 and c.cycle_s), default=0.01)
@@ -261,6 +262,7 @@ class E2EMonitor:
         state.waiting, state.last_valid, state.window = False, counter, state.max_delta_init
         state.last_valid_s = state.last_ok_s = timestamp_s
         live.last = counter
+        self.retakes += 1
 
     def count_frame_kind(self, *, error: bool = False, remote: bool = False) -> None:
         """Count an error or remote frame (they are never checked)."""
