@@ -494,4 +494,4 @@ def firmware_ok_spans(
         ok, upto, made = (np.concatenate(([first], a)) for first, a in ((1, ok), (0, upto),
                                                                         (0, made)))
     return widened(ok_count_spans(ok, upto, made),  # and the frames it may have swapped
-                   refused_places(frames, accepted, decoder, enc.index))
+                   refused_places(frames, accepted, decoder, enc.index, enc.counter))

@@ -70,6 +70,7 @@ class StreamLosses:
     _signal: bool = True  # the DBC's ODOM_STATUS has ENC_E2E_LOST
     _overflow_after: bool = False  # a MAILBOX_OVERFLOW summary after the last page
     _refused: list[IntArray] = field(default_factory=list)  # swappedskips.refused_places
+    _last_counter: int | None = None  # the COUNTER of the last accepted encoder frame
 
     @property
     def exact(self) -> bool:
@@ -93,8 +94,11 @@ class StreamLosses:
                                             int(index[-1]) if len(index) else -1)
         self._overflow_after = reported if len(index) else (self._overflow_after or reported)
         self._add_summaries(chunk, accepted, enc)
-        self._refused.append(self._enc_count + refused_places(chunk, accepted, self.decoder,
-                                                              enc.index, self._offset))
+        self._refused.append(self._enc_count + refused_places(
+            chunk, accepted, self.decoder, enc.index, enc.counter, self._offset,
+            self._last_counter))
+        if len(enc.counter):
+            self._last_counter = int(enc.counter[-1])
         self._offset += len(chunk)
         self._enc_count += len(enc.index)
         if len(enc.seq):
