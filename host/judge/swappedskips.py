@@ -61,7 +61,8 @@ def refused_places(frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder
     before = np.concatenate(([-1 if counter_before is None else counter_before],
                              np.asarray(enc_counter, dtype=np.int64)))[places]
     keep = good & late(before, data[:, 1].astype(np.int64) & ENC_COUNTER_MASK)
-    return places[keep]
+    kept: IntArray = places[keep]
+    return kept
 
 
 def late(counter_before: IntArray, counter: IntArray) -> npt.NDArray[np.bool_]:
