@@ -1,11 +1,15 @@
 """The thirty-sixth pass's outside trial (issue #11) with fault mixes a test rig would use
 (10 s drives, Python firmware, every step watched by ``tests.fw_watch``): the wrong verdicts it
-found, pinned as strict xfails with their figures and traced cause.
+found, with their figures and traced cause, each fixed.
 
-* ``stall_delay_distance``: ``stall=2:0.05,delay=0.1:30`` (a 50 ms halt under a 10 % 30 ms
-  delay) FAILs a correct firmware by ODOM_TWIST DISTANCE in ``run`` and both ``analyze``
-  readings, while the live monitor says OK. Either fault alone PASSes (pmir random 5 and 6),
-  and so do ``stall=2:0.1,delay=0.1:30`` and ``stall=2:0.05,delay=0.1:20`` there.
+* ``stall_delay_distance`` (fixed): ``stall=2:0.05,delay=0.1:30`` (a 50 ms halt under a 10 %
+  30 ms delay) FAILed a correct firmware by ODOM_TWIST DISTANCE in ``run`` and both ``analyze``
+  readings, while the live monitor said OK. Either fault alone PASSes (pmir random 5 and 6),
+  and so do ``stall=2:0.1,delay=0.1:30`` and ``stall=2:0.05,delay=0.1:20`` there. Not the
+  stall's merged step: after it the host took the late frame 0xE for the next lap's and
+  refused the late 0xD, the firmware took 0xD and 0xE and refused 0xF and 0x0: ENC_E2E_OK net
+  one short, two of the host's frames skipped (``host.judge.swappedskips``). DISTANCE raised
+  or lowered 10 mm from 5 s still FAILs (``test_distance_10_mm_off_from_5_s_fails``).
 * ``delay_drop_live_tamper`` (fixed): ``delay=0.2:40,drop=0.02``: ``analyze`` FAILs a pose
   10 mm off from 5 s on (9.84 mm beyond); the live monitor and the bridge's judge now do too.
 """
@@ -27,33 +31,33 @@ from tests.judges_cli import (
     reported_analyses,
     watched_run,
 )
+from tests.log_edit import raise_raw
 
 Spec = tuple[str, str, int, str]  # robot, scenario, seed, faults (10 s drives)
 STALL_DELAY = "stall=2:0.05,delay=0.1:30"
-DISTANCE_FAILS: dict[str, tuple[Spec, str]] = {
+DISTANCE_FAILS: dict[str, tuple[Spec, str]] = {  # fixed: the verdicts before, and why
     "pmir_random_5": (("pmir", "random", 5, STALL_DELAY),
-                      "issue #11: run, analyze whole and streamed FAIL by ODOM_TWIST DISTANCE "
-                      "2.294 mm beyond (the pose within 0.0633 mm; the live monitor OK, "
-                      "0.077 mm). The firmware sums |dS| of its steps exactly (asserted) and is "
-                      "3.2..4.2 mm below the reference after the 50 ms stall at 2 s: it took "
-                      "the stall's frames as one step. distance.DistanceJudge.stall_breaks is "
-                      "empty (the stall under the 30 ms delay is not seen as one), so the only "
-                      "'down' allowance is the skip at encoder frame 184, 0.942 mm"),
+                      "run, analyze whole and streamed FAILed by ODOM_TWIST DISTANCE 2.294 mm "
+                      "beyond (the pose within 0.0633 mm; the live monitor OK, 0.077 mm). The "
+                      "firmware sums |dS| of its steps exactly (asserted) and was 3.2..4.2 mm "
+                      "below the reference after the stall: the host took the late 0xE (sent "
+                      "at 2.06 s) at 2.09 s for the next lap's, a step back (-11, 7 counts) and "
+                      "on (44, -29); the firmware took the late 0xD and 0xE in order and "
+                      "refused 0xF and 0x0. ENC_E2E_OK one short (n = 1) allowed 0.942 mm; "
+                      "the swap hides a second skip: 3.77 mm (stall_breaks empty: no 75 ms "
+                      "silence, the poses 70 ms apart)"),
     "pmir_random_6": (("pmir", "random", 6, STALL_DELAY),
-                      "issue #11: run, analyze whole and streamed FAIL by ODOM_TWIST DISTANCE "
-                      "6.015 mm beyond (the pose within 0.0636 mm; the live monitor OK, "
-                      "0.061 mm). The firmware 14.5..15.5 mm below the reference after the "
-                      "50 ms stall at 2 s, 'down' allowed 8.482 mm (skips from encoder frame "
-                      "189); DistanceJudge.stall_breaks empty: the stall is not seen"),
+                      "FAILed by DISTANCE 6.015 mm beyond (the pose within 0.0636 mm; the live "
+                      "monitor OK, 0.061 mm), the firmware 14.5..15.5 mm below the reference "
+                      "after the 50 ms stall at 2 s, 'down' allowed 8.482 mm: the span from "
+                      "frame 173 one short net, 45 frames the host refused in it"),
     "pmir_figure8_5": (("pmir", "figure8", 5, STALL_DELAY),
-                       "issue #11: run, analyze whole and streamed FAIL by ODOM_TWIST DISTANCE "
-                       "8.411 mm beyond (figure8 seed 6 too, the same 8.411 mm: the stall's "
-                       "merged step, not the delay's draw); the live monitor OK, 0.065 mm"),
+                       "FAILed by DISTANCE 8.411 mm beyond (figure8 seed 6 too, the same "
+                       "8.411 mm); the live monitor OK, 0.065 mm"),
     "kobuki_random_6": (("kobuki", "random", 6, STALL_DELAY),
-                        "issue #11: run, analyze whole and streamed FAIL by ODOM_TWIST DISTANCE "
-                        "7.194 mm beyond (kobuki random 5: 1.001 mm; pmir square 5 and 6: "
-                        "4.973 mm); the live monitor OK, 0.061 mm. stall_breaks empty again; "
-                        "14.9..15.9 mm below, 'down' 7.677 mm (skips from frame 189)"),
+                        "FAILed by DISTANCE 7.194 mm beyond (kobuki random 5: 1.001 mm; pmir "
+                        "square 5 and 6: 4.973 mm); the live monitor OK, 0.061 mm; 14.9..15.9 mm "
+                        "below, 'down' 7.677 mm (skips from frame 189)"),
 }
 DELAY_DROP = "delay=0.2:40,drop=0.02"
 # issue #11, fixed: analyze FAILs a pose raised 10 mm from 5 s (9.84 mm beyond); the monitor
@@ -67,6 +71,7 @@ LIVE_TAMPERS: dict[str, Spec] = {
     "pmir_figure8_5": ("pmir", "figure8", 5, DELAY_DROP),
 }
 TAMPER_FROM_S = 5.0
+DISTANCE_BYTES = (6, 2)  # ODOM_TWIST DISTANCE: bytes 6..7, u16, 1 mm
 Drive = tuple[Path, Watch, int, list[tuple[float, float]]]  # log, watch, run's exit, paths
 
 
@@ -115,11 +120,11 @@ def test_the_firmware_integrates_and_sums_its_path_right(drives: dict[str, Drive
     assert max(abs(q40 - f64) for q40, f64 in paths) < 1e-6
 
 
-@pytest.mark.parametrize("name", [
-    pytest.param(n, marks=pytest.mark.xfail(strict=True, reason=why))
-    for n, (_, why) in DISTANCE_FAILS.items()])
+@pytest.mark.parametrize("name", list(DISTANCE_FAILS))
 def test_run_and_both_analyzes_pass_the_stall_under_delay(
         drives: dict[str, Drive], name: str) -> None:
+    """Each was a FAIL (``DISTANCE_FAILS``' figures): the host's E2E and the firmware's
+    refused different late frames, and the net ENC_E2E_OK count hid the swap."""
     log, _, code, _ = drives[f"distance/{name}"]
     assert [code, *both_analyses(log)] == [0, 0, 0]
 
@@ -140,6 +145,20 @@ def test_the_live_judges_pass_the_drive(drives: dict[str, Drive], name: str,
         assert judge.tracker.placer.placements.stalls <= stalls
 
 
+@pytest.mark.parametrize("mm", [10, -10])
+@pytest.mark.parametrize("name", ["pmir_random_5", "kobuki_random_6"])
+def test_distance_10_mm_off_from_5_s_fails(drives: dict[str, Drive], name: str, mm: int,
+                                           tmp_path: Path) -> None:
+    """The swapped frames' allowance hides no wrong DISTANCE: 10 mm off from 5 s on FAILs
+    whole and streamed, by more than 9 mm."""
+    log, _, _, _ = drives[f"distance/{name}"]
+    tampered = tmp_path / "tampered.log"
+    assert raise_raw(log, tampered, "ODOM_TWIST", DISTANCE_BYTES, mm, TAMPER_FROM_S) > 100
+    for stream, code, report in reported_analyses(tampered, tmp_path):
+        excess_m = report["onboard_distance_vs_reference"]["max_excess_m"]
+        assert (code, excess_m > 9e-3) == (1, True), (stream, excess_m)
+
+
 @pytest.mark.parametrize("name", LIVE_TAMPERS)
 def test_the_live_judges_fail_a_pose_10_mm_off(drives: dict[str, Drive], name: str,
                                                tmp_path: Path) -> None:
@@ -147,7 +166,7 @@ def test_the_live_judges_fail_a_pose_10_mm_off(drives: dict[str, Drive], name: s
     assert code == 0
     tampered = tmp_path / "tampered.log"
     assert raise_x_10_mm(log, tampered, TAMPER_FROM_S) > 100
-    assert both_analyses(tampered) == [1, 1]  # analyze FAILs it (not the xfail's cause)
+    assert both_analyses(tampered) == [1, 1]  # analyze FAILs it, as the live judges must
     monitor, bridge = live_judges(LIVE_TAMPERS[name][0], tampered)
     beyond_m = (monitor.tracker.max_beyond_allowance_m, bridge.tracker.max_beyond_allowance_m)
     assert min(beyond_m) > 5e-3, beyond_m

@@ -24,6 +24,7 @@ from odocan.host.judge.samples import (
     IntArray,
     queued_frames,
 )
+from odocan.host.judge.swappedskips import refused_places, widened
 from odocan.host.protocol import busfacts
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.sim.robot import RobotProfile
@@ -492,4 +493,5 @@ def firmware_ok_spans(
     if power_up:
         ok, upto, made = (np.concatenate(([first], a)) for first, a in ((1, ok), (0, upto),
                                                                         (0, made)))
-    return ok_count_spans(ok, upto, made)
+    return widened(ok_count_spans(ok, upto, made),  # and the frames it may have swapped
+                   refused_places(frames, accepted, decoder, enc.index, enc.counter))

@@ -43,6 +43,7 @@ from odocan.host.judge.samples import (
     contract_cycle_s,
     queued_frames,
 )
+from odocan.host.judge.swappedskips import refused_places, widened
 from odocan.host.protocol.busfacts import TOTALS_PAGE
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 
@@ -68,6 +69,8 @@ class StreamLosses:
     _in_order: bool = True  # no summary stamped before an encoder frame of an earlier chunk
     _signal: bool = True  # the DBC's ODOM_STATUS has ENC_E2E_LOST
     _overflow_after: bool = False  # a MAILBOX_OVERFLOW summary after the last page
+    _refused: list[IntArray] = field(default_factory=list)  # swappedskips.refused_places
+    _last_counter: int | None = None  # the COUNTER of the last accepted encoder frame
 
     @property
     def exact(self) -> bool:
@@ -91,6 +94,11 @@ class StreamLosses:
                                             int(index[-1]) if len(index) else -1)
         self._overflow_after = reported if len(index) else (self._overflow_after or reported)
         self._add_summaries(chunk, accepted, enc)
+        self._refused.append(self._enc_count + refused_places(
+            chunk, accepted, self.decoder, enc.index, enc.counter, self._offset,
+            self._last_counter))
+        if len(enc.counter):
+            self._last_counter = int(enc.counter[-1])
         self._offset += len(chunk)
         self._enc_count += len(enc.index)
         if len(enc.seq):
@@ -157,7 +165,8 @@ class StreamLosses:
         if power_up:
             ok, upto, made = (np.concatenate(([first], a)) for first, a in ((1, ok), (0, upto),
                                                                             (0, made)))
-        return ok_count_spans(ok, upto, made)
+        return widened(ok_count_spans(ok, upto, made), np.concatenate(
+            [np.zeros(0, dtype=np.int64), *self._refused]))  # swappedskips
 
     def _made_from(self, upto: IntArray, page_t: FloatArray) -> IntArray:
         """``losses._made_from`` from the carried summaries."""
