@@ -14,7 +14,9 @@ pose at the first sample after the stall (``after``) is the pose it sent before 
 carried over the log's counts that way: fine steps to a frame ``p`` within
 ``FIFO_FRAMES`` of ``before`` (the FIFO's), one merged step from ``p`` to some ``q``,
 fine steps from ``q`` on, each by the firmware's integrator (``losses.step_vector``), from the
-exact heading. The sample must lie within the two samples' tolerance, plus the merge allowance
+exact heading, turned by ``before``'s sent heading (half a heading LSB of rounding over the
+candidate's way: 0.26 mm over the 5.33 m a 12-count wheel of 0.27 m radius rolled across a
+33-period stall). The sample must lie within the two samples' tolerance, plus the merge allowance
 of the FIFO's frames and of the frames just after the resume (a mailbox that dropped some, an
 E2E window catching up), of one such candidate. A pose that jumped elsewhere is no placement.
 Spans over ``breaks.MAX_MERGE_FRAMES`` frames are not judged by this rule (the placement's
@@ -82,7 +84,9 @@ def resume_excess(before: tuple[float, float, float], after: tuple[float, float]
     want_x, want_y = after[0] - before[0], after[1] - before[1]
     rx = x * math.cos(turn) - y * math.sin(turn)
     ry = x * math.sin(turn) + y * math.cos(turn)
-    nearest = float(np.min(np.hypot(rx - want_x, ry - want_y)))
+    # each candidate turned by ``before``'s sent heading, within half its LSB of the exact one
+    nearest = float(np.min(np.hypot(rx - want_x, ry - want_y)
+                           - 0.5 * HEADING_LSB_RAD * np.hypot(rx, ry)))
     edge = min(FIFO_FRAMES, n) + 1
     slack = (2.0 * tolerance_m
              + merge_allowance_m(left[:edge], right[:edge], geometry, bits, integrator)
