@@ -88,14 +88,13 @@ class SourceWatch:
     last_uptime_s: int = 0
     last_state: str = ""
     conflict_until_s: float = -math.inf
-    first_uptime_s: int | None = None  # the first summary's UPTIME
+    first_uptime_s: int | None = None  # the first summary's UPTIME, even held back (analyze)
     page_pending: bool = True  # the first life's first ENC_E2E_OK page not heard yet
     changed_at_s: float | None = None  # when the offset followed last changed to a new one
     conflict_from_s: float | None = None  # two sources: when the second offset first came
     # (or the pose streams began to interleave: ``livestreams``)
     conflict_detail: str = ""  # the pose streams' reason (``livestreams.detail_text``)
     streams: LiveStreams = field(default_factory=LiveStreams)  # the pose streams' watch
-
     summary: tuple[int, int, int | None] | None = None  # the latest accepted one: COUNTER,
     # the encoder frames heard, those up to the frame the latest pose names (pose_named_live)
     first_counter: int | None = None  # the first accepted page's COUNTER, any page
@@ -205,6 +204,7 @@ class SourceWatch:
         judge. A summary the first pose after it may tell is kept in ``ahead`` (live:
         ``hear_pose``, ``told_ahead``)."""
         offset, kind = uptime_s - t_s, None
+        self.first_uptime_s = uptime_s if self.first_uptime_s is None else self.first_uptime_s
         pose_held, status_held = (self.pose_late, any(self.status_late)) if held is None else held
         pose = (self.pose[0], self.pose[1], False) if pose_held and self.pose else self.pose
         booted = counter is not None and boot_tick(uptime_s, counter, t_s, pose, self.summary_s,
@@ -223,7 +223,7 @@ class SourceWatch:
         booted, ahead = booted or (ahead and broke is not None), ahead and not booted
         self.summary_s, self.ahead, self.ahead_posed = t_s, None, None
         if self.offset_s is None:
-            self.offset_s, self.first_uptime_s = offset, uptime_s
+            self.offset_s = offset
         elif abs(offset - self.offset_s) <= UPTIME_MATCH_S:
             if booted or (state == "INIT" and self.last_state not in ("", "INIT")) or (
                 uptime_s < self.last_uptime_s  # one source's UPTIME never goes back
