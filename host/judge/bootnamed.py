@@ -72,6 +72,7 @@ from odocan.host.judge.powerup import NAMED_SPAN
 from odocan.host.protocol import busfacts
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
 from odocan.host.protocol.e2e import crc8h2f_p02, e2e_messages
+from odocan.host.protocol.e2e_rows import crc_right
 
 # (log positions, bus times s, ENC_COUNTERs) of the poses of COUNTER 0, ENC_COUNTER ``NO_WORD``
 # for one that reads no power-up pose (module docstring)
@@ -332,13 +333,7 @@ def _crc_holds(frames: FrameArrays, decoder: BulkDecoder, rows: npt.NDArray[np.i
                ) -> npt.NDArray[np.bool_]:
     """Which ODOM_POSE_X frames at ``rows`` carry a right CRC, whatever their sequence (a new
     firmware restarts it)."""
-    config = e2e_messages(decoder.db).get(decoder.message(POSE_MESSAGE).frame_id)
-    if config is None or config.data_ids is None:
-        return np.ones(len(rows), dtype=bool)
-    data = frames.data[rows]
-    ids = np.array(config.data_ids, dtype=np.uint8)[data[:, 1] & 0xF]
-    good: npt.NDArray[np.bool_] = crc8h2f_p02(data, ids) == data[:, 0]
-    return good
+    return crc_right(frames, decoder, rows, POSE_MESSAGE, unprotected=True)
 
 
 class LivePowerUp:

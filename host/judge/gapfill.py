@@ -76,9 +76,9 @@ from odocan.host.judge.breaks import merge_allowance_m
 from odocan.host.judge.gapbound import gap_allowance_of_counts, period_bounds
 from odocan.host.judge.reference import Geometry, SpeedBound, wrap_delta
 from odocan.host.judge.samples import Encoders, IntArray
-from odocan.host.protocol.busfacts import ENC_COUNTER_LAP, ENC_COUNTER_MASK
+from odocan.host.protocol.busfacts import ENC_COUNTER_LAP
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
-from odocan.host.protocol.e2e import crc8h2f_p02, e2e_messages
+from odocan.host.protocol.e2e_rows import crc_right
 
 COUNTER_MODULO = ENC_COUNTER_LAP  # 16
 MAX_LATE_PERIODS = 15  # a frame held back at most this many periods (one COUNTER cycle less
@@ -251,14 +251,7 @@ def crc_holds(chunk: FrameArrays, decoder: BulkDecoder, rows: IntArray,
               name: str = "WHEEL_ENCODERS") -> npt.NDArray[np.bool_]:
     """Which frames ``rows`` (of message ``name``) have a right Profile 2 CRC: the sender's,
     whatever the host's E2E window said of their COUNTER (False: unprotected)."""
-    message = decoder.message(name)
-    config = e2e_messages(decoder.db).get(message.frame_id)
-    if config is None or config.data_ids is None:
-        return np.zeros(len(rows), dtype=bool)  # unprotected: a frame refused is not the sender's
-    data = chunk.data[rows]
-    ids = np.array(config.data_ids, dtype=np.uint8)[data[:, 1] & ENC_COUNTER_MASK]
-    good: npt.NDArray[np.bool_] = crc8h2f_p02(data, ids) == data[:, 0]
-    return good
+    return crc_right(chunk, decoder, rows, name, unprotected=False)  # refused: not the sender's
 
 
 def gap_or_fill_allowance(

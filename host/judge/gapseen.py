@@ -114,7 +114,7 @@ from odocan.host.judge.pagekeeper import Totals as Totals
 from odocan.host.judge.samples import Encoders, FloatArray, IntArray
 from odocan.host.protocol.busfacts import ENC_COUNTER_MASK
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
-from odocan.host.protocol.e2e import crc8h2f_p02, e2e_messages
+from odocan.host.protocol.e2e_rows import crc_right
 
 PAIR_PAGES = 8  # pages paired up to this many apart (4 s of pages: a window per pair)
 DARK_CYCLES = 3  # a log without any frame this many encoder cycles (the firmware sends a pose
@@ -480,14 +480,7 @@ def crc_holds(frames: FrameArrays, decoder: BulkDecoder, rows: IntArray,
               name: str = "ODOM_STATUS") -> npt.NDArray[np.bool_]:
     """Which frames of message ``name`` at ``rows`` carry a right CRC, whatever their sequence
     (a page the host's E2E window refused after the bus lost a few is as good evidence)."""
-    message = decoder.message(name)
-    config = e2e_messages(decoder.db).get(message.frame_id)
-    if config is None or config.data_ids is None:
-        return np.ones(len(rows), dtype=bool)
-    data = frames.data[rows]
-    ids = np.array(config.data_ids, dtype=np.uint8)[data[:, 1] & ENC_COUNTER_MASK]
-    good: npt.NDArray[np.bool_] = crc8h2f_p02(data, ids) == data[:, 0]
-    return good
+    return crc_right(frames, decoder, rows, name, unprotected=True)
 
 
 def seen_in_log(frames: FrameArrays, decoder: BulkDecoder, enc: Encoders, *,

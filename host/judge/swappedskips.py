@@ -32,7 +32,7 @@ from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.samples import IntArray
 from odocan.host.protocol.busfacts import ENC_COUNTER_MASK
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
-from odocan.host.protocol.e2e import crc8h2f_p02, e2e_messages
+from odocan.host.protocol.e2e_rows import crc_right
 
 LATE_BEHIND = 7  # COUNTER periods behind: late, not the next lap's (under half the 16)
 
@@ -51,12 +51,8 @@ def refused_places(frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder
     except DecodeError:
         return np.zeros(0, dtype=np.int64)
     refused = rows[~accepted[rows]]
-    config = e2e_messages(decoder.db).get(decoder.message("WHEEL_ENCODERS").frame_id)
-    if config is None or config.data_ids is None:  # unprotected: a refused frame is no sender's
-        return np.zeros(0, dtype=np.int64)
-    data = frames.data[refused]  # ``gapfill.crc_holds``' test (gapfill imports losses)
-    ids = np.array(config.data_ids, dtype=np.uint8)[data[:, 1] & ENC_COUNTER_MASK]
-    good = crc8h2f_p02(data, ids) == data[:, 0]
+    good = crc_right(frames, decoder, refused, "WHEEL_ENCODERS", unprotected=False)
+    data = frames.data[refused]
     places: IntArray = np.searchsorted(enc_index, refused + index_offset).astype(np.int64)
     before = np.concatenate(([-1 if counter_before is None else counter_before],
                              np.asarray(enc_counter, dtype=np.int64)))[places]
