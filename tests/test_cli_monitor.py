@@ -30,6 +30,7 @@ from odocan.host.cli.app import build_parser, main
 from odocan.host.cli.subparsers import monitor as monitor_cmd
 from odocan.host.io.buses import open_bus
 from odocan.host.judge.monitor import error_names
+from odocan.host.mqtt.broker import BrokerURL
 from odocan.host.report.tui_app import MonitorApp
 from odocan.sim import robot
 from odocan.sim.rig import LockstepRig, RigConfig
@@ -335,15 +336,17 @@ def test_monitor_mqtt_fleet_json(capsys: pytest.CaptureFixture[str]) -> None:
     async def fleet() -> None:
         async with EmbeddedBroker() as broker:
             urls.append(str(broker.url))
-            ready.set()
             run = FleetRun(fleet=FleetConfig(robots=2, robot=robot.load("pmir"), seed=1),
-                           duration_s=3.5, broker=broker.url, client_prefix="test-monitor")
-            reports.append(await run_fleet(run))
+                           duration_s=8.0, broker=broker.url, client_prefix="test-monitor")
+            fleet_task = asyncio.create_task(run_fleet(run))
+            await summaries_published(broker.url, {"robot001", "robot002"})
+            ready.set()  # the monitor's 2 s start once each bridge has told its firmware's state
+            reports.append(await fleet_task)
 
     urls: list[str] = []
     thread = threading.Thread(target=lambda: asyncio.run(fleet()), name="fleet")
     thread.start()
-    assert ready.wait(20)
+    assert ready.wait(30), "no firmware summary published"
     try:
         model = monitor_json(capsys, "--mqtt", urls[0], "--duration", "2")
     finally:
@@ -362,6 +365,17 @@ def test_monitor_mqtt_fleet_json(capsys: pytest.CaptureFixture[str]) -> None:
         assert row["encoder_hz"] > 0
         assert row["stale"] is False  # the fleet was still publishing
         assert 0.0 <= row["age_s"] < 3.0
+
+
+async def summaries_published(broker: BrokerURL, names: set[str]) -> None:
+    """Return once every robot of ``names`` has a retained status with its firmware's summary
+    (the bridge publishes one a second: on a loaded machine the first may come after 2 s)."""
+    from odocan.host.mqtt.fleetview import fleet_snapshot, fleet_states
+
+    async for table in fleet_states(broker=broker, min_interval_s=0.0):
+        rows = fleet_snapshot(table)
+        if set(rows) >= names and all(rows[n]["status"] is not None for n in names):
+            return
 
 
 def test_error_names() -> None:
