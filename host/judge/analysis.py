@@ -144,6 +144,7 @@ from odocan.host.judge.reference_path import (
     firmware_steps,
     restart_detail,
 )
+from odocan.host.judge.refusednames import refused_frames
 from odocan.host.judge.reportfacts import covered_s, frame_counts, realtime, robot_dict
 from odocan.host.judge.reprimecount import power_up_lost
 from odocan.host.judge.resent import worst_sent
@@ -488,13 +489,12 @@ def _analyze_life(
 def _distance(frames: FrameArrays, accepted: np.ndarray, decoder: BulkDecoder, enc: Encoders,
               robot: RobotProfile, ref: Reference, judge: DistanceJudge, seen: Seen,
               alive_s: np.ndarray) -> dict[str, Any]:
-    """``distance.check_distance`` over the firmware's steps from the reference's start
-    (``seen``: its evidence, holetaken, nearthreshold, gapskips; cutreprime's re-primes; its
-    stalls' windows: stallrestart)."""
+    """``distance.check_distance`` over the firmware's steps from the reference's start (``seen``:
+    holetaken, nearthreshold, gapskips; cutreprime; stallrestart's windows; refusednames)."""
     judge.took_none, e0 = gapskips.took_none(seen, frozenset(ref.counter_restarts)), ref.start
     steps = firmware_steps(enc, e0, Geometry.of(robot), min(robot.counter_bits, WIRE_COUNTER_BITS),
                            judge.max_wheel_speed_mm_s, through=seen.through, resets=seen.resets,
                            stalled=ref.stalled)
     cutreprime.cut_left_out(steps.d_left, steps.d_right, ref.stall_reprimes)
-    return check_distance(frames, accepted, decoder, enc, (steps.d_left, steps.d_right), e0,
-                          judge, alive_s)
+    return check_distance(frames, accepted, decoder, enc, (steps.d_left, steps.d_right,
+                          refused_frames(steps, len(enc.seq) - e0)), e0, judge, alive_s)

@@ -247,10 +247,11 @@ class DistanceJudge:
             self.feasible = Feasible(0.0, 0.0)
         self._skip = SkipDown([span for span in self.skipped if span[2] <= MAX_RUN])
 
-    def feed_frames(self, g: IntArray, d_left: IntArray, d_right: IntArray, seq: IntArray
-                    ) -> None:
-        """Encoder frames ``g`` (consecutive numbers) with the step into each (0: none) and
-        their sender's sequence numbers."""
+    def feed_frames(self, g: IntArray, d_left: IntArray, d_right: IntArray, seq: IntArray,
+                    refused: npt.NDArray[np.bool_] | None = None) -> None:
+        """Encoder frames ``g`` (consecutive numbers) with the step into each (0: none), their
+        sender's sequence numbers and whether the reference refused each inside a run
+        (``refusednames``: a sample naming one is left out; None: none)."""
         if len(g) == 0:
             return
         m_left, m_right = firmware_m_per_count(self.robot)
@@ -267,7 +268,8 @@ class DistanceJudge:
                 extra[frame - int(g[0])] += up_m
         up = up0 + np.cumsum(extra)
         new = {"g": g, "units": units, "n": n, "c": counts, "up": up,
-               "skip": self._skip.feed(g, signed_m)}
+               "skip": self._skip.feed(g, signed_m),
+               "refused": np.zeros(len(g), dtype=np.bool_) if refused is None else refused}
         self._cols = ({k: np.concatenate((self._cols[k], v)) for k, v in new.items()}
                       if self._cols else new)
         self._carry = (int(units[-1]), int(n[-1]), int(counts[-1]), float(up[-1]), int(seq[-1]))
@@ -347,6 +349,7 @@ class DistanceJudge:
             return
         g0 = int(self._cols["g"][0])
         keep = e >= g0
+        keep[keep] = ~self._cols["refused"][e[keep] - g0]  # ``refusednames``: left out
         e, raw_mm = e[keep], raw_mm[keep]
         if len(e) == 0:
             return
@@ -447,15 +450,17 @@ def twin_paths(enc: Encoders, robot: RobotProfile, after: int) -> dict[int, tupl
 
 
 def check_distance(frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder,
-                   enc: Encoders, steps: tuple[IntArray, IntArray], e0: int,
-                   judge: DistanceJudge, alive_s: FloatArray | None = None) -> dict[str, Any]:
+                   enc: Encoders, steps: tuple[IntArray, IntArray, npt.NDArray[np.bool_]],
+                   e0: int, judge: DistanceJudge, alive_s: FloatArray | None = None
+                   ) -> dict[str, Any]:
     """The whole log's judgement: ``steps`` (d_left, d_right into frames e0 + 1, ...: the
-    firmware's, ``reference_path.firmware_steps``) and the ODOM_TWIST samples (``alive_s``:
-    the firmware's other frames' bus times, ``judge.talked_before``)."""
+    firmware's, ``reference_path.firmware_steps``; and per frame from e0 whether it refused
+    it inside a run, ``refusednames``) and the ODOM_TWIST samples (``alive_s``: the firmware's
+    other frames' bus times, ``judge.talked_before``)."""
     zero = np.zeros(1, dtype=np.int64)
     judge.feed_frames(np.arange(e0, len(enc.seq), dtype=np.int64),
                       np.concatenate((zero, steps[0])), np.concatenate((zero, steps[1])),
-                      enc.seq[e0:])
+                      enc.seq[e0:], steps[2])
     e, raw_mm, t_s, heard = twist_samples(frames, accepted, decoder, enc)
     if alive_s is not None and len(t_s):
         judge.talked_before(float(t_s[0]), alive_s,

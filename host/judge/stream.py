@@ -62,6 +62,7 @@ import numpy.typing as npt
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.reference import Geometry, SpeedBound
 from odocan.host.judge.reference_path import firmware_steps
+from odocan.host.judge.refusednames import refused_frames
 from odocan.host.judge.resent import resent_differs
 from odocan.host.judge.samples import (
     HEADING_LSB_RAD,
@@ -401,6 +402,7 @@ class StreamReference:
     left_out: tuple[tuple[int, int], ...] = ()  # re-primes' steps (f, r] (``stream_reprime``)
     last_steps: tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]] | None = None  # the
     # firmware's step into each frame of the last chunk fed (d_left, d_right; host.judge.distance)
+    last_refused: npt.NDArray[np.bool_] | None = None  # its frames refused in a run (refusednames)
 
     def feed(self, enc: Encoders) -> dict[str, np.ndarray]:
         """The increments at this chunk's encoder frames: x_m, y_m, heading_rad, distance_m."""
@@ -435,6 +437,7 @@ class StreamReference:
         first = np.zeros(1 if first_chunk else 0, dtype=np.int64)  # no step into frame 0
         self.last_steps = (np.concatenate((first, steps.d_left[skip:])),
                            np.concatenate((first, steps.d_right[skip:])))
+        self.last_refused = refused_frames(steps, len(win["g"]))[carried:]
         if first_chunk:  # the very first frame: pose 0 before any step
             out = {k: np.concatenate(([0.0], v)) for k, v in out.items()}
         return out

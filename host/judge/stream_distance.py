@@ -72,6 +72,7 @@ def stream_distance(frames: Callable[[], Iterable[FrameArrays]], db: DatabaseSpe
             taken = _take(enc, from_e0)
             reference.feed(taken)
             if reference.last_steps is not None and len(taken.index):
-                judge.feed_frames(g[from_e0], *reference.last_steps, taken.seq)
+                judge.feed_frames(g[from_e0], *reference.last_steps, taken.seq,
+                                  reference.last_refused)
         twist.feed(chunk, accepted, enc)
     return judge.result()

@@ -1,0 +1,142 @@
+"""figure8 under ``--faults delay=0.5:150,drop=0.1``, 10 s: ODOM_TWIST DISTANCE where the
+reference refused frames the firmware took (issue #11, rule 5: a FAIL never blames a correct
+firmware, a PASS never hides a wrong pose or DISTANCE).
+
+A 150 ms delay is 15 encoder periods: half the frames arrive with a COUNTER one ahead of the
+on-time frame beside them, and the host's E2E and the firmware's may take different chains.
+
+* pmir seed 7: the host took a late frame of COUNTER 9 (sent 7.61 s, heard 7.76 s) where the
+  firmware took the on-time one (7.77 s, refused by the host as a repeat); the reference then
+  refused the next two frames (COUNTER 10 and 11: 57 counts in a period from the late frame)
+  and stepped 84/128 counts into COUNTER 2 at 7.86 s. The firmware had taken 10 and 11; its
+  twist naming COUNTER 10 (7.93 s) read 67.4 mm above the reference's path there, and the next
+  (7.86 s frame, 8.01 s) on it again: the interval of allowed offsets went empty by 66.28 mm
+  (``run``, both analyses; the live judges 66.89 mm).
+* kobuki seed 2: the firmware re-primed on a counter restart one frame (3.96 mm) before the
+  reference's restart run (on a frame the host never accepted) and named a frame of that run,
+  11.9 mm above it: DISTANCE 7.02 mm beyond.
+
+The reference's own state machine refused those frames, so a firmware that took its chain
+never names one: such a sample names the firmware's chain, not the reference's, and is left out
+(``host.judge.refusednames``); the samples around still pin DISTANCE (10 mm from 7 s on pmir,
+4 s on kobuki, FAILs). What stays wrong is in the strict xfails below, with its figures.
+
+The firmware is watched at every step (``tests.fw_watch``, float64): a FAIL of an untampered
+drive blames a correct one.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from odocan.host.judge.reference_path import Steps
+from odocan.host.judge.refusednames import refused_frames
+from tests.fw_watch import Watch
+from tests.judges_cli import (
+    TEN_MM_LSB,
+    both_analyses,
+    live_judges,
+    reported_analyses,
+    watched_run,
+    x_10_mm_off_fails,
+)
+from tests.log_edit import raise_raw
+
+FAULTS = "delay=0.5:150,drop=0.1"
+DURATION_S = 10
+DISTANCE_SPAN = (6, 2)  # ODOM_TWIST DISTANCE: bytes 6..7, 1 mm
+DRIVES = {"pmir7": ("pmir", 7), "kobuki2": ("kobuki", 2), "kobuki7": ("kobuki", 7)}
+X_FROM_S = {"pmir7": 8.5, "kobuki2": 4.0, "kobuki7": 5.0}  # X +10 mm from then on
+DISTANCE_FROM_S = {"pmir7": 7.0, "kobuki2": 4.0}  # DISTANCE +10 mm, across the sample left out
+Drive = tuple[str, Path, Watch, int]
+
+KOBUKI_POSE = pytest.mark.xfail(strict=True, reason=(
+    "kobuki 2: position 7.862 mm beyond the allowance and the stall-resume rule 11.69 mm at "
+    "4.44 s; kobuki 7: position 0.150 mm beyond (run and both analyses): the pose judge's "
+    "reference follows the host's chain where the firmware took another (kobuki 2: it "
+    "re-primed on a frame the host never accepted, one before the reference's restart run); "
+    "untraced for kobuki 7"))
+LIVE = pytest.mark.xfail(strict=True, reason=(
+    "live DISTANCE (monitor = bridge) 63.89 (pmir 7), 63.66 (kobuki 2), 63.93 mm (kobuki 7) "
+    "beyond, kobuki 2 also POSE WRONG 65.5 mm: traced on pmir 7 at 0.551 s, a twist naming "
+    "ENC_COUNTER 7 held since the frame of 0.39 s (DISTANCE 111 mm) is named by the live "
+    "tracker as the COUNTER-7 frame of 0.55 s, a lap later (175.3 mm): the live naming of a "
+    "counter held across a lap, which analyze's samples._held rule resolves"))
+
+
+@pytest.fixture(scope="module", params=sorted(DRIVES))
+def drive(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory) -> Drive:
+    name = str(request.param)
+    log = tmp_path_factory.mktemp(name) / "drive.log"
+    robot, seed = DRIVES[name]
+    watch, code = watched_run(log, robot, "figure8", seed, DURATION_S, FAULTS)
+    return name, log, watch, code
+
+
+def test_the_firmware_is_right_at_every_step(drive: Drive) -> None:
+    name, _, watch, _ = drive
+    assert watch.steps > 300, (name, watch.steps)
+    assert watch.within_a_thousandth_lsb(), (name, watch.worst_m, watch.worst_rad)
+
+
+def test_both_analyses_pass_its_distance(drive: Drive, tmp_path: Path) -> None:
+    """Before: pmir 7 66.277 mm beyond, kobuki 2 7.020 mm (both analyses)."""
+    name, log, _, _ = drive
+    for stream, _, report in reported_analyses(log, tmp_path):
+        distance = report["onboard_distance_vs_reference"]
+        assert distance["samples"] > 90, (name, stream, distance)
+        assert distance["passed"], (name, stream, distance)
+
+
+@pytest.mark.parametrize("judge", ["run", "analyze"])
+def test_run_and_both_analyses_pass_it(drive: Drive, judge: str,
+                                       request: pytest.FixtureRequest) -> None:
+    name, log, _, code = drive
+    if name.startswith("kobuki"):
+        request.applymarker(KOBUKI_POSE)
+    if judge == "run":
+        assert code == 0, name
+    else:
+        assert both_analyses(log) == [0, 0], name
+
+
+@LIVE
+def test_the_live_judges_pass_it(drive: Drive) -> None:
+    name, log, _, _ = drive
+    for judge in live_judges(DRIVES[name][0], log):
+        assert judge.distance.verdict() == [], name
+        assert judge.tracker.wrongs.count == 0, name
+
+
+def test_x_10_mm_off_fails_both_analyses(drive: Drive, tmp_path: Path) -> None:
+    name, log, _, _ = drive
+    assert x_10_mm_off_fails(log, tmp_path / "t.log", X_FROM_S[name], 50) == [], name
+
+
+@pytest.mark.parametrize("lsb", [TEN_MM_LSB // 10, -TEN_MM_LSB // 10], ids=["+10", "-10"])
+def test_distance_10_mm_off_across_the_left_out_sample_fails(drive: Drive, lsb: int,
+                                                              tmp_path: Path) -> None:
+    """DISTANCE raised or lowered 10 mm from before the sample left out: each analysis FAILs
+    it by more than 5 mm (so leaving it out hides no such error)."""
+    name, log, _, _ = drive
+    if name not in DISTANCE_FROM_S:
+        pytest.skip("no twist left out on this drive")
+    tampered = tmp_path / "t.log"
+    assert raise_raw(log, tampered, "ODOM_TWIST", DISTANCE_SPAN, lsb, DISTANCE_FROM_S[name],
+                     wrap=True) > 100
+    for stream, code, report in reported_analyses(tampered, tmp_path):
+        excess_m = report["onboard_distance_vs_reference"]["max_excess_m"]
+        assert code == 1, (name, stream, excess_m)
+        assert excess_m > 5e-3, (name, stream, excess_m)
+
+
+def test_the_frames_inside_a_refusal_run_are_the_ones_marked() -> None:
+    """``refused_frames``: frames after the one taken before a run up to the one taken after
+    (a run open at the end reaches the last frame); the others, and frame 0, are not."""
+    zero = np.zeros(9, dtype=np.int64)
+    steps = Steps(zero, zero.copy(), taken_before={5: 2, 10: 7})
+    assert refused_frames(steps, 10).tolist() == [
+        False, False, False, True, True, False, False, False, True, True]
