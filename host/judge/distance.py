@@ -50,6 +50,8 @@ Where the firmware's steps are not the reference's:
 * an encoder frame with a twin (``twin_paths``): the firmware may have stepped through the
   twin (``up``: the steps into and out of it) or taken it for the frame (``down``: the
   reference's steps into and out of the frame).
+* a sample naming a frame the reference refused inside a run names a chain the firmware took
+  and the host's E2E did not (``refusednames``): left out, the samples around it judged.
 
 Verdict (``Feasible``): the firmware's path less the reference's (mm, before the wire's
 rounding) is a value that only those allowances move. Each sample bounds it, [r - s, r + s] (r
