@@ -10,6 +10,12 @@ PASS; the monitor and the bridge waited for a count page that had come, then sta
 on COUNTER 15 of 0.950 s: 23.87 mm (kobuki) and 56.5 mm (pmir) beyond the allowance from 1.92 s
 on, POSE WRONG. Now they start at ``heldboot.held_start``'s frame, the refused COUNTER 1, as
 ``analyze`` does. 696 and 700 (the tick told by its page heard in order) stay within 0.1 mm.
+
+kobuki random 692 ``reboot=0.5,delay=0.1:150``: up at 0.501 s, its pose of COUNTER 0 and
+summary held back to 0.651 s (the reboot told by ``liveheldpose`` at the summary), its first
+count page (0.601 s) heard before them: the live start on COUNTER 0 of 0.640 s, 12 frames
+late, 27.59 mm beyond from 1.65 s. The summary's tick dated by ``heldtick`` (0.501 s) was read
+only when no other rule told the reboot; ``analyze`` reads it whatever told it.
 """
 
 from __future__ import annotations
@@ -23,25 +29,31 @@ from odocan.host.judge.liveheldstart import held_counts
 from odocan.host.judge.livewindow import ENC_COLUMNS, Columns
 from tests.judges_cli import (
     STREAMS,
+    TEN_MM_LSB,
     analyze,
     correct_drive,
+    fails_by_position,
     live_judges,
+    raise_first_x,
     raise_x_10_mm,
     x_10_mm_off_fails,
 )
 
 FAULTS = "reboot=0.5:0.3,delay=0.1:150"
+UP_AT_ONCE = "reboot=0.5,delay=0.1:150"
 AFTER_REBOOT_S = 1.0  # after the held boot summary (0.951 s)
-DRIVES = [("kobuki", 692), ("pmir", 692), ("kobuki", 696), ("pmir", 696), ("kobuki", 700)]
-_RECORDED: dict[tuple[str, int], Path] = {}
+DRIVES = [("kobuki", 692, FAULTS), ("pmir", 692, FAULTS), ("kobuki", 692, UP_AT_ONCE),
+          ("kobuki", 696, FAULTS), ("pmir", 696, FAULTS), ("kobuki", 700, FAULTS)]
+_RECORDED: dict[tuple[str, int, str], Path] = {}
 
 
-def _drive(robot: str, seed: int, factory: pytest.TempPathFactory) -> Path:
+def _drive(robot: str, seed: int, factory: pytest.TempPathFactory, faults: str = FAULTS
+           ) -> Path:
     """The drive's log, recorded once per module and asserted right (``correct_drive``)."""
-    if (robot, seed) not in _RECORDED:
+    if (robot, seed, faults) not in _RECORDED:
         log = factory.mktemp(f"{robot}{seed}") / "drive.log"
-        _RECORDED[robot, seed] = correct_drive(log, robot, "random", seed, 8, FAULTS)
-    return _RECORDED[robot, seed]
+        _RECORDED[robot, seed, faults] = correct_drive(log, robot, "random", seed, 8, faults)
+    return _RECORDED[robot, seed, faults]
 
 
 def _live_beyond_m(robot: str, log: Path) -> tuple[float, float]:
@@ -50,28 +62,63 @@ def _live_beyond_m(robot: str, log: Path) -> tuple[float, float]:
     return monitor.tracker.max_beyond_allowance_m, bridge.tracker.max_beyond_allowance_m
 
 
-@pytest.mark.parametrize(("robot", "seed"), DRIVES)
+@pytest.mark.parametrize(("robot", "seed", "faults"), DRIVES)
 def test_every_judge_passes_the_correct_firmware(
-    robot: str, seed: int, tmp_path_factory: pytest.TempPathFactory
+    robot: str, seed: int, faults: str, tmp_path_factory: pytest.TempPathFactory
 ) -> None:
     """run (``correct_drive``), ``analyze`` whole and streamed, the monitor and the bridge
-    (kobuki 692 23.87 mm, pmir 692 56.5 mm beyond before)."""
-    log = _drive(robot, seed, tmp_path_factory)
+    (kobuki 692 23.87 mm, pmir 692 56.5 mm, kobuki 692 ``UP_AT_ONCE`` 27.59 mm beyond before)."""
+    log = _drive(robot, seed, tmp_path_factory, faults)
     assert [analyze(log, s) for s in STREAMS] == [0, 0]
     beyond_m = _live_beyond_m(robot, log)
     assert max(beyond_m) <= 1e-4, beyond_m
 
 
-@pytest.mark.parametrize(("robot", "seed"), DRIVES[:2])
+@pytest.mark.parametrize(("robot", "seed", "faults"), DRIVES[:3])
 def test_x_10_mm_off_after_the_reboot_fails_every_judge(
-    robot: str, seed: int, tmp_path_factory: pytest.TempPathFactory, tmp_path: Path
+    robot: str, seed: int, faults: str, tmp_path_factory: pytest.TempPathFactory, tmp_path: Path
 ) -> None:
-    log = _drive(robot, seed, tmp_path_factory)
+    log = _drive(robot, seed, tmp_path_factory, faults)
     assert x_10_mm_off_fails(log, tmp_path / "t.log", AFTER_REBOOT_S, 300) == []
     tampered = tmp_path / "live.log"
     assert raise_x_10_mm(log, tampered, AFTER_REBOOT_S) > 300
     beyond_m = _live_beyond_m(robot, tampered)
     assert min(beyond_m) > 5e-3, beyond_m
+
+
+POWER_UP_POSES = [
+    pytest.param(
+        696, (0.8, 0.81), id="696",
+        marks=pytest.mark.xfail(strict=True, reason=(
+            "kobuki 696: the power-up pose (0.801 s, ENC_COUNTER 1) alone 10 mm off PASSes "
+            "every judge (analyze whole and streamed 0.083 mm beyond, monitor and bridge "
+            "0.082): it names a frame with a twin (the held COUNTER 1 of 0.800 s the firmware "
+            "primed on, the on-time 1 of 0.810 s it refused), and a sample naming a twinned "
+            "frame is not judged (samples.match_encoder: which one the firmware had is "
+            "unknown), though the pose must read (0, 0, 0) on either"))),
+    pytest.param(
+        692, (0.95, 0.952), id="692",
+        marks=pytest.mark.xfail(strict=True, reason=(
+            "kobuki 692: the power-up pose held back to 0.951 s alone 10 mm off PASSes every "
+            "judge (analyze 0.079 mm beyond, monitor and bridge 0.070): its ENC_COUNTER 1 "
+            "read from the latest frame heard (COUNTER 15 of 0.950 s) names the frame after "
+            "next, not heard yet (samples.match_encoder's -8 .. +7): not judged (1 m off "
+            "PASSes alike)"))),
+]
+
+
+@pytest.mark.parametrize(("seed", "span_s"), POWER_UP_POSES)
+def test_the_power_up_pose_10_mm_off_alone_fails(
+    seed: int, span_s: tuple[float, float], tmp_path_factory: pytest.TempPathFactory,
+    tmp_path: Path
+) -> None:
+    """The new firmware's power-up pose (COUNTER 0) alone raised 10 mm: a wrong pose, which
+    every judge must FAIL (the whole pose run raised FAILs: ``test_x_10_mm_off_...``)."""
+    log = _drive("kobuki", seed, tmp_path_factory)
+    tampered = tmp_path / "t.log"
+    raise_first_x(log, tampered, TEN_MM_LSB, *span_s)
+    beyond_m = _live_beyond_m("kobuki", tampered)
+    assert (fails_by_position(tampered, tmp_path), min(beyond_m) > 5e-3) == ([], True), beyond_m
 
 
 def _window(rows: list[tuple[int, int, float, int, int]]) -> Columns:

@@ -214,8 +214,9 @@ class SourceWatch:
             fell = self._fell_in_run(t_s) if fell is None else fell
             booted = boot_tick(uptime_s, counter, t_s, pose, self.summary_s,
                                self.status_before, fell, held=status_held)
-        tick = None if booted or counter != 0 or uptime_s != 0 else told_tick(  # (``heldtick``)
+        held_tick = None if counter != 0 or uptime_s != 0 else told_tick(  # (``heldtick``)
             self.ticks.told, lambda s: self._fell_in_run(s) if self.ticks.fell is None else True)
+        tick = None if booted else held_tick
         booted = booted or tick is not None  # held past its tick's page
         if not booted and (self.order.passed_over(uptime_s, state) if late is None else late):
             return None  # held back, it tells no reboot (``livelatestatus``)
@@ -254,7 +255,7 @@ class SourceWatch:
         self.last_uptime_s, self.last_state = uptime_s, state
         self.page_pending = self.page_pending and kind != "reboot"
         self.held_tick_s = (  # its life starts where ``heldboot.held_start`` says (liveheldstart)
-            self.held_tick_s if kind != "reboot" else None if tick is None else tick[0])
+            self.held_tick_s if kind != "reboot" else None if held_tick is None else held_tick[0])
         return kind
 
     def _told_from(self, t_s: float, power_up_tick: bool) -> float:
