@@ -412,7 +412,7 @@ class BusMonitor:
         boot_frame(self.tracker, self.e2e, (uptime_s, state, seq, self._bus_time_s),
                    self._take_encoders)
         detail += ": " + src.start_new_life(self.tracker, self.e2e, self.db, uptime_s, state, seq,
-                                            self.sources.held_tick_s)
+                                            self.sources)
         self.distance.new_life()
         self.first_after.new_life()
         # its first ticks' (bootticks; its power-up pose's, its summary held back: bootnamed)

@@ -453,13 +453,13 @@ def pose_frame(watch: SourceWatch, message: Message, data: bytes, e2e: Any, t_s:
 
 def start_new_life(tracker: PoseTracker, e2e: E2EMonitor, db: Database,
                    uptime_s: int, state: str, seq: int | None = None,
-                   tick_s: float | None = None) -> str:
+                   watch: SourceWatch | None = None) -> str:
     """A reboot told by ``SourceWatch``: the reference starts at the power-up pose when the
     summary says UPTIME 0 (``PoseTracker.power_up``; ``host.judge.reboots``), else (more than a
     second after the boot: its page of encoder E2E counts may be gone too) at the next pose;
     the E2E sequences of the messages ``FIRMWARE_NODE`` sends in ``db`` start afresh (a reboot
     is not frames lost; ``seq``: the encoder frame latest heard at the summary, when told
-    after it, ``bootticks.boot_ahead``). Returns what was done (text)."""
+    after it, ``bootticks.boot_ahead``; ``watch``: its ``held_tick_s``). Returns what was done."""
     tracker.placer.seen.new_life()  # its pages count from 0 (host.judge.livegapseen)
     tracker.placer.dark.new_life()  # no pose adopted before it carried (host.judge.livedark)
     tracker.adopted.new_life()  # ... nor at a start of the reference (host.judge.liveadopted)
@@ -468,6 +468,7 @@ def start_new_life(tracker: PoseTracker, e2e: E2EMonitor, db: Database,
         if FIRMWARE_NODE in message.senders:  # the counts stay; the next frame starts afresh
             e2e.restart_sequence(message.frame_id, extended=message.is_extended_frame)
     if uptime_s == 0:
+        tick_s = None if watch is None else watch.held_tick_s  # (liveheldstart)
         tracker.power_up(primed_now=state != "INIT", seq=seq, tick_s=tick_s)
         return "reference restarted at the power-up pose"
     tracker.adopted.owe(LATE_REBOOT.format(uptime_s=uptime_s))  # its pose adopted
