@@ -15,7 +15,7 @@ proves it (frames 0 and 1 unmoved); with frame 0 moved it is unproven and said, 
 had FAILed the correct firmware by 29.8 mm / 15.8 mrad.
 
 (a) Before: the live judges read that bound on their 32 recent frames only
-(``sources.heard_before_live``), could not prove the power-up, and started the reference fitted
+(``liveheard.heard_before_live``), could not prove the power-up, and started the reference fitted
 at the first sample kept: a firmware 1 m off from its first pose showed 0 wrong episodes (the
 monitor DEGRADED only by the firmware's own POSE_UNCERTAIN) while ``analyze`` FAILed it at
 944 mm. Now they read the whole window (5 s) as ``analyze`` reads the log, and when the proof

@@ -23,6 +23,7 @@ a newer one it primed on), nor a repeat less than half a COUNTER lap after it (a
 
 from __future__ import annotations
 
+from collections import deque
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
@@ -37,6 +38,7 @@ if TYPE_CHECKING:
     from odocan.host.judge.tracking import PoseTracker
     from odocan.host.protocol.e2e_live import E2EMonitor
 
+RECENT_REFUSED = 8  # refused frames kept (``BootTick.recent``)
 Frame = tuple[int, int, int, float, int]  # COUNTER, LEFT_COUNT, RIGHT_COUNT, bus time s, uptime
 
 
@@ -54,6 +56,9 @@ class BootTick:
         self.status = ""
         self.can_id = -1
         self.behind = False  # ``frame`` kept behind frames taken after it (``taken``)
+        # the latest refused, each with the seq of the latest frame taken before it
+        # (``liveheldstart``: a held summary's tick may have primed on one)
+        self.recent: deque[tuple[Frame, int]] = deque(maxlen=RECENT_REFUSED)
         # the judge's E2E check and encoder handler (``bind``; ``livefreshboot``)
         self.bound: tuple[E2EMonitor, Callable[[tuple[int, int, int, int], float], object]] \
             | None = None
@@ -63,12 +68,15 @@ class BootTick:
         """The judge's E2E check and its WHEEL_ENCODERS handler (as ``boot_frame``'s)."""
         self.bound = (e2e, take)
 
-    def refused(self, can_id: int, signals: Any, t_s: float, status: str) -> None:
+    def refused(self, can_id: int, signals: Any, t_s: float, status: str,
+                after: int = -1) -> None:
         """A WHEEL_ENCODERS frame (identifier ``can_id``, 11-bit) refused (``signals``: its raw
-        signals, a mapping) at bus time ``t_s``, by ``status``."""
+        signals, a mapping) at bus time ``t_s``, by ``status``; ``after``: the seq of the
+        latest frame taken before it."""
         self.can_id = can_id
         self.frame = (int(signals["COUNTER"]), int(signals["LEFT_COUNT"]),
                       int(signals["RIGHT_COUNT"]), t_s, int(signals.get("CTRL_UPTIME", 0)))
+        self.recent.append((self.frame, after))
         self.status = status
         self.behind = False
 
@@ -120,7 +128,7 @@ def refused_frame(tracker: PoseTracker, can_id: int, signals: Any, t_s: float,
     decoded (``signals``: a mapping of its raw signals), heard at bus time ``t_s``: to the twins
     and a gap's fill (``livetwins.refused_encoders``) and to ``tracker.boot_tick``."""
     refused_encoders(tracker.twins, signals, t_s, tracker.placer.fill)
-    tracker.boot_tick.refused(can_id, signals, t_s, status)
+    tracker.boot_tick.refused(can_id, signals, t_s, status, tracker.enc_seq)
 
 
 def refused_named(tracker: PoseTracker, can_id: int, name: str, signals: Callable[[], Any],

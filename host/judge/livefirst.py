@@ -24,7 +24,7 @@ ENC_E2E_LOST counts the frames its FIFO overran among them, which open no loss a
 
 The watch's first ``FIRST_FRAMES`` encoder frames' bus times are kept (``keep_first``): a
 power-up's first count page, made after a stall longer than the window (5 s), is proven by the
-frames heard before its tick bound, long gone from the window (``sources.heard_before_live``;
+frames heard before its tick bound, long gone from the window (``liveheard.heard_before_live``;
 issue #11: a 6 s halt at power-up left the live judges unproven, their start adopted), and their
 counts (``stallpowerup``'s rule below).
 

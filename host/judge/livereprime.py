@@ -43,7 +43,7 @@ explains within the two LSBs (the pairs' choice).
 A stall before a life's first pose, the reference not started (a power-up's: its first summary
 is the last before the stall), takes the same hold and the same replay from the power-up pose
 (0, 0, 0) on frame 0 or 1 once the power-up is proven (its first count page, made after the
-stall: ``sources.heard_before_live``; the word waits for it, ``counted``). That page's
+stall: ``liveheard.heard_before_live``; the word waits for it, ``counted``). That page's
 ENC_E2E_LOST, taken under ``analyze``'s preconditions, keeps the pairs it allows and names the
 frame the power-up primed on when one fits (``livereprimecount``: the start no longer unknown;
 the word waits for the page while it may come with it); a first pose the frames do not explain
@@ -237,7 +237,7 @@ class ReprimeHold:
     def _origin(self) -> tuple[float, float] | None:
         """Where the firmware was before the stall, at release: ``_anchor``; after a stall
         before the first pose of a life the reference had not started for, the power-up pose
-        (0, 0) once the power-up is proven (its first count page: ``sources.heard_before_live``,
+        (0, 0) once the power-up is proven (its first count page: ``liveheard.heard_before_live``,
         made after the stall), None while it is not."""
         if not self._power_up:
             return self._anchor

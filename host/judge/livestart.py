@@ -216,13 +216,14 @@ class Lives:
         """Whether the waiting boot's frame is its power-up pose's word (``await_boot``)."""
         return self.boot_named and self._tracker.powerup.corroborated
 
-    def finish_boot(self, primed: int, first_life: bool = False) -> None:
+    def finish_boot(self, primed: int, first_life: bool = False,
+                    counts: list[Counted] | None = None) -> None:
         """Start the new life's reference at (0, 0, 0) at encoder frame ``primed`` (seq), judge
         the samples heard since the reboot; adopt the next pose when that frame is not known (not
         heard yet, or left the window). ``first_life``: the log's first (one start)."""
         tracker = self._tracker
         poses, self.boot, self.boot_poses = self.boot_poses, None, []
-        counts = window_counts(tracker.window, primed)
+        counts = window_counts(tracker.window, primed) if counts is None else counts
         if not counts or counts[0][0] != primed:
             if not first_life:  # a first life keeps its fitted start
                 tracker.adopted.owe(UNHEARD_BOOT)

@@ -411,7 +411,8 @@ class BusMonitor:
         lost = rebooted(self, self.config, self._bus_time_s)  # its configs were in its RAM
         boot_frame(self.tracker, self.e2e, (uptime_s, state, seq, self._bus_time_s),
                    self._take_encoders)
-        detail += ": " + src.start_new_life(self.tracker, self.e2e, self.db, uptime_s, state, seq)
+        detail += ": " + src.start_new_life(self.tracker, self.e2e, self.db, uptime_s, state, seq,
+                                            self.sources)
         self.distance.new_life()
         self.first_after.new_life()
         # its first ticks' (bootticks; its power-up pose's, its summary held back: bootnamed)

@@ -47,12 +47,12 @@ from odocan.host.judge.latefall import continues_twice, tied_late
 from odocan.host.judge.liveadopted import LATE_REBOOT
 from odocan.host.judge.livefreshboot import powerup_heard
 from odocan.host.judge.livegapseen import heard_status
+from odocan.host.judge.liveheard import heard_before_live, pose_named_live
 from odocan.host.judge.liveheldpose import PoseOrder
 from odocan.host.judge.livelatestatus import StatusOrder
 from odocan.host.judge.livestreams import LiveStreams, hear_pose_frame, pose_told_first
 from odocan.host.judge.navrestart import NAV_MESSAGE, restarted_within
 from odocan.host.judge.powerup import (
-    NAMED_SPAN,
     holds_first_cycle,
     primed_by_count,
     same_tick,
@@ -96,7 +96,7 @@ class SourceWatch:
     conflict_detail: str = ""  # the pose streams' reason (``livestreams.detail_text``)
     streams: LiveStreams = field(default_factory=LiveStreams)  # the pose streams' watch
     summary: tuple[int, int, int | None] | None = None  # the latest accepted one: COUNTER,
-    # the encoder frames heard, those up to the frame the latest pose names (pose_named_live)
+    # the encoder frames heard, those up to the frame the latest pose names (liveheard)
     first_counter: int | None = None  # the first accepted page's COUNTER, any page
     before_first: int = 0  # the encoder frames heard before it (``powerup.primed_after``)
     summary_times: list[tuple[int, float]] = field(default_factory=list)  # the latest
@@ -131,6 +131,7 @@ class SourceWatch:
     pose_late: bool = False  # the latest ODOM_POSE_X of COUNTER 0 heard was held back
     status_late: tuple[bool, bool] = (False, False)  # the ODOM_STATUS frame before the latest
     # and the latest were held back (``order``; as ``status_before`` and ``status_last``)
+    held_tick_s: float | None = None  # the latest reboot's held summary's tick (heldtick)
     ticks: TickPages = field(default_factory=TickPages)  # a boot summary held past its tick's
     # page (``heldtick``): live, heard at ``hear_pose``, ``hear_status``; a log's: ``told`` set
 
@@ -213,8 +214,9 @@ class SourceWatch:
             fell = self._fell_in_run(t_s) if fell is None else fell
             booted = boot_tick(uptime_s, counter, t_s, pose, self.summary_s,
                                self.status_before, fell, held=status_held)
-        tick = None if booted or counter != 0 or uptime_s != 0 else told_tick(  # (``heldtick``)
+        held_tick = None if counter != 0 or uptime_s != 0 else told_tick(  # (``heldtick``)
             self.ticks.told, lambda s: self._fell_in_run(s) if self.ticks.fell is None else True)
+        tick = None if booted else held_tick
         booted = booted or tick is not None  # held past its tick's page
         if not booted and (self.order.passed_over(uptime_s, state) if late is None else late):
             return None  # held back, it tells no reboot (``livelatestatus``)
@@ -252,6 +254,8 @@ class SourceWatch:
             self.life_from_s = min(self.life_from_s, run_s)  # its poses heard before its summary
         self.last_uptime_s, self.last_state = uptime_s, state
         self.page_pending = self.page_pending and kind != "reboot"
+        self.held_tick_s = (  # its life starts where ``heldboot.held_start`` says (liveheldstart)
+            self.held_tick_s if kind != "reboot" else None if held_tick is None else held_tick[0])
         return kind
 
     def _told_from(self, t_s: float, power_up_tick: bool) -> float:
@@ -323,6 +327,7 @@ class SourceWatch:
         The frames its firmware sent since (refused by the E2E check until now) tell ``first``
         it talked then: no stall before its first sample (``livefirst.FirstStall.told``)."""
         self.offset_s, self.life_from_s, self.page_pending = uptime_s - t_s, t_s, False
+        self.held_tick_s = None  # not held past its tick
         if self.first is not None:
             self.first.told(self.ahead_heard)
 
@@ -447,13 +452,14 @@ def pose_frame(watch: SourceWatch, message: Message, data: bytes, e2e: Any, t_s:
 
 
 def start_new_life(tracker: PoseTracker, e2e: E2EMonitor, db: Database,
-                   uptime_s: int, state: str, seq: int | None = None) -> str:
+                   uptime_s: int, state: str, seq: int | None = None,
+                   watch: SourceWatch | None = None) -> str:
     """A reboot told by ``SourceWatch``: the reference starts at the power-up pose when the
     summary says UPTIME 0 (``PoseTracker.power_up``; ``host.judge.reboots``), else (more than a
     second after the boot: its page of encoder E2E counts may be gone too) at the next pose;
     the E2E sequences of the messages ``FIRMWARE_NODE`` sends in ``db`` start afresh (a reboot
     is not frames lost; ``seq``: the encoder frame latest heard at the summary, when told
-    after it, ``bootticks.boot_ahead``). Returns what was done (text)."""
+    after it, ``bootticks.boot_ahead``; ``watch``: its ``held_tick_s``). Returns what was done."""
     tracker.placer.seen.new_life()  # its pages count from 0 (host.judge.livegapseen)
     tracker.placer.dark.new_life()  # no pose adopted before it carried (host.judge.livedark)
     tracker.adopted.new_life()  # ... nor at a start of the reference (host.judge.liveadopted)
@@ -462,39 +468,9 @@ def start_new_life(tracker: PoseTracker, e2e: E2EMonitor, db: Database,
         if FIRMWARE_NODE in message.senders:  # the counts stay; the next frame starts afresh
             e2e.restart_sequence(message.frame_id, extended=message.is_extended_frame)
     if uptime_s == 0:
-        tracker.power_up(primed_now=state != "INIT", seq=seq)
+        tick_s = None if watch is None else watch.held_tick_s  # (liveheldstart)
+        tracker.power_up(primed_now=state != "INIT", seq=seq, tick_s=tick_s)
         return "reference restarted at the power-up pose"
     tracker.adopted.owe(LATE_REBOOT.format(uptime_s=uptime_s))  # its pose adopted
     tracker.new_life()
     return "reference restarted"
-
-
-def pose_named_live(tracker: PoseTracker) -> int | None:
-    """``powerup.pose_named`` live: the encoder frames heard up to the one the latest pose
-    heard names (its ENC_COUNTER: the latest of the last ``NAMED_SPAN`` frames heard before it
-    with that COUNTER). None when none."""
-    halves = tracker.pairs.halves["x"].rows  # (pos, enc_counter, ...) of the latest X halves heard
-    if not halves:
-        return None
-    pos, named = halves[-1][0], int(halves[-1][1])
-    before = [row for row in tracker.window.rows if row[1] < pos][-NAMED_SPAN:]
-    seqs = [int(row[0]) for row in before if int(row[2]) == named]
-    return seqs[-1] + 1 if seqs else None
-
-
-def heard_before_live(tracker: PoseTracker, bound_s: float, made: int) -> int | None:
-    """``powerup.heard_by_tick`` live: the encoder frames heard before bus time ``bound_s`` and
-    among the first ``made``; None when the window no longer holds the frames to tell. The
-    whole window (5 s), not its recent rows alone: after an MCU halted at power-up, the page's
-    tick bound is seconds back (its ODOM_STATUS COUNTER stood still), as ``analyze`` reads it
-    (issue #11: a 3 s halt left the live judges unproven, their start fitted); past the window,
-    the watch's first frames kept (``livefirst.FirstStall.heard_first_before``: a 6 s halt)."""
-    window = tracker.window
-    if not len(window):
-        return 0
-    before = np.flatnonzero(window.col("t_s") < bound_s)
-    if len(before):
-        return min(int(window.col("seq")[before[-1]]) + 1, made)
-    if int(window.col("seq")[0]) == 0:
-        return 0
-    return tracker.first.heard_first_before(bound_s, made)  # a stall longer than the window

@@ -30,6 +30,7 @@ from odocan.host.judge.livefirst import FIRST_FRAMES, FirstStall, left_out_first
 from odocan.host.judge.livefit import LiveFit
 from odocan.host.judge.livefloodnames import LiveFloodNames
 from odocan.host.judge.livehalves import HalfPairs
+from odocan.host.judge.liveheldstart import held_counts
 from odocan.host.judge.livelaphold import LapHold
 from odocan.host.judge.livelatehalves import LateHalves
 from odocan.host.judge.livelosses import LiveAllowance
@@ -397,7 +398,8 @@ class PoseTracker:
         self.losses.restart(self.enc_seq, self.fast_path)
         self.lives.drop_backlog()
 
-    def power_up(self, primed_now: bool, seq: int | None = None) -> None:
+    def power_up(self, primed_now: bool, seq: int | None = None,
+                 tick_s: float | None = None) -> None:
         """A reboot (``sources``): the new life starts at (0, 0, 0) at the encoder frame it
         primed on, as ``analyze`` starts it: the one its first ENC_E2E_OK page names
         (``on_enc_counts``), whatever the summary said; its samples wait for that page, or
@@ -406,8 +408,9 @@ class PoseTracker:
         summary, when the reboot was told after it), else the next. Above both: the
         frame its power-up pose named, heard up to 80 ms before the summary
         (``bootnamed``: the ODOM_STATUS frames may be stamped late). No pose is
-        adopted, so a firmware that comes up wrong shows its error. Without a known integrator:
-        ``restart_reference`` (the next pose is adopted)."""
+        adopted, so a firmware that comes up wrong shows its error. A summary held past its tick
+        (``tick_s``): at once on ``heldboot.held_start``'s frame (``liveheldstart``), unless its
+        pose names a later one. Without a known integrator: ``restart_reference``."""
         self.new_life()
         self.losses.lost_page = None  # the new firmware counts from 0
         latest = self.enc_seq if seq is None else seq
@@ -416,6 +419,10 @@ class PoseTracker:
             self.adopted.owe(REBOOT_BEFORE_INTEGRATOR)
             return
         named = self.powerup.named_seq(self.now_s)  # its power-up pose's word (bootnamed)
+        held = None if tick_s is None else held_counts(self, tick_s, primed_now)
+        if held is not None and (named is None or named <= held[0][0]):  # (liveheldstart)
+            self.lives.finish_boot(held[0][0], counts=held)
+            return
         unnamed = latest if primed_now else latest + 1
         if named is None:
             self.lives.await_boot(unnamed, self.now_s)

@@ -302,7 +302,7 @@ class RobotTelemetry(CommandFollowing):
         lost = rebooted(self, self.config, t_s)  # its staging and configs were in its RAM
         self.config_doubt = None  # and the config in doubt with them
         boot_frame(self.tracker, self.e2e, (uptime_s, state, seq, t_s), self._on_encoders)
-        start_new_life(self.tracker, self.e2e, self.db, uptime_s, state, seq)
+        start_new_life(self.tracker, self.e2e, self.db, uptime_s, state, seq, self.sources)
         self.distance.new_life()
         # its first ticks' (bootticks; its power-up pose's, its summary held back: bootnamed)
         since_s = self.tracker.powerup.life_from_s(self.sources.life_from_s) - SAME_TICK_S
