@@ -49,13 +49,14 @@ DRIVES: dict[str, Spec] = {
 STALL_S = (2.0, 2.1)  # the 50 ms stall of STALL_DELAY (bus time s)
 TAMPER_FROM_S = 5.0
 DISTANCE_BYTES = (6, 2)  # ODOM_TWIST DISTANCE: bytes 6..7, u16, 1 mm
-KEPT_NO_PAGE = ("the live gap bounds above from encoder frame 450 (4.96 s) on are kept: LiveSeen "
-                "keeps no ENC_E2E page (PAGE 2) from 5.551 to 7.25 s, though those at 6.181 and "
-                "6.781 s are heard in order with their CRC right (before them the summary, "
-                "COUNTER 14, held 30 ms, heard at 5.581 s after PAGE 2, COUNTER 15), so HeldGaps "
-                "decides each gap at HOLD_FRAMES (180 frames) with its bound, where analyze's "
-                "took_none proves them (bound 0); the first tampered twist judged (7.02 s) comes "
-                "with the bound grown by one gap's. Not swappedskips' rule: it only widens below")
+KEPT_NO_PAGE = ("the live gap bounds above from encoder frame 450 (4.96 s) to 535 are kept: "
+                "the ENC_E2E pages (PAGE 2) of 6.181 and 6.781 s came 30 ms after their summary "
+                "(the delay), past PageKeeper's half cycle, so no page is kept from 5.551 to "
+                "7.25 s; the pages prove those gaps (took_none) only at 8.0 s, after the FRAME_"
+                "TOTALS page of 7.851 s, but HeldGaps decided each at HOLD_FRAMES (180 frames, "
+                "6.97..7.91 s) with its bound; analyze, the whole log at hand, proves them "
+                "(bound 0). The first tampered twist judged (7.02 s) comes with the bound grown "
+                "by one gap's. Not swappedskips' rule: it only widens below")
 HIGH_PASSES: dict[str, tuple[Spec, str]] = {  # the sweep's 5 such (seed 10, each scenario)
     "pmir_figure8_10": (("pmir", "figure8", 10, STALL_DELAY),
                         "issue #11: DISTANCE 10 mm high from 5 s: analyze FAILs it by 9.996 mm, "
