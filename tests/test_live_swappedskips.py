@@ -8,17 +8,17 @@ next lap's and followed the late frames as the firmware did, so the net ENC_E2E_
 hid a second skip (``tests/test_trial36.py``). The live judge (``liveskip``) takes no such rule,
 and needs none on these drives: the live E2E (``E2EMonitor``, frame by frame) refused the late
 0xD and 0xE and stayed on the sender's frames, while the firmware took the late ones and refused
-the on-time ones after them, so the page after the stall counts 30 frames fewer than the live
-host took (pmir random 5: frames 169..221; kobuki random 6: 31, 173..227). Past
-``skipdefect.MAX_RUN`` (16) such a span goes to the union (``liveunion``): its fine path bounds
-whatever the firmware merged there, a swap's skip included. The rule only ever widens the
-allowance below (n times the largest defect of up to n + 1 steps grows with n; past
-``MAX_RUN``, the fine path bounds any defect), so its lack cannot let a wrong DISTANCE pass live,
-only blame a correct firmware; a sweep of 216 drives (pmir, kobuki x figure8, random, square x
-seeds 1-12 x the three mixes here) found no live DISTANCE FAIL of the correct firmware.
-
-``test_a_distance_10_mm_high_fails_live`` pins what the sweep found instead (not the rule's):
-DISTANCE 10 mm high from 5 s PASSes live where ``analyze`` FAILs it.
+the on-time ones after them (ENC_E2E_OK grew by 22 where the live host took 52 frames), so the
+first page after the stall counts 30 frames fewer than the live host took (pmir random 5,
+frames 169..221; kobuki random 6: 31, 173..227). Past ``skipdefect.MAX_RUN`` (16) such a span
+goes to the union (``liveunion``): its fine path bounds whatever the firmware merged there, a
+swap's skip included. Within ``MAX_RUN`` the rule only widens n, and n times the largest defect
+of up to n + 1 steps grows with n: its lack can blame a correct firmware, not pass a wrong
+DISTANCE. A sweep of 216 drives (pmir, kobuki x figure8, random, square x seeds 1-12 x
+``stall=2:0.05,delay=0.1:30``, ``stall=3:0.05,delay=0.1:40``, ``delay=0.2:40,stall=2:0.1``)
+found no live DISTANCE FAIL of the correct firmware; where live and ``analyze`` disagree, it is
+not for the rule (the xfails below: DISTANCE 10 mm high or low PASSing live, a correct firmware
+FAILed by ``analyze``).
 """
 
 from __future__ import annotations
@@ -67,6 +67,22 @@ HIGH_PASSES: dict[str, tuple[Spec, str]] = {  # the sweep's 5 such (seed 10, eac
                          "the monitor and the bridge PASS it (0.0 mm; 13.6 mm a 2-period gap): "
                          + KEPT_NO_PAGE),
 }
+LOW_PASSES: dict[str, tuple[Spec, str]] = {  # the sweep's 2 such (seed 2, figure8)
+    "pmir_figure8_2_delay2": (("pmir", "figure8", 2, "delay=0.2:40,stall=2:0.1"),
+                              "issue #11: DISTANCE 10 mm low from 5 s: analyze FAILs it by "
+                              "9.991 mm (kobuki figure8 2: 9.998 mm), the monitor and the "
+                              "bridge PASS it (0.0 mm). Not swappedskips' rule (the live judge "
+                              "lacks it: its allowance below is no wider for it); not traced"),
+}
+ANALYZE_FAILS: dict[str, tuple[Spec, str]] = {  # the sweep's 3 such (seed 3)
+    "pmir_random_3_delay2": (("pmir", "random", 3, "delay=0.2:40,stall=2:0.1"),
+                             "issue #11: run and analyze whole and streamed FAIL the correct "
+                             "firmware by ODOM_TWIST DISTANCE 35.575 mm beyond (pmir figure8 3: "
+                             "62.507 mm, kobuki figure8 3: 63.006 mm), the monitor and the "
+                             "bridge PASS it (0.0 mm). Not swappedskips' rule: with its "
+                             "widening undone analyze FAILs by the same 35.575 mm (the live and "
+                             "the whole-log ENC_E2E_OK spans are the same here); not traced"),
+}
 Drive = tuple[Path, int]  # log, run's exit
 
 
@@ -114,19 +130,30 @@ def _distance_tampered(log: Path, tmp_path: Path, mm: int) -> Path:
     return tampered
 
 
-@pytest.fixture(scope="module")
-def drives(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Drive]:
-    """Each drive (``DRIVES``, ``HIGH_PASSES``) recorded once by ``run`` with the Python
-    firmware, every step watched: the log and run's exit."""
-    made: dict[str, Drive] = {}
-    specs = {**DRIVES, **{name: spec for name, (spec, _) in HIGH_PASSES.items()}}
-    for name, (robot, scenario, seed, faults) in specs.items():
-        log = tmp_path_factory.mktemp(name) / "d.log"
+class _Drives(dict[str, "Drive"]):
+    """Each drive (``DRIVES`` and the xfails' tables) recorded once, when first asked, by
+    ``run`` with the Python firmware, every step watched: the log and run's exit."""
+
+    def __init__(self, tmp: pytest.TempPathFactory) -> None:
+        super().__init__()
+        self.tmp = tmp
+
+    def __missing__(self, name: str) -> Drive:
+        specs = {**DRIVES, **{n: spec for n, (spec, _) in {**HIGH_PASSES, **LOW_PASSES,
+                                                              **ANALYZE_FAILS}.items()}}
+        robot, scenario, seed, faults = specs[name]
+        log = self.tmp.mktemp(name) / "d.log"
         watch, code = watched_run(log, robot, scenario, seed, 10, faults)
         assert watch.steps > 400, watch.steps
         assert watch.within_a_thousandth_lsb(), (watch.worst_m, watch.worst_rad)
-        made[name] = (log, code)
-    return made
+        self[name] = (log, code)
+        return self[name]
+
+
+@pytest.fixture(scope="module")
+def drives(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Drive]:
+    """The drives, each recorded when a test first asks for it (``_Drives``)."""
+    return _Drives(tmp_path_factory)
 
 
 @pytest.mark.slow
@@ -186,18 +213,30 @@ def test_a_pose_10_mm_off_still_fails(drives: dict[str, Drive], name: str,
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name", [
-    pytest.param(n, marks=pytest.mark.xfail(strict=True, reason=why))
-    for n, (_, why) in HIGH_PASSES.items()])
-def test_a_distance_10_mm_high_fails_live(drives: dict[str, Drive], name: str,
-                                          tmp_path: Path) -> None:
-    """DISTANCE 10 mm high from 5 s on a correct drive: analyze FAILs it; so must the monitor
+@pytest.mark.parametrize(("name", "mm"), [
+    pytest.param(n, mm, marks=pytest.mark.xfail(strict=True, reason=why))
+    for mm, table in ((10, HIGH_PASSES), (-10, LOW_PASSES)) for n, (_, why) in table.items()])
+def test_a_distance_10_mm_off_fails_live(drives: dict[str, Drive], name: str, mm: int,
+                                         tmp_path: Path) -> None:
+    """DISTANCE ``mm`` off from 5 s on a correct drive: analyze FAILs it; so must the monitor
     and the bridge."""
     log, code = drives[name]
     assert code == 0
-    tampered = _distance_tampered(log, tmp_path, 10)
+    tampered = _distance_tampered(log, tmp_path, mm)
     assert [c for _, c, _ in reported_analyses(tampered, tmp_path)] == [1, 1]
-    robot = HIGH_PASSES[name][0][0]
+    robot = {**HIGH_PASSES, **LOW_PASSES}[name][0][0]
     verdicts = _verdicts(*_live(robot, tampered)[:2])
     assert [(passed, excess_m > 5e-3) for passed, excess_m in verdicts] == [(False, True)] * 2, \
         verdicts
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", [
+    pytest.param(n, marks=pytest.mark.xfail(strict=True, reason=why))
+    for n, (_, why) in ANALYZE_FAILS.items()])
+def test_run_and_analyze_pass_the_correct_firmware(drives: dict[str, Drive], name: str,
+                                                   tmp_path: Path) -> None:
+    """The live judges PASS it (asserted first); run and both analyses must too."""
+    log, code = drives[name]
+    assert _verdicts(*_live(ANALYZE_FAILS[name][0][0], log)[:2]) == [(True, 0.0)] * 2
+    assert [code, *(c for _, c, _ in reported_analyses(log, tmp_path))] == [0, 0, 0]
