@@ -1,0 +1,243 @@
+"""The live DISTANCE judge (the monitor model's and the bridge's ``livedistance``) beside
+``analyze``'s on the trial36 stall under delay and its neighbours (issue #11, one judge; rule 5:
+a FAIL never blames a correct firmware, a PASS never hides a wrong DISTANCE).
+
+``analyze`` widens a ``skipped`` span by the late frames the host refused
+(``host.judge.swappedskips``): its whole-log E2E took the late 0xE after the 50 ms stall for the
+next lap's and followed the late frames as the firmware did, so the net ENC_E2E_OK count (n = 1)
+hid a second skip (``tests/test_trial36.py``). The live judge (``liveskip``) takes no such rule,
+and needs none on these drives: the live E2E (``E2EMonitor``, frame by frame) refused the late
+0xD and 0xE and stayed on the sender's frames, while the firmware took the late ones and refused
+the on-time ones after them (ENC_E2E_OK grew by 22 where the live host took 52 frames), so the
+first page after the stall counts 30 frames fewer than the live host took (pmir random 5,
+frames 169..221; kobuki random 6: 31, 173..227). Past ``skipdefect.MAX_RUN`` (16) such a span
+goes to the union (``liveunion``): its fine path bounds whatever the firmware merged there, a
+swap's skip included. Within ``MAX_RUN`` the rule only widens n, and n times the largest defect
+of up to n + 1 steps grows with n: its lack can blame a correct firmware, not pass a wrong
+DISTANCE. A sweep of 216 drives (pmir, kobuki x figure8, random, square x seeds 1-12 x
+``stall=2:0.05,delay=0.1:30``, ``stall=3:0.05,delay=0.1:40``, ``delay=0.2:40,stall=2:0.1``)
+found no live DISTANCE FAIL of the correct firmware; where live and ``analyze`` disagree, it is
+not for the rule (the xfails below: DISTANCE 10 mm high or low PASSing live, a correct firmware
+FAILed by ``analyze``).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import can
+import pytest
+
+from odocan.host.judge import liveskip
+from odocan.host.judge.monitor import BusMonitor
+from odocan.host.judge.reference import Geometry
+from odocan.host.judge.skipdefect import MAX_RUN
+from odocan.host.judge.watchend import end_watch
+from odocan.host.mqtt.telemetry import RobotTelemetry
+from odocan.sim.robot import load
+from tests.judges_cli import reported_analyses, watched_run, x_10_mm_off_fails
+from tests.log_edit import raise_raw
+
+Spec = tuple[str, str, int, str]  # robot, scenario, seed, faults (10 s drives)
+STALL_DELAY = "stall=2:0.05,delay=0.1:30"  # trial36's
+DRIVES: dict[str, Spec] = {
+    "pmir_random_5": ("pmir", "random", 5, STALL_DELAY),
+    "kobuki_random_6": ("kobuki", "random", 6, STALL_DELAY),
+    "pmir_square_5_stall3": ("pmir", "square", 5, "stall=3:0.05,delay=0.1:40"),
+    "kobuki_figure8_6_delay2": ("kobuki", "figure8", 6, "delay=0.2:40,stall=2:0.1"),
+}
+STALL_S = (2.0, 2.1)  # the 50 ms stall of STALL_DELAY (bus time s)
+TAMPER_FROM_S = 5.0
+DISTANCE_BYTES = (6, 2)  # ODOM_TWIST DISTANCE: bytes 6..7, u16, 1 mm
+KEPT_NO_PAGE = ("the live gap bounds above from encoder frame 450 (4.96 s) to 535 are kept: "
+                "the ENC_E2E pages (PAGE 2) of 6.181 and 6.781 s came 30 ms after their summary "
+                "(the delay), past PageKeeper's half cycle, so no page is kept from 5.551 to "
+                "7.25 s; the pages prove those gaps (took_none) only at 8.0 s, after the FRAME_"
+                "TOTALS page of 7.851 s, but HeldGaps decided each at HOLD_FRAMES (180 frames, "
+                "6.97..7.91 s) with its bound; analyze, the whole log at hand, proves them "
+                "(bound 0). The first tampered twist judged (7.02 s) comes with the bound grown "
+                "by one gap's. Not swappedskips' rule: it only widens below")
+HIGH_PASSES: dict[str, tuple[Spec, str]] = {  # the sweep's 10 such (seed 10, both stall mixes)
+    "pmir_figure8_10": (("pmir", "figure8", 10, STALL_DELAY),
+                        "issue #11: DISTANCE 10 mm high from 5 s: analyze FAILs it by 9.996 mm, "
+                        "the monitor and the bridge PASS it (0.0 mm; 76.8 mm a 2-period gap, "
+                        "pmir's 4 m/s): " + KEPT_NO_PAGE),
+    "kobuki_random_10": (("kobuki", "random", 10, STALL_DELAY),
+                         "issue #11: DISTANCE 10 mm high from 5 s: analyze FAILs it by 9.99 mm, "
+                         "the monitor and the bridge PASS it (0.0 mm; 13.6 mm a 2-period gap): "
+                         + KEPT_NO_PAGE),
+}
+LOW_PASSES: dict[str, tuple[Spec, str]] = {  # the sweep's 2 such (seed 2, figure8)
+    "pmir_figure8_2_delay2": (("pmir", "figure8", 2, "delay=0.2:40,stall=2:0.1"),
+                              "issue #11: DISTANCE 10 mm low from 5 s: analyze FAILs it by "
+                              "9.991 mm (kobuki figure8 2: 9.998 mm), the monitor and the "
+                              "bridge PASS it (0.0 mm). Not swappedskips' rule (the live judge "
+                              "lacks it: its allowance below is no wider for it); not traced"),
+}
+ANALYZE_FAILS: dict[str, tuple[Spec, str]] = {  # the sweep's 6 such (seed 3, every drive)
+    "pmir_random_3_delay2": (("pmir", "random", 3, "delay=0.2:40,stall=2:0.1"),
+                             "issue #11: run and analyze whole and streamed FAIL the correct "
+                             "firmware by ODOM_TWIST DISTANCE 35.575 mm beyond (pmir figure8 3: "
+                             "62.507 mm, kobuki figure8 3: 63.006 mm, the others 35.8..47.7 "
+                             "mm), the monitor and the bridge PASS it (0.0 mm). Not "
+                             "swappedskips' rule: with its widening undone analyze FAILs by the "
+                             "same 35.575 mm (the live and the whole-log ENC_E2E_OK spans are "
+                             "the same here); not traced"),
+}
+Drive = tuple[Path, int]  # log, run's exit
+
+
+def _live(robot: str, log: Path) -> tuple[BusMonitor, RobotTelemetry, list[tuple[float, int]]]:
+    """The monitor and the bridge fed ``log`` and their watch ended (what still waits judged,
+    as ``odocan monitor`` and the bridge end it); the monitor's ENC_E2E_OK spans
+    (``LiveSkips.on_page``: bus time of the page, frames fewer than the host took)."""
+    profile = load(robot)
+    monitor = BusMonitor(profile)
+    bridge = RobotTelemetry("r1", Geometry.of(profile), "exact",
+                            counter_bits=profile.counter_bits)
+    spans: list[tuple[float, int]] = []
+    now = [0.0]
+    on_page = liveskip.LiveSkips.on_page
+
+    def noted(skips: liveskip.LiveSkips, ok: int, seq: int) -> None:
+        if skips is monitor.distance._skips and skips._page is not None:
+            ok_before, seq_before = skips._page
+            spans.append((now[0], (seq - seq_before) - (ok - ok_before) % liveskip.OK_WRAP))
+        on_page(skips, ok, seq)
+
+    with pytest.MonkeyPatch.context() as patch, can.LogReader(str(log)) as reader:
+        patch.setattr(liveskip.LiveSkips, "on_page", noted)
+        for msg in reader:
+            now[0] = msg.timestamp
+            monitor.feed(msg, now_s=msg.timestamp)
+            bridge.feed(msg)
+        monitor.release_held()
+        end_watch(monitor.tracker, monitor.distance)
+        bridge.end_watch()
+    return monitor, bridge, spans
+
+
+def _verdicts(monitor: BusMonitor, bridge: RobotTelemetry) -> list[tuple[bool, float]]:
+    """Each live DISTANCE judge's (passed, worst excess m), its verdict taken first (the worst
+    excess is brought up to date by it)."""
+    return [(bool(j.as_dict()["passed"]), j.worst_excess_m)
+            for j in (monitor.distance, bridge.distance)]
+
+
+def _distance_tampered(log: Path, tmp_path: Path, mm: int) -> Path:
+    """``log`` with ODOM_TWIST DISTANCE ``mm`` off from ``TAMPER_FROM_S`` on."""
+    tampered = tmp_path / f"distance{mm}.log"
+    assert raise_raw(log, tampered, "ODOM_TWIST", DISTANCE_BYTES, mm, TAMPER_FROM_S) > 100
+    return tampered
+
+
+class _Drives(dict[str, "Drive"]):
+    """Each drive (``DRIVES`` and the xfails' tables) recorded once, when first asked, by
+    ``run`` with the Python firmware, every step watched: the log and run's exit."""
+
+    def __init__(self, tmp: pytest.TempPathFactory) -> None:
+        super().__init__()
+        self.tmp = tmp
+
+    def __missing__(self, name: str) -> Drive:
+        specs = {**DRIVES, **{n: spec for n, (spec, _) in {**HIGH_PASSES, **LOW_PASSES,
+                                                              **ANALYZE_FAILS}.items()}}
+        robot, scenario, seed, faults = specs[name]
+        log = self.tmp.mktemp(name) / "d.log"
+        watch, code = watched_run(log, robot, scenario, seed, 10, faults)
+        assert watch.steps > 400, watch.steps
+        assert watch.within_a_thousandth_lsb(), (watch.worst_m, watch.worst_rad)
+        self[name] = (log, code)
+        return self[name]
+
+
+@pytest.fixture(scope="module")
+def drives(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Drive]:
+    """The drives, each recorded when a test first asks for it (``_Drives``)."""
+    return _Drives(tmp_path_factory)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", list(DRIVES))
+def test_every_distance_judge_passes_the_correct_firmware(drives: dict[str, Drive], name: str,
+                                                          tmp_path: Path) -> None:
+    """run, analyze whole and streamed, the monitor and the bridge: DISTANCE within its
+    allowance everywhere (the live judges without swappedskips' rule)."""
+    log, code = drives[name]
+    judged = reported_analyses(log, tmp_path)
+    assert [code, *(c for _, c, _ in judged)] == [0, 0, 0]
+    assert all(r["onboard_distance_vs_reference"]["passed"] for _, _, r in judged)
+    monitor, bridge, _ = _live(DRIVES[name][0], log)
+    assert min(monitor.distance.samples, bridge.distance.samples) > 300
+    assert _verdicts(monitor, bridge) == [(True, 0.0), (True, 0.0)]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["pmir_random_5", "kobuki_random_6"])
+def test_the_live_span_over_the_stall_is_past_max_run(drives: dict[str, Drive],
+                                                      name: str) -> None:
+    """Why the live judge needs no swapped-frames rule here: the first ENC_E2E page after the
+    stall counts more than ``MAX_RUN`` frames fewer than the live host took (its fine path
+    bounds the span, swaps included), where ``analyze``'s net n was 1 (module docstring)."""
+    log, _ = drives[name]
+    _, _, spans = _live(DRIVES[name][0], log)
+    after = [fewer for t_s, fewer in spans if t_s > STALL_S[1]]
+    assert after[0] > MAX_RUN, spans
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("mm", [10, -10])
+@pytest.mark.parametrize("name", list(DRIVES))
+def test_a_distance_10_mm_off_fails_every_judge(drives: dict[str, Drive], name: str, mm: int,
+                                                tmp_path: Path) -> None:
+    """DISTANCE 10 mm off from 5 s: both analyses and both live judges FAIL it (by more than
+    5 mm: the live allowance below is a looser fine path than analyze's after a stall)."""
+    tampered = _distance_tampered(drives[name][0], tmp_path, mm)
+    for stream, code, report in reported_analyses(tampered, tmp_path):
+        excess_m = report["onboard_distance_vs_reference"]["max_excess_m"]
+        assert (code, excess_m > 9e-3) == (1, True), (stream, excess_m)
+    verdicts = _verdicts(*_live(DRIVES[name][0], tampered)[:2])
+    assert [(passed, excess_m > 5e-3) for passed, excess_m in verdicts] == [(False, True)] * 2, \
+        verdicts
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["pmir_random_5", "kobuki_figure8_6_delay2"])
+def test_a_pose_10_mm_off_still_fails(drives: dict[str, Drive], name: str,
+                                      tmp_path: Path) -> None:
+    """X 10 mm off from 5 s: both analyses FAIL it by the position, both live judges too."""
+    tampered = tmp_path / "x10.log"
+    assert x_10_mm_off_fails(drives[name][0], tampered, TAMPER_FROM_S, 100) == []
+    monitor, bridge, _ = _live(DRIVES[name][0], tampered)
+    beyond_m = [j.tracker.max_beyond_allowance_m for j in (monitor, bridge)]
+    assert min(beyond_m) > 5e-3, beyond_m
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("name", "mm"), [
+    pytest.param(n, mm, marks=pytest.mark.xfail(strict=True, reason=why))
+    for mm, table in ((10, HIGH_PASSES), (-10, LOW_PASSES)) for n, (_, why) in table.items()])
+def test_a_distance_10_mm_off_fails_live(drives: dict[str, Drive], name: str, mm: int,
+                                         tmp_path: Path) -> None:
+    """DISTANCE ``mm`` off from 5 s on a correct drive: analyze FAILs it; so must the monitor
+    and the bridge."""
+    log, code = drives[name]
+    assert code == 0
+    tampered = _distance_tampered(log, tmp_path, mm)
+    assert [c for _, c, _ in reported_analyses(tampered, tmp_path)] == [1, 1]
+    robot = {**HIGH_PASSES, **LOW_PASSES}[name][0][0]
+    verdicts = _verdicts(*_live(robot, tampered)[:2])
+    assert [(passed, excess_m > 5e-3) for passed, excess_m in verdicts] == [(False, True)] * 2, \
+        verdicts
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", [
+    pytest.param(n, marks=pytest.mark.xfail(strict=True, reason=why))
+    for n, (_, why) in ANALYZE_FAILS.items()])
+def test_run_and_analyze_pass_the_correct_firmware(drives: dict[str, Drive], name: str,
+                                                   tmp_path: Path) -> None:
+    """The live judges PASS it (asserted first); run and both analyses must too."""
+    log, code = drives[name]
+    assert _verdicts(*_live(ANALYZE_FAILS[name][0][0], log)[:2]) == [(True, 0.0)] * 2
+    assert [code, *(c for _, c, _ in reported_analyses(log, tmp_path))] == [0, 0, 0]
