@@ -43,6 +43,7 @@ from tests.conftest_mqtt import (  # noqa: F401 (fixtures)
     durable_mosquitto,
     mosquitto,
 )
+from tests.fleet_run_until import BOUND_S, stop_fleet_when
 
 BROKERS = ("mosquitto", "amqtt")
 ROBOT = "robot001"
@@ -141,17 +142,28 @@ def test_invalid_commands_are_rejected_and_never_reach_the_bus(kind: str, tmp_pa
 
 
 @pytest.mark.parametrize("kind", BROKERS)
-def test_fleet_telemetry_and_retained_status(kind: str, tmp_path: Path) -> None:
-    """One real-time robot through the bridge: pose vs reference on the broker, status retained."""
+def test_fleet_telemetry_and_retained_status(
+    kind: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """One real-time robot through the bridge: pose vs reference on the broker, status retained.
+    The fleet drives until the operator got a pose, a reference and an error (a 1.5 s drive
+    ended before the bridge had published the last two when its loop stalled 1.4 s)."""
+    seen = asyncio.Event()
+    stop_fleet_when(monkeypatch, seen)
+
+    def leaves_seen(got: list[tuple[str, dict[str, Any]]]) -> bool:
+        if {"pose", "reference", "error"} <= {t.split("/", 2)[2] for t, _ in got}:
+            seen.set()
+        return got[-1][1].get("state") == "offline"
 
     async def scenario() -> tuple[list[tuple[str, dict[str, Any]]], dict[str, Any]]:
         async with broker_of(kind, tmp_path) as brokers, client(brokers.operator) as sub:
             await sub.subscribe(f"odocan/{ROBOT}/#", qos=1)
-            run = FleetRun(fleet=FleetConfig(robots=1, robot=PMIR, seed=3), duration_s=1.5,
+            run = FleetRun(fleet=FleetConfig(robots=1, robot=PMIR, seed=3), duration_s=BOUND_S,
                            broker=brokers.bridge, client_prefix=f"test-fleet-{kind}")
+            listening = asyncio.create_task(collect(sub, leaves_seen, BOUND_S + 30.0))
             report = await run_fleet(run)
-            got = await collect(sub, lambda g: g[-1][1].get("state") == "offline")
-            return got, report
+            return await listening, report
 
     got, report = asyncio.run(scenario())
     by_leaf: dict[str, list[dict[str, Any]]] = {}
