@@ -34,6 +34,7 @@ from odocan.host.mqtt.broker import BrokerURL
 from odocan.host.report.tui_app import MonitorApp
 from odocan.sim import robot
 from odocan.sim.rig import LockstepRig, RigConfig
+from tests.fleet_run_until import pace_never_late
 from tests.test_cli_run import assert_usage_error, run_cli
 
 TICKS = 100  # 1 s of real time
@@ -325,8 +326,13 @@ def test_monitor_without_a_duration_gives_up_on_a_broker_it_never_reached(
         2, 1, True), err
 
 
-def test_monitor_mqtt_fleet_json(capsys: pytest.CaptureFixture[str]) -> None:
-    """Two real-time robots bridged to the embedded amqtt broker; the monitor's fleet table."""
+def test_monitor_mqtt_fleet_json(
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Two real-time robots bridged to the embedded amqtt broker; the monitor's fleet table.
+    The fleet on a clock never late (``PacedClock``): a tick 95 ms late (a loaded machine)
+    halts the boards, and the firmwares' status then says DEGRADED (TIME_LOST), rightly."""
+    pace_never_late(monkeypatch)
     from odocan.host.mqtt.broker import EmbeddedBroker
     from odocan.host.mqtt.fleetrun import FleetRun, run_fleet
     from odocan.sim.fleet import FleetConfig
