@@ -375,12 +375,15 @@ def test_monitor_mqtt_fleet_json(
 
 async def summaries_published(broker: BrokerURL, names: set[str]) -> None:
     """Return once every robot of ``names`` has a retained status with its firmware's summary
-    (the bridge publishes one a second: on a loaded machine the first may come after 2 s)."""
+    (the bridge publishes one a second: on a loaded machine the first may come after 2 s), a
+    pose and its error against the reference (under load: the status alone came first, then
+    a 1.8 s stall, and the monitor's 2 s saw no error yet)."""
     from odocan.host.mqtt.fleetview import fleet_snapshot, fleet_states
 
     async for table in fleet_states(broker=broker, min_interval_s=0.0):
         rows = fleet_snapshot(table)
-        if set(rows) >= names and all(rows[n]["status"] is not None for n in names):
+        if set(rows) >= names and all(None not in (rows[n]["status"], rows[n]["pose"],
+                                                   rows[n]["error"]) for n in names):
             return
 
 
