@@ -34,6 +34,7 @@ from odocan.host.mqtt.broker import BrokerURL
 from odocan.host.report.tui_app import MonitorApp
 from odocan.sim import robot
 from odocan.sim.rig import LockstepRig, RigConfig
+from tests.fleet_run_until import pace_never_late
 from tests.test_cli_run import assert_usage_error, run_cli
 
 TICKS = 100  # 1 s of real time
@@ -325,8 +326,13 @@ def test_monitor_without_a_duration_gives_up_on_a_broker_it_never_reached(
         2, 1, True), err
 
 
-def test_monitor_mqtt_fleet_json(capsys: pytest.CaptureFixture[str]) -> None:
-    """Two real-time robots bridged to the embedded amqtt broker; the monitor's fleet table."""
+def test_monitor_mqtt_fleet_json(
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Two real-time robots bridged to the embedded amqtt broker; the monitor's fleet table.
+    The fleet on a clock never late (``PacedClock``): a tick 95 ms late (a loaded machine)
+    halts the boards, and the firmwares' status then says DEGRADED (TIME_LOST), rightly."""
+    pace_never_late(monkeypatch)
     from odocan.host.mqtt.broker import EmbeddedBroker
     from odocan.host.mqtt.fleetrun import FleetRun, run_fleet
     from odocan.sim.fleet import FleetConfig
@@ -369,12 +375,15 @@ def test_monitor_mqtt_fleet_json(capsys: pytest.CaptureFixture[str]) -> None:
 
 async def summaries_published(broker: BrokerURL, names: set[str]) -> None:
     """Return once every robot of ``names`` has a retained status with its firmware's summary
-    (the bridge publishes one a second: on a loaded machine the first may come after 2 s)."""
+    (the bridge publishes one a second: on a loaded machine the first may come after 2 s), a
+    pose and its error against the reference (under load: the status alone came first, then
+    a 1.8 s stall, and the monitor's 2 s saw no error yet)."""
     from odocan.host.mqtt.fleetview import fleet_snapshot, fleet_states
 
     async for table in fleet_states(broker=broker, min_interval_s=0.0):
         rows = fleet_snapshot(table)
-        if set(rows) >= names and all(rows[n]["status"] is not None for n in names):
+        if set(rows) >= names and all(None not in (rows[n]["status"], rows[n]["pose"],
+                                                   rows[n]["error"]) for n in names):
             return
 
 

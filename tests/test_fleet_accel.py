@@ -14,6 +14,7 @@ import pytest
 
 from odocan.host import accel
 from odocan.host.cli.app import main
+from tests.fleet_run_until import pace_never_late
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -36,7 +37,9 @@ def test_fleet_accel_without_a_compiler_runs_pure_in_one_line(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """No C compiler: the fleet runs in pure Python, said once, and the environment the
-    workers would have inherited is left as it was."""
+    workers would have inherited is left as it was. (On ``PacedClock``: a loaded machine's
+    halt could leave the robot UNJUDGED, exit 1.)"""
+    pace_never_late(monkeypatch)
     monkeypatch.delenv(accel.ENV, raising=False)
     monkeypatch.setenv(accel.CACHE_ENV, str(tmp_path / "cache"))
     monkeypatch.setenv("CC", "/nonexistent/cc")

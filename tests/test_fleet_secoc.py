@@ -26,6 +26,7 @@ from odocan.sim import robot
 from odocan.sim.fleet import FleetConfig
 from odocan.sim.provision import robot_key
 from tests.conftest_mqtt import client
+from tests.fleet_run_until import pace_never_late
 from tests.test_secoc import KEY
 from tests.test_secoc_host import one_line_error
 
@@ -90,7 +91,10 @@ async def _publish(operator: Any, commands: list[tuple[str, str, dict[str, Any]]
         await operator.publish(topics.topic(name, f"cmd/{command}"), json.dumps(payload), qos=1)
 
 
-def test_a_fleet_command_is_acked_with_the_key_and_nacked_auth_without_it() -> None:
+def test_a_fleet_command_is_acked_with_the_key_and_nacked_auth_without_it(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    pace_never_late(monkeypatch)  # a halted MCU (a loaded machine) loses what it was sent
     pose = {"x_m": 1.5, "y_m": -2.0, "heading_rad": 0.5}
     answers = asyncio.run(fleet_answers([
         (SIGNED, "set_pose", {"id": "signed-pose", **pose}),

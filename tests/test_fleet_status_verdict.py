@@ -33,6 +33,7 @@ from odocan.sim.board import TICK_S
 from odocan.sim.fleet import FleetConfig
 from odocan.sim.realtime import DeadlineStats
 from tests.conftest_mqtt import Mosquitto, client, mosquitto  # noqa: F401 (fixture)
+from tests.fleet_run_until import pace_never_late
 from tests.test_bridge_exit import RETAINED_WAIT_S, _retained_status
 from tests.test_cli_run import run_cli
 from tests.test_fleet_verdict import WRONG_100UM
@@ -95,6 +96,7 @@ def _check_loop(verdict: dict[str, Any], ratio: float, max_ratio: float) -> None
 def test_each_fleet_robots_retained_status_carries_its_report_verdict(
     wrong: bool, monkeypatch: pytest.MonkeyPatch
 ) -> None:
+    pace_never_late(monkeypatch)  # a halt (a loaded machine) would judge only before it
     if wrong:
         _inject_wrong_x(monkeypatch)
     report, statuses = asyncio.run(_fleet_and_statuses())
@@ -127,6 +129,7 @@ def test_the_cli_fleets_statuses_carry_its_max_miss_ratio(
     the status's verdict is its ``--report``'s, its loop judged against ``--max-miss-ratio``."""
     url = mosquitto.url()
     monkeypatch.setenv(PASSWORD_ENV, url.password or "")
+    pace_never_late(monkeypatch)  # a halt (a loaded machine) would leave the robot UNJUDGED
     path = tmp_path / "fleet.json"
     code, out, err = run_cli(capsys, "fleet", "-n", "1", "--duration", "1", "--seed", "4",
                              "--max-miss-ratio", "1", "--report", str(path), "--broker",

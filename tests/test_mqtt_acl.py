@@ -40,6 +40,9 @@ PMIR = robot.load("pmir")
 GEOMETRY = Geometry.of(PMIR)
 SET_POSE = {"x_m": 1.0, "y_m": 2.0, "heading_rad": 0.5}
 _channels = count()
+ANSWER_WAIT_S = 30.0  # a bound only: each wait ends when what it waits for came
+REFUSED_STATUS = ("robot001: the broker refused a publication on odocan/robot001/status "
+                  "(Not authorized)")
 
 
 def roles_acl() -> str:
@@ -113,18 +116,22 @@ def frames_on(bus: can.BusABC) -> list[can.Message]:
     return frames
 
 
-async def results(url: BrokerURL, name: str, wait_s: float) -> list[dict[str, object]]:
-    """``cmd/result`` messages of robot ``name`` seen within ``wait_s`` (read as ``url``)."""
+async def results(url: BrokerURL, name: str, subscribed: asyncio.Event,
+                  last_id: str) -> list[dict[str, object]]:
+    """``cmd/result`` messages of robot ``name`` (read as ``url``), from ``subscribed`` (set once
+    the broker granted the subscription) until the answer to command ``last_id`` (a bound of
+    ``ANSWER_WAIT_S``: a loaded machine's bridge answers late, and a fixed 3 s watch closed
+    before it did)."""
     got: list[dict[str, object]] = []
     async with client(url) as sub:
         await sub.subscribe(topics.topic(name, topics.RESULT_LEAF), qos=1)
-        try:
-            async with asyncio.timeout(wait_s):
-                async for message in sub.messages:
-                    assert isinstance(message.payload, bytes)
-                    got.append(json.loads(message.payload))
-        except TimeoutError:
-            pass
+        subscribed.set()
+        async with asyncio.timeout(ANSWER_WAIT_S):
+            async for message in sub.messages:
+                assert isinstance(message.payload, bytes)
+                got.append(json.loads(message.payload))
+                if got[-1]["id"] == last_id:
+                    break
     return got
 
 
@@ -137,8 +144,11 @@ def test_only_an_operator_moves_a_robot(broker: Mosquitto) -> None:
                                   list[dict[str, object]]]:
         target = topics.topic("robot001", "cmd/set_pose")
         async with bridge_of(broker.url("robot001"), "robot001") as bus:
-            watch = asyncio.create_task(results(broker.url("viewer"), "robot001", 3.0))
-            await asyncio.sleep(0.3)  # the watcher subscribed
+            subscribed = asyncio.Event()
+            watch = asyncio.create_task(results(broker.url("viewer"), "robot001", subscribed,
+                                                "by-operator"))
+            async with asyncio.timeout(ANSWER_WAIT_S):
+                await subscribed.wait()
             codes = {}
             for user in ("robot002", "viewer", "robot001"):
                 codes[user] = await asyncio.to_thread(
@@ -172,13 +182,19 @@ def test_a_robot_reads_only_its_own_commands(broker: Mosquitto,
             await asyncio.to_thread(publish_v5, broker.url("operator"),
                                     topics.topic("robot001", "cmd/set_pose"),
                                     {"id": "op", **SET_POSE})
-            await asyncio.sleep(1.5)  # the first status (QoS 1) is refused meanwhile
+            async with asyncio.timeout(ANSWER_WAIT_S):  # the first status (QoS 1) refused
+                while REFUSED_STATUS not in warnings_of(caplog):
+                    await asyncio.sleep(0.05)
+            await asyncio.sleep(1.0)  # time for the command to arrive, had it been let through
             return frames_on(bus)
 
     assert asyncio.run(scenario()) == []  # the operator's command never reached this bridge
-    warnings = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
-    assert ("robot001: the broker refused a publication on odocan/robot001/status "
-            "(Not authorized)") in warnings
+    assert REFUSED_STATUS in warnings_of(caplog)
+
+
+def warnings_of(caplog: pytest.LogCaptureFixture) -> list[str]:
+    """The WARNING lines logged so far."""
+    return [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
 
 
 def test_a_viewer_reads_what_robots_publish(broker: Mosquitto) -> None:

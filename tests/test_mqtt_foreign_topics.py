@@ -100,6 +100,8 @@ def test_a_bridge_link_on_amqtt_answers_no_other_topics_retained_message(
                              on_command=lambda n, p, v: calls.append((n, v)) or [])  # type: ignore[func-returns-value]
             stop = asyncio.Event()
             task = asyncio.create_task(link.run(stop=stop))
+            async with asyncio.timeout(20):  # its commands subscribed (a command published
+                await link.connected.wait()  # before, on a loaded machine, reached no one)
             await monitor.publish(COMMAND, b'{"id": "c"}', qos=1)  # a command: taken
             async with asyncio.timeout(20):  # the command answered, the foreign ones read
                 while not (calls and foreign <= set(reached)):

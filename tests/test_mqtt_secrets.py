@@ -18,6 +18,7 @@ from odocan.host.cli.app import main
 from odocan.host.mqtt.broker import LOOPBACK, BrokerURL
 from odocan.host.mqtt.options import PASSWORD_ENV
 from tests.conftest_mqtt import Mosquitto, restore_logging  # noqa: F401
+from tests.fleet_watch_until import BOUND_S, end_watch_once
 from tests.requires import require_executables
 
 pytestmark = pytest.mark.usefixtures("restore_logging")
@@ -188,9 +189,12 @@ def test_a_bad_password_file_is_exit_2_and_one_line(
 def test_the_monitor_takes_the_password_from_the_environment(
     broker: Mosquitto, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """A wrong password in the environment is a refusal (so the variable is read), one line."""
+    """A wrong password in the environment is a refusal (so the variable is read), one line.
+    The watch ends at the refusal, its --duration a bound (a 2 s watch that a loaded machine
+    spent before the CONNACK said "cannot reach", not the refusal)."""
     monkeypatch.setenv(PASSWORD_ENV, "wrong")
-    code = main(["monitor", "--json", "--duration", "2",
+    end_watch_once(monkeypatch, lambda watch: watch.connected_once)
+    code = main(["monitor", "--json", "--duration", BOUND_S,
                  "--broker", f"mqtt://bridge@{LOOPBACK}:{broker.port}"])
     _, err = capsys.readouterr()
     assert code == 2
