@@ -1,0 +1,122 @@
+"""The thirty-seventh pass's outside trial (issue #11): odd robots (custom profiles: 32-bit
+counters, 12 counts per revolution, a 1 cm wheelbase, unequal wheel radii, a robot whose every
+scenario saturates at its MAX_WHEEL_SPEED, 2^20 and 2^24 counts per revolution), the C firmware
+beside the Python one, 10..60 s drives of every scenario but straight, and the fault mixes a rig
+would use, alone and by two. Each drive judged by the four judges (``run``, ``analyze`` whole
+and streamed, the live monitor and the bridge's judge), its firmware's every step watched
+(``tests.fw_watch``), and again with ODOM_POSE_X raised 10 mm from mid-drive on.
+
+Pinned here: a sample of the passes (each judge PASSes the correct firmware, FAILs the tampered
+pose, and the C firmware writes the Python one's log byte for byte), and the one wrong verdict
+found (``LIVE_LOSS_SPAN``, strict xfail with its figures and traced cause).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from odocan.host.cli.app import main
+from odocan.sim import cboard
+from odocan.sim.robot import RobotProfile, to_toml
+from tests.fw_watch import Watch
+from tests.judges_cli import live_judges, raise_x_10_mm, watched_run
+from tests.requires import require_executables
+
+PROFILES = {  # odd robots a rig may be configured for (names are the tests' own)
+    "cpr12": RobotProfile("cpr12", 12, 0.05, 0.05, 0.25, 16, 2.0),  # 26 mm of rim per count
+    "wb1cm": RobotProfile("wb1cm", 1000, 0.03, 0.03, 0.01, 16, 1.5),  # a 1 cm wheelbase
+    "c32": RobotProfile("c32", 4096, 0.08, 0.08, 0.3, 32, 4.0),  # 32-bit counters
+    "fast": RobotProfile("fast", 2000, 0.05, 0.05, 0.3, 16, 0.45),  # every scenario saturates
+}
+Spec = tuple[str, str, int, int, str]  # profile, scenario, seed, duration s, faults
+TAMPER_MM = 10
+STALL_DELAY = "stall=3.0:0.05,delay=0.1:30"
+LIVE_LOSS_SPAN = (
+    "issue #11: cpr12 figure8 seed 74, 10 s, stall=3.0:0.05,delay=0.1:30: ODOM_POSE_X raised 10 mm "
+    "from 5 s on FAILs run's firmware twin and both analyzes (9.92 mm beyond), but the monitor "
+    "and the bridge's judge stay OK, 0.0555 mm beyond, the samples 6.4..9.97 mm off. Traced: "
+    "after the 50 ms halt the firmware's E2E locked out under the 30 ms delays (ENC_E2E_OK +8, "
+    "ENC_E2E_LOST +43 between the pages of 3.15 and 3.78 s); the whole-log judge's model "
+    "refused the same frames (9 taken: gaps, lost beyond them -13), the live model took 54, so "
+    "livelosses.on_page read 34 frames the firmware lost beyond the bus's gaps and opened a "
+    "worst-runs span of 13.70 mm from frame 273 (with 1.37 mm from 222 and 5.48 mm from 327: "
+    "20.55 mm for every later sample of the life), which a 12-count wheel's 26 mm per count "
+    "makes that wide; analyze's loss_allowance_m is 0.0")
+PASSES: dict[str, Spec] = {  # a sample of the trial's passes, every judge right both ways
+    "wb1cm_random_51": ("wb1cm", "random", 51, 10, "busoff=6.0:0.1,dup=0.05"),
+    "c32_figure8_77": ("c32", "figure8", 77, 10, "stall=4.0:0.05,drop=0.02"),
+}
+LIVE_MISSES: dict[str, Spec] = {"cpr12_figure8_74": ("cpr12", "figure8", 74, 10, STALL_DELAY)}
+
+
+@pytest.fixture(scope="module")
+def robots(tmp_path_factory: pytest.TempPathFactory) -> dict[str, str]:
+    """Each profile's TOML path (the CLI's ``--robot``)."""
+    folder = tmp_path_factory.mktemp("robots")
+    paths = {}
+    for name, profile in PROFILES.items():
+        (path := folder / f"{name}.toml").write_text(to_toml(profile))
+        paths[name] = str(path)
+    return paths
+
+
+def _judged(log: Path, robot: str) -> tuple[list[int], list[float]]:
+    """``analyze --robot`` whole and streamed exit codes, and the live monitor's and bridge's
+    largest position error beyond their allowance (m), their wrong episodes counted as 1 m."""
+    codes = [main(["analyze", str(log), "--robot", robot, "--stream", s])
+             for s in ("never", "always")]
+    beyond = [1.0 if judge.tracker.wrongs.count else judge.tracker.max_beyond_allowance_m
+              for judge in live_judges(robot, log)]
+    return codes, beyond
+
+
+def _drive(spec: Spec, robots: dict[str, str], log: Path) -> tuple[Watch, int]:
+    """The watched Python-firmware drive of ``spec`` into ``log``: its watch and run's exit."""
+    robot, scenario, seed, duration, faults = spec
+    return watched_run(log, robots[robot], scenario, seed, duration, faults)
+
+
+def _both_ways(spec: Spec, robots: dict[str, str], tmp_path: Path) -> list[object]:
+    """Run's exit, then the judges of the log (``_judged``) and of the log with X raised 10 mm
+    from mid-drive: [run, analyze whole, streamed, monitor, bridge] x 2, beyond in mm."""
+    log, tampered = tmp_path / "drive.log", tmp_path / "tampered.log"
+    watch, code = _drive(spec, robots, log)
+    assert watch.steps > 400 and watch.within_a_thousandth_lsb(), (watch.worst_m,
+                                                                  watch.worst_rad)
+    codes, beyond = _judged(log, robots[spec[0]])
+    assert raise_x_10_mm(log, tampered, spec[3] / 2) > 100
+    t_codes, t_beyond = _judged(tampered, robots[spec[0]])
+    return [code, *codes, *(b > 5e-3 for b in beyond), *t_codes, *(b > 5e-3 for b in t_beyond)]
+
+
+RIGHT = [0, 0, 0, False, False, 1, 1, True, True]  # PASS both ways, FAIL the tampered pose
+
+
+@pytest.mark.parametrize("name", PASSES)
+def test_odd_robot_passes_and_its_tamper_fails(name: str, robots: dict[str, str],
+                                               tmp_path: Path) -> None:
+    assert _both_ways(PASSES[name], robots, tmp_path) == RIGHT
+
+
+@pytest.mark.xfail(strict=True, reason=LIVE_LOSS_SPAN)
+@pytest.mark.parametrize("name", LIVE_MISSES)
+def test_live_judges_fail_a_10_mm_tamper_after_a_lock_out(name: str, robots: dict[str, str],
+                                                          tmp_path: Path) -> None:
+    assert _both_ways(LIVE_MISSES[name], robots, tmp_path) == RIGHT
+
+
+def test_c_firmware_writes_the_python_log_on_a_32_bit_robot(robots: dict[str, str],
+                                                            tmp_path: Path) -> None:
+    """The C firmware on a custom 32-bit-counter profile under a bus-off and duplicates: the
+    same bytes as the Python firmware (so the same verdicts, which PASS)."""
+    require_executables("make", "cc", install="apt-get install gcc make")
+    cboard.load_library()
+    argv = ["run", "--robot", robots["c32"], "--scenario", "circle", "--seed", "38",
+            "--duration", "10", "--faults", "busoff=6.0:0.1,dup=0.05"]
+    logs = [tmp_path / f"{fw}.log" for fw in ("python", "c")]
+    codes = [main([*argv, "--firmware", fw, "--log", str(log)])
+             for fw, log in zip(("python", "c"), logs, strict=True)]
+    assert codes == [0, 0]
+    assert logs[0].read_bytes() == logs[1].read_bytes()
