@@ -65,7 +65,12 @@ SLOW16_LIVE = (
     "10 s, stall=3:0.05,delay=0.1:30: run and both analyzes PASS the correct firmware (0.048 mm), "
     "the monitor and the bridge say POSE WRONG, 3 episodes, 5.05 mm beyond (latest 0.917 mm, "
     "allowed 0.0); the firmware reports COUNTER_RESET (a step of 3 periods reads wrapped on "
-    "this robot). Not traced")
+    "this robot). Traced in part: analyze re-primes the reference at 17 counter restarts "
+    "(the counts could not span the silence), the live judges at 16: not at analyze's 3.22 s "
+    "(encoder frame 280), and their numbering runs 12 frames ahead of analyze's from there "
+    "(the restart of 3.41 s: live frame 300, analyze 288); the live judges place a gap there "
+    "instead, asked 5.15 mm, allowed 0.10 mm: episodes 3.69..5.65 s (5.04 mm), 5.69..7.95 s "
+    "(4.84 mm), 7.99 s on (1.02 mm)")
 PASSES: dict[str, Spec] = {  # a sample of the trial's passes, every judge right both ways
     "wb1cm_random_51": ("wb1cm", "random", 51, 10, "busoff=6.0:0.1,dup=0.05"),
     "c32_figure8_77": ("c32", "figure8", 77, 10, "stall=4.0:0.05,drop=0.02"),
@@ -105,13 +110,18 @@ def _drive(spec: Spec, robots: dict[str, str], log: Path) -> tuple[Watch, int]:
     return watched_run(log, robots[robot], scenario, seed, duration, faults)
 
 
+def _assert_right(watch: Watch) -> None:
+    """The firmware integrated over 400 steps, each within 1/1000 LSB of float64."""
+    assert watch.steps > 400
+    assert watch.within_a_thousandth_lsb(), (watch.worst_m, watch.worst_rad)
+
+
 def _both_ways(spec: Spec, robots: dict[str, str], tmp_path: Path) -> list[object]:
     """Run's exit, then the judges of the log (``_judged``) and of the log with X raised 10 mm
     from mid-drive: [run, analyze whole, streamed, monitor, bridge] x 2, beyond in mm."""
     log, tampered = tmp_path / "drive.log", tmp_path / "tampered.log"
     watch, code = _drive(spec, robots, log)
-    assert watch.steps > 400 and watch.within_a_thousandth_lsb(), (watch.worst_m,
-                                                                  watch.worst_rad)
+    _assert_right(watch)
     codes, beyond = _judged(log, robots[spec[0]])
     assert raise_x_10_mm(log, tampered, spec[3] / 2) > 100
     t_codes, t_beyond = _judged(tampered, robots[spec[0]])
@@ -143,8 +153,7 @@ def test_every_judge_passes_the_correct_firmware(name: str, robots: dict[str, st
     spec = FALSE_FAILS[name][0]
     log = tmp_path / "drive.log"
     watch, code = _drive(spec, robots, log)
-    assert watch.steps > 400 and watch.within_a_thousandth_lsb(), (watch.worst_m,
-                                                                  watch.worst_rad)
+    _assert_right(watch)
     codes, beyond = _judged(log, robots[spec[0]])
     assert [code, *codes, *(b > 1e-4 for b in beyond)] == [0, 0, 0, False, False], beyond
 
