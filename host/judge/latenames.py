@@ -53,7 +53,12 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
-from odocan.host.protocol.busfacts import ENC_COUNTER_LAP, ENC_COUNTER_MASK, POSE_PERIOD_S
+from odocan.host.protocol.busfacts import (
+    ENC_COUNTER_LAP,
+    ENC_COUNTER_MASK,
+    ENC_CYCLE_S,
+    POSE_PERIOD_S,
+)
 from odocan.host.protocol.decode import BulkDecoder
 from odocan.host.protocol.e2e import e2e_messages
 from odocan.host.protocol.e2e_crc import crc8h2f_p02
@@ -163,6 +168,9 @@ class LateScan:
                     top_s, top_c = self.top
                     sent_s = _top_send(t[k] - top_s, (c[k] - top_c) & ENC_COUNTER_MASK,
                                        top_s, self.period_s)
+                    if sent_s is not None and not _joins_run(
+                            t[k] - sent_s, t[k - 1] - times[k - 1], self.period_s):
+                        sent_s = None  # a halt's silence after a straggler, not held back
             heard = sent_s is not None and (
                 _send_heard(t, c, late, k, sent_s, self.period_s)
                 or (self.repeat and _run_send(t, c, t, k, self.period_s) is not None))
@@ -229,6 +237,19 @@ def _run_send(t: list[float], c: list[int], times: list[float], k: int,
     if not 1 <= step <= RUN_STEPS or abs(gap - step) > 0.5:
         return None
     return float(times[k - 1]) + step * period_s
+
+
+def _joins_run(lateness_s: float, before_s: float, period_s: float) -> bool:
+    """Whether a frame read late from the latest heard in order (``_top_send``, ``lateness_s``
+    behind its stamp) joins the late frame heard just before it (``before_s`` behind): held
+    back as long, within half a period (a run held back together), or too long for its
+    name to be resolved where heard (half an encoder COUNTER lap or more). Neither: the
+    frame before was a straggler sent before the latest heard in order, and the silence
+    since was its sender's (a 50 ms MCU halt after a frame held 30 ms, pmir circle 74: the
+    first pose after it read 50 ms late, and the 15 sends after it, one naming from there an
+    encoder frame a lap back: 79.5 mm off a correct firmware, tests/test_trial37.py)."""
+    return (abs(lateness_s - before_s) <= HALF_PERIOD * period_s
+            or lateness_s >= ENC_COUNTER_LAP // 2 * ENC_CYCLE_S)
 
 
 def _top_send(dt_s: float, step: int, top_s: float, period_s: float) -> float | None:
