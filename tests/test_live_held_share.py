@@ -7,8 +7,10 @@ that stamped it late look alike) for a fixed 1.36 s, the ENC_E2E pages' time, th
 the next: HELD for 45..85 % of a 10 s drive (pmir figure8 seed 3: 85 %, first judged OK at
 5.85 s; kobuki random seed 5: 82 %), though the firmware's poses had settled each such frame
 within 0.2 s. Now a hold ends once they have (``host.judge.liveearly``): 17..46 % over pmir and
-kobuki, seeds 1..5, here 38 % and 43 %. The frames taken are still the whole log's, ``run`` and
-both ``analyze`` PASS the correct firmware, and X raised 10 mm from 5 s FAILs every judge.
+kobuki, seeds 1..5, here 38 % and 46 %. The frames taken are still the whole log's, ``run`` and
+both ``analyze`` PASS the correct firmware, and X raised 10 mm from 5 s FAILs every judge. The
+firmware's own DEGRADED (ENCODER_TIMEOUT, its encoder frames late), whose summaries waited in the
+held frames, now shows between the holds.
 """
 
 from __future__ import annotations
