@@ -168,7 +168,7 @@ class BusMonitor:
             return
         if self.settle.held:
             self.settle.held.append((msg, now_s))
-            if msg.timestamp > self.settle.until_s:
+            if self.settle.due(msg.timestamp):  # (or its evidence is in: liveearly)
                 self.settle.release(self._feed, self.feed)
             return
         self._feed(msg, now_s, None)

@@ -53,7 +53,7 @@ class BridgeHold:
     def hold(self, t_s: float, can_id: int, data: bytes) -> list[Publication]:
         """A frame heard while a hold waits: kept; the hold judged once it is due."""
         self.settle.held.append((_message(t_s, can_id, data), t_s))
-        return self.release() if t_s > self.settle.until_s else []
+        return self.release() if self.settle.due(t_s) else []
 
     def release(self, ends: bool = False) -> list[Publication]:
         """The plans back, the frames held judged and fed again (``SettleHold.release``; all

@@ -77,6 +77,7 @@ from odocan.host.protocol.e2e_cycles import (
     new_cycle_s,
     new_cycles,
 )
+from odocan.host.protocol.e2e_decided import all_decided, by_readings
 from odocan.host.protocol.e2e_evidence import (
     Evidence,
     evidence_frames,
@@ -335,7 +336,7 @@ def _rejudge(
 
 def check_frames(
     frames: FrameArrays, db: DatabaseSpec | None = None,
-    touched: list[npt.NDArray[np.intp]] | None = None,
+    touched: list[npt.NDArray[np.intp]] | None = None, decided: dict[int, bool] | None = None,
 ) -> tuple[dict[str, dict[str, int]], npt.NDArray[np.bool_]]:
     """Profile 2 over every frame of a log.
 
@@ -344,7 +345,9 @@ def check_frames(
     OKSOMELOST; the frames of unprotected messages are accepted unchecked). ``db`` defaults to
     the contract (dbc/odocan.dbc). ``touched``, when given, gets the bus positions of the
     frames whose verdict of the stamps the poses or the pages changed (evidence that may come
-    after the frame: ``host.judge.stream_carry``, ``stream_e2e``).
+    after the frame: ``host.judge.stream_carry``, ``stream_e2e``); ``decided`` (bus positions
+    asked) says of each encoder frame whether its verdict is one by every reading of its stamp
+    (``e2e_decided``).
 
     The frames are grouped by message once (a stable sort of their message numbers) and the CRCs
     of all protected frames found in one pass; the sequence is then judged per message.
@@ -381,7 +384,7 @@ def check_frames(
             accepted[right_dlc] = True
             continue
         counts[config.name] = _check_message(frames, right_dlc, config, accepted, crc_ok, poses,
-                                             pages, touched)
+                                             pages, touched, decided)
     counts[UNKNOWN] = unknown
     return counts, accepted
 
@@ -410,7 +413,7 @@ def _check_message(
     crc_ok: npt.NDArray[np.bool_],
     poses: list[npt.NDArray[np.intp]] | None = None,
     pages: OkPages | None = None,
-    touched: list[npt.NDArray[np.intp]] | None = None,
+    touched: list[npt.NDArray[np.intp]] | None = None, decided: dict[int, bool] | None = None,
 ) -> dict[str, int]:
     """Check the frames ``index`` of one protected message (``crc_ok``: of every frame); mark
     the accepted ones. ``poses``: the evidence frames' positions (``e2e_evidence``); ``pages``:
@@ -425,7 +428,7 @@ def _check_message(
                                cycle_s)
     if config.name in PER_PERIOD_WINDOW and config.cycle_s is not None and poses is not None:
         status = _settled(frames, index, counter, crc_ok[index], periods, status, config, poses,
-                          pages, touched)
+                          pages, touched, decided)
         counted = repeats_by_pages(status, counter, index, pages)  # e2e_repeats
         if touched is not None and counted is not status:
             touched.append(index[counted != status])
@@ -458,7 +461,8 @@ def _settled(frames: FrameArrays, index: npt.NDArray[np.intp], counter: npt.NDAr
              status: npt.NDArray[np.int8], config: E2EMessage,
              poses: list[npt.NDArray[np.intp]],
              pages: OkPages | None = None,
-             touched: list[npt.NDArray[np.intp]] | None = None) -> npt.NDArray[np.int8]:
+             touched: list[npt.NDArray[np.intp]] | None = None,
+             decided: dict[int, bool] | None = None) -> npt.NDArray[np.int8]:
     """``status`` where the capture's stamps decide every frame; else settled from the
     firmware's poses (``e2e_evidence``) and its counts (``e2e_pages``; a skip proof they
     contradict dropped: ``e2e_skipveto``), the bus positions of
@@ -469,6 +473,8 @@ def _settled(frames: FrameArrays, index: npt.NDArray[np.intp], counter: npt.NDAr
     if all(np.array_equal(p, periods) or np.array_equal(
             status, sequence_statuses(crc_ok, counter, p, config.max_delta_init, t_s, cycle_s))
            for p in (wide, narrow)):
+        if decided is not None:
+            all_decided(decided, index)
         return status
     evidence = pose_evidence(frames, index, counter, crc_ok, poses)
     released = recorder_releases(frames.timestamp_s, frame_keys(frames) == config.key,
@@ -488,4 +494,6 @@ def _settled(frames: FrameArrays, index: npt.NDArray[np.intp], counter: npt.NDAr
     settled = by_page_skips(unread, settled, status, index, evidence, pages)  # e2e_skipveto
     if touched is not None:
         touched.append(index[settled != status])
+    if decided is not None:
+        by_readings(decided, index, run, settled)
     return settled
