@@ -53,6 +53,20 @@ def test_a_duplicate_and_a_swapped_pair_are_not_late() -> None:
     assert _late(heard, counter) == [False] * 8 + [True]
 
 
+def test_a_halt_of_half_a_lap_after_a_straggler_is_not_lateness() -> None:
+    """pmir random 3, ``delay=0.2:40,stall=2:0.1`` (the twists of 1.941 to 2.241 s): COUNTER 2
+    held back 40 ms behind 3, then the firmware halted 100 ms (2.0 to 2.1 s) and sent 4 on at
+    its cadence. The straggler says nothing of the sends after the silence: they are on time,
+    as they are read without it. Read as a run held back 100 ms (half an encoder COUNTER lap
+    and more), they named encoder frames a lap back: run and analyze FAILed the correct
+    firmware's DISTANCE by 35.6 mm (``tests/test_live_swappedskips.py``'s ``HALT_DRIVES``)."""
+    heard = [1.941, 1.981, 2.001, *(2.101 + 0.02 * k for k in range(8))]
+    counter = [1, 3, 2, *range(4, 12)]
+    assert _late(heard, counter) == [False, False, True] + [False] * 8
+    without = [k for k in range(len(heard)) if k != 2]  # the same sends, no straggler
+    assert _late([heard[k] for k in without], [counter[k] for k in without]) == [False] * 10
+
+
 def _scan_in_pieces(t: np.ndarray, c: np.ndarray, size: int) -> tuple[list[bool], list[float]]:
     scan, late, sent = LateScan(PERIOD), [], []
     for lo in range(0, len(t), size):

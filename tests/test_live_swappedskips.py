@@ -17,8 +17,16 @@ of up to n + 1 steps grows with n: its lack can blame a correct firmware, not pa
 DISTANCE. A sweep of 216 drives (pmir, kobuki x figure8, random, square x seeds 1-12 x
 ``stall=2:0.05,delay=0.1:30``, ``stall=3:0.05,delay=0.1:40``, ``delay=0.2:40,stall=2:0.1``)
 found no live DISTANCE FAIL of the correct firmware; where live and ``analyze`` disagree, it is
-not for the rule (the xfails below: DISTANCE 10 mm high or low PASSing live, a correct firmware
-FAILed by ``analyze``).
+not for the rule (the xfails below: DISTANCE 10 mm high or low PASSing live).
+
+The sweep's seed 3 under ``delay=0.2:40,stall=2:0.1`` (``HALT_DRIVES``, all six) had run and
+``analyze`` FAIL the correct firmware's DISTANCE by 35.6 to 63.0 mm (the live judges PASSed): the
+twist before the 100 ms MCU halt was held back 40 ms, and ``latenames.LateScan`` read the twists
+after the halt as a run held back 100 ms behind it (``_joins_run`` let a lateness of half an
+encoder COUNTER lap join any run), so each named from its send time the encoder frame a lap
+(160 ms) before the one it named (pmir random: DISTANCE 504 mm at 2.181 s against the
+reference's 467.0 mm of 2.02 s, not 503.75 mm of 2.18 s). Fixed there: read as without the
+straggler (on time), as the live judges name twists.
 """
 
 from __future__ import annotations
@@ -46,6 +54,10 @@ DRIVES: dict[str, Spec] = {
     "pmir_square_5_stall3": ("pmir", "square", 5, "stall=3:0.05,delay=0.1:40"),
     "kobuki_figure8_6_delay2": ("kobuki", "figure8", 6, "delay=0.2:40,stall=2:0.1"),
 }
+HALT_DRIVES: dict[str, Spec] = {  # the sweep's seed 3: a 100 ms halt after a straggler
+    f"{robot}_{scenario}_3_delay2": (robot, scenario, 3, "delay=0.2:40,stall=2:0.1")
+    for robot in ("pmir", "kobuki") for scenario in ("figure8", "random", "square")}
+ALL_DRIVES = {**DRIVES, **HALT_DRIVES}
 STALL_S = (2.0, 2.1)  # the 50 ms stall of STALL_DELAY (bus time s)
 TAMPER_FROM_S = 5.0
 DISTANCE_BYTES = (6, 2)  # ODOM_TWIST DISTANCE: bytes 6..7, u16, 1 mm
@@ -73,16 +85,6 @@ LOW_PASSES: dict[str, tuple[Spec, str]] = {  # the sweep's 2 such (seed 2, figur
                               "9.991 mm (kobuki figure8 2: 9.998 mm), the monitor and the "
                               "bridge PASS it (0.0 mm). Not swappedskips' rule (the live judge "
                               "lacks it: its allowance below is no wider for it); not traced"),
-}
-ANALYZE_FAILS: dict[str, tuple[Spec, str]] = {  # the sweep's 6 such (seed 3, every drive)
-    "pmir_random_3_delay2": (("pmir", "random", 3, "delay=0.2:40,stall=2:0.1"),
-                             "issue #11: run and analyze whole and streamed FAIL the correct "
-                             "firmware by ODOM_TWIST DISTANCE 35.575 mm beyond (pmir figure8 3: "
-                             "62.507 mm, kobuki figure8 3: 63.006 mm, the others 35.8..47.7 "
-                             "mm), the monitor and the bridge PASS it (0.0 mm). Not "
-                             "swappedskips' rule: with its widening undone analyze FAILs by the "
-                             "same 35.575 mm (the live and the whole-log ENC_E2E_OK spans are "
-                             "the same here); not traced"),
 }
 Drive = tuple[Path, int]  # log, run's exit
 
@@ -140,8 +142,8 @@ class _Drives(dict[str, "Drive"]):
         self.tmp = tmp
 
     def __missing__(self, name: str) -> Drive:
-        specs = {**DRIVES, **{n: spec for n, (spec, _) in {**HIGH_PASSES, **LOW_PASSES,
-                                                              **ANALYZE_FAILS}.items()}}
+        specs = {**ALL_DRIVES, **{n: spec for n, (spec, _) in {**HIGH_PASSES,
+                                                              **LOW_PASSES}.items()}}
         robot, scenario, seed, faults = specs[name]
         log = self.tmp.mktemp(name) / "d.log"
         watch, code = watched_run(log, robot, scenario, seed, 10, faults)
@@ -158,7 +160,7 @@ def drives(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Drive]:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name", list(DRIVES))
+@pytest.mark.parametrize("name", list(ALL_DRIVES))
 def test_every_distance_judge_passes_the_correct_firmware(drives: dict[str, Drive], name: str,
                                                           tmp_path: Path) -> None:
     """run, analyze whole and streamed, the monitor and the bridge: DISTANCE within its
@@ -167,7 +169,7 @@ def test_every_distance_judge_passes_the_correct_firmware(drives: dict[str, Driv
     judged = reported_analyses(log, tmp_path)
     assert [code, *(c for _, c, _ in judged)] == [0, 0, 0]
     assert all(r["onboard_distance_vs_reference"]["passed"] for _, _, r in judged)
-    monitor, bridge, _ = _live(DRIVES[name][0], log)
+    monitor, bridge, _ = _live(ALL_DRIVES[name][0], log)
     assert min(monitor.distance.samples, bridge.distance.samples) > 300
     assert _verdicts(monitor, bridge) == [(True, 0.0), (True, 0.0)]
 
@@ -202,13 +204,13 @@ def test_a_distance_10_mm_off_fails_every_judge(drives: dict[str, Drive], name: 
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name", ["pmir_random_5", "kobuki_figure8_6_delay2"])
+@pytest.mark.parametrize("name", ["pmir_random_5", "kobuki_figure8_6_delay2", *HALT_DRIVES])
 def test_a_pose_10_mm_off_still_fails(drives: dict[str, Drive], name: str,
                                       tmp_path: Path) -> None:
     """X 10 mm off from 5 s: both analyses FAIL it by the position, both live judges too."""
     tampered = tmp_path / "x10.log"
     assert x_10_mm_off_fails(drives[name][0], tampered, TAMPER_FROM_S, 100) == []
-    monitor, bridge, _ = _live(DRIVES[name][0], tampered)
+    monitor, bridge, _ = _live(ALL_DRIVES[name][0], tampered)
     beyond_m = [j.tracker.max_beyond_allowance_m for j in (monitor, bridge)]
     assert min(beyond_m) > 5e-3, beyond_m
 
@@ -229,15 +231,3 @@ def test_a_distance_10_mm_off_fails_live(drives: dict[str, Drive], name: str, mm
     verdicts = _verdicts(*_live(robot, tampered)[:2])
     assert [(passed, excess_m > 5e-3) for passed, excess_m in verdicts] == [(False, True)] * 2, \
         verdicts
-
-
-@pytest.mark.slow
-@pytest.mark.parametrize("name", [
-    pytest.param(n, marks=pytest.mark.xfail(strict=True, reason=why))
-    for n, (_, why) in ANALYZE_FAILS.items()])
-def test_run_and_analyze_pass_the_correct_firmware(drives: dict[str, Drive], name: str,
-                                                   tmp_path: Path) -> None:
-    """The live judges PASS it (asserted first); run and both analyses must too."""
-    log, code = drives[name]
-    assert _verdicts(*_live(ANALYZE_FAILS[name][0][0], log)[:2]) == [(True, 0.0)] * 2
-    assert [code, *(c for _, c, _ in reported_analyses(log, tmp_path))] == [0, 0, 0]
