@@ -11,6 +11,7 @@ point, even when the exception that should have stopped it never arrived.
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 import signal
 from collections.abc import Callable, Iterator, Mapping
@@ -59,3 +60,28 @@ def handlers_installed(handlers: Mapping[signal.Signals, Callable[..., Any]]) ->
     finally:
         for sig, before in previous.items():
             signal.signal(sig, before)
+
+
+@contextlib.contextmanager
+def loop_handlers_installed(
+    loop: asyncio.AbstractEventLoop, callback: Callable[[int], None]
+) -> Iterator[None]:
+    """SIGINT and SIGTERM call ``callback(signum)`` from ``loop`` while inside (the signal no
+    longer raises in whichever task is running), the Python-level handlers from before back
+    after: asyncio's own removal leaves Python's default for SIGINT and SIG_DFL for SIGTERM,
+    not the CLI's ``latch_and_raise``. Main thread only: elsewhere none is installed."""
+    previous = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
+    handled: list[signal.Signals] = []
+    try:
+        for sig in previous:
+            try:
+                loop.add_signal_handler(sig, callback, int(sig))
+            except (RuntimeError, ValueError, NotImplementedError):  # not the main thread
+                break
+            handled.append(sig)
+        yield
+    finally:
+        for sig in handled:
+            loop.remove_signal_handler(sig)
+            if previous[sig] is not None:
+                signal.signal(sig, previous[sig])

@@ -69,7 +69,7 @@ from odocan.host.report.trace import FrameFilter, Trace
 from odocan.host.report.tui import View
 from odocan.host.report.tui_app import FrameLog, MonitorApp, RecordingError, run_screen
 from odocan.host.stopped import Stopped, early_stop, interruption, signum_of
-from odocan.sim import robot
+from odocan.sim import interrupts, robot
 from odocan.sim.exceptions import ConfigurationError, OdocanError
 from odocan.sim.realtime import StopRequest, stop_on_signals
 
@@ -338,10 +338,11 @@ def _watch_fleet(url: BrokerURL, args: argparse.Namespace) -> int:
             finally:
                 if not console.is_terminal:  # the last screen ends its line before any error's
                     console.line()
-    except KeyboardInterrupt as exc:
+    except KeyboardInterrupt as exc:  # before or after the watch's loop took the signals
         signum = signum_of(exc)
     except BaseExceptionGroup as group:  # the watch's TaskGroup: its one-line error, not a tree
         raise first_error(group) from None
+    signum = signum or watch.signum
     if not watch.connected_once:  # no error at all: something took the TCP connection, silent
         reason = watch.last_error or (f"no MQTT answer in {time.monotonic() - watch.started:.1f}"
                                       " s (is it an MQTT broker?)")
@@ -358,11 +359,32 @@ class _FleetWatch:
         self.connected_once = False
         self.last_error = ""
         self.started = time.monotonic()
+        self.signum: int | None = None  # SIGINT or SIGTERM, when one ended the watch
 
     async def run(self, redraw: Callable[[], None] | None) -> None:
-        """Follow the broker until the duration has passed (forever without one); a TLS or
-        credentials problem at the first connection is a ``BrokerError`` at once (no retry
-        mends it)."""
+        """Follow the broker until the duration has passed (forever without one) or SIGINT or
+        SIGTERM (``signum``); a TLS or credentials problem at the first connection is a
+        ``BrokerError`` at once (no retry mends it). The signals are the loop's: raised in the
+        task reading the broker, one was left there ("Task exception was never retrieved") and
+        its MQTT client closed after the loop ("Event loop is closed")."""
+        watching = asyncio.current_task()
+        assert watching is not None
+
+        def on_signal(signum: int) -> None:
+            self.signum = self.signum or signum
+            watching.cancel()
+
+        with interrupts.loop_handlers_installed(asyncio.get_running_loop(), on_signal):
+            if (latched := interrupts.latched()) is not None:  # heard as the command started
+                on_signal(latched)
+            try:
+                await self._watch(redraw)
+            except asyncio.CancelledError:
+                if self.signum is None:
+                    raise
+                watching.uncancel()
+
+    async def _watch(self, redraw: Callable[[], None] | None) -> None:
         if self.url.tls and (found := await tls_diagnosis(self.url, TLS_CHECK_S)) is not None:
             raise BrokerError(f"cannot connect to {self.url}: TLS: {found}")
         try:
