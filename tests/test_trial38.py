@@ -25,10 +25,14 @@ import can
 import pytest
 
 from odocan.firmware import frames as fr
+from odocan.host.cli.app import main
 from odocan.host.mqtt.firmwareheard import firmware_heard
 from odocan.host.mqtt.fleetview import RobotState, fleet_snapshot
 from tests.conftest_mqtt import Mosquitto
-from tests.conftest_mqtt import mosquitto as mosquitto  # the fixture
+from tests.conftest_mqtt import mosquitto as mosquitto  # the fixtures
+from tests.conftest_mqtt import restore_logging as restore_logging
+from tests.fleet_watch_until import BOUND_S as FLEET_BOUND_S
+from tests.fleet_watch_until import end_watch_once
 from tests.test_realtime import _open_udp_or_skip, _udp_channel
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -157,7 +161,8 @@ def _statuses(broker: Mosquitto) -> tuple[Any, list[dict[str, Any]]]:
 
 
 def test_killed_firmware_is_stale_on_monitor_bridge_and_fleet_view(
-        rig: _Rig, mosquitto: Mosquitto) -> None:
+        rig: _Rig, mosquitto: Mosquitto, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str], restore_logging: None) -> None:
     client, statuses = _statuses(mosquitto)
     url = mosquitto.url()
     broker = f"mqtt://{url.username}:{url.password}@{url.host}:{url.port}"
@@ -179,10 +184,12 @@ def test_killed_firmware_is_stale_on_monitor_bridge_and_fleet_view(
     assert heard["timeout_s"] == pytest.approx(0.2)
     assert heard["age_s"] > heard["timeout_s"]
     assert heard["age_s"] <= time.monotonic() - killed + 0.5  # an age, not a guess
-    fleet = rig.start("monitor", "--broker", broker, "--json", "--duration", "120", bus=False)
-    rig.listen_until(lambda: sum(1 for s in statuses[k:] if s["firmware_heard"]["stale"]) >= 3,
-                     "two more statuses for the fleet view to take in")
-    row = _json_of(fleet)["robots"]["robot001"]
+    # the fleet view (in-process: it ends once it holds a status of the silence, BOUND_S a bound)
+    end_watch_once(monkeypatch, lambda w: "robot001" in w.table and (
+        w.table["robot001"].status.get("firmware_heard") or {}).get("stale") is True)
+    capsys.readouterr()
+    assert main(["monitor", "--broker", broker, "--json", "--duration", FLEET_BOUND_S]) == 0
+    row = json.loads(capsys.readouterr().out)["robots"]["robot001"]
     assert row["status"]["state"] == "STALE", row  # was "OK" 6 s after the kill
     assert row["status"]["reported_state"] == "OK"
     assert row["status"]["firmware_age_s"] > 0.2
