@@ -44,7 +44,7 @@ from typing import Any
 import can
 
 from odocan.host.judge.reference import Geometry
-from odocan.host.mqtt import topics
+from odocan.host.mqtt import firmwareheard, topics
 from odocan.host.mqtt.bridgeconfig import BridgeConfig as BridgeConfig  # (its home before)
 from odocan.host.mqtt.broker import first_error
 from odocan.host.mqtt.clientids import reader_client_id
@@ -135,8 +135,9 @@ class _Robot:
         if self.receive is None:
             return self.telemetry.status()
         receive = self.receive()  # first: its ``lost_here`` event goes out with this status
-        leaf, payload = self.telemetry.status()
-        return leaf, {**payload, "receive": receive}
+        leaf, payload = self.telemetry.status()  # and the firmware's age: silence is not OK
+        return leaf, {**payload, "receive": receive,
+                      "firmware_heard": firmwareheard.telemetry_heard(self.telemetry, time.time())}
 
     def last_status(self) -> dict[str, Any]:
         """The fields of ``status`` but its ``robot``, ``state`` and stamp, and the watch's

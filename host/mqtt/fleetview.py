@@ -167,12 +167,26 @@ def _firmware_row(status: dict[str, Any], db: Database) -> dict[str, Any] | None
         return None
     status_msg = db.get_message_by_name("ODOM_STATUS")
     try:
-        return {"state": shown_value(status_msg, "STATE", summary.get("state", 0)),
-                "integrator": shown_value(status_msg, "INTEGRATOR", summary.get("integrator", 0)),
-                "error_mask": mask, "errors": error_names(mask),
-                "uptime_s": summary.get("uptime")}
+        row = {"state": shown_value(status_msg, "STATE", summary.get("state", 0)),
+               "integrator": shown_value(status_msg, "INTEGRATOR", summary.get("integrator", 0)),
+               "error_mask": mask, "errors": error_names(mask),
+               "uptime_s": summary.get("uptime")}
     except (TypeError, ValueError, OverflowError):  # an enum that is no number nor name
         return None
+    return _silence(row, status.get("firmware_heard"))
+
+
+def _silence(row: dict[str, Any], heard: Any) -> dict[str, Any]:
+    """``row`` with the firmware's age (``host.mqtt.firmwareheard``): a firmware silent past its
+    timeout is ``STALE``, not the state its last summary said (``reported_state``), so a dead
+    firmware behind a live bridge never shows OK; ``firmware_age_s`` None when unknown."""
+    if not isinstance(heard, dict):
+        return row
+    age_s = real(heard.get("age_s"))
+    row = {**row, "firmware_age_s": age_s}
+    if heard.get("stale") is True:
+        row.update(state="STALE", reported_state=row["state"])
+    return row
 
 
 def _rates_hz(rates: dict[str, Any]) -> dict[str, float]:
