@@ -199,7 +199,7 @@ class LiveDistance:
                 self._zero.excess_mm = max(self._zero.excess_mm, self._feasible.excess_mm)
                 self._feasible, self._r0 = self._zero, 0.0
         seq, units = tracker.enc_seq, self._sums[0]
-        if self._lost is not None and self._page is not None and _lost_on_board(
+        if self._lost is not None and self._page is not None and lost_on_board(
                 self._lost, (lost, ok), seq - self._page[0], self._bus_gaps):
             self._lossy.append((self._queued, (*self._page, seq, units)))
         self._lost, page_before, self._page = (lost, ok), self._page, (seq, units)
@@ -343,7 +343,7 @@ class LiveDistance:
                 "passed": self.wrong_lives == 0}
 
 
-def _lost_on_board(before: tuple[int, int], after: tuple[int, int], frames: int,
+def lost_on_board(before: tuple[int, int], after: tuple[int, int], frames: int,
                    bus_gaps: int) -> bool:
     """Whether the firmware lost frames the bus carried between two ENC_E2E pages (ENC_E2E_LOST
     and ENC_E2E_OK at each; ``frames``: the host took between them, ``bus_gaps``: the sender's
