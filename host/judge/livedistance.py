@@ -12,7 +12,10 @@ whose frames the firmware may have merged, each frame once (``host.judge.liveuni
 ``analyze``'s ``distance.merged_path_m``): a stall the tracker tells (the last sample's frame to the
 first judged after it); a stall before the first pose (``livefirst``: from the frame the firmware
 could first have primed on, from the life's first frame once that left: looser by the path between);
-an ODOM_STATUS page whose ENC_E2E_LOST grew (the page before's latest frame to its own); a span
+an ODOM_STATUS page whose ENC_E2E_LOST grew beyond the bus's own gaps since the page before
+(``losses.lost_beyond_gaps``, ``analyze``'s ``firmware_losses``: the page before's latest frame to
+its own; any growth was one before, and under ``delay=0.2:40,stall=2:0.1`` every page's was, so a
+DISTANCE 10 mm low from 5 s PASSed live where ``analyze`` FAILed it by 9.99 mm); a span
 where ENC_E2E_OK grew by more than ``skipdefect.MAX_RUN`` less than the frames the host took. Where
 it grew by fewer less (a jittered capture: the host's E2E took frames the firmware refused),
 ``skipdefect``'s defect allowance, as ``analyze`` gives it. A twist is judged once the page after
@@ -37,6 +40,8 @@ from __future__ import annotations
 import math
 from typing import Any
 
+import numpy as np
+
 from odocan.host.judge.distance import (
     COUNT_SLACK_M,
     STEP_SLACK_M,
@@ -53,6 +58,7 @@ from odocan.host.judge.liveresent import may_alias_live
 from odocan.host.judge.liveskip import WAIT_FRAMES, LiveSkips
 from odocan.host.judge.liveunion import MergedSpans
 from odocan.host.judge.livewindow import HALF_WINDOW, Columns
+from odocan.host.judge.losses import lost_beyond_gaps
 from odocan.host.judge.reference import PROFILE_SPEED, Geometry, SpeedBound
 from odocan.host.judge.samples import SILENCE_CYCLES
 from odocan.host.judge.tracking import PoseTracker
@@ -129,7 +135,8 @@ class LiveDistance:
         self._last_units = 0  # the path at the last frame judged (``_last_e``)
         self._stalls = -1
         self._page: tuple[int, int] | None = None  # the last ENC_E2E page: latest frame, path
-        self._lost: int | None = None
+        self._lost: tuple[int, int] | None = None  # the last page's ENC_E2E_LOST and _OK
+        self._bus_gaps = 0  # the sender's periods the bus lacked since that page (``_lossy``)
         self._r0: float | None = None
         self._feasible: Feasible | None = None
         self._zero = Feasible(0.0, 0.0)  # the same samples judged from 0 at the first frame
@@ -158,6 +165,7 @@ class LiveDistance:
         signed_m = 0.5 * (d_left * m_left + d_right * m_right)
         ds_m = abs(signed_m)
         self._skips.on_step(seq, signed_m)
+        self._bus_gaps += max(periods - tracker.placer.moved - 1, 0)  # the stamps' (sums kept)
         units, n, c, up = self._sums
         frames = self._frames
         if periods > 1 and frames:
@@ -191,9 +199,11 @@ class LiveDistance:
                 self._zero.excess_mm = max(self._zero.excess_mm, self._feasible.excess_mm)
                 self._feasible, self._r0 = self._zero, 0.0
         seq, units = tracker.enc_seq, self._sums[0]
-        if self._lost is not None and (lost - self._lost) % 256 and self._page is not None:
+        if self._lost is not None and self._page is not None and lost_on_board(
+                self._lost, (lost, ok), seq - self._page[0], self._bus_gaps):
             self._lossy.append((self._queued, (*self._page, seq, units)))
-        self._lost, page_before, self._page = lost, self._page, (seq, units)
+        self._lost, page_before, self._page = (lost, ok), self._page, (seq, units)
+        self._bus_gaps = 0
         self._skips.on_page(ok, seq)
         for first, end in self._skips.merged:  # past MAX_RUN frames skipped: the fine path
             start = page_before if page_before and page_before[0] == first else None
@@ -331,3 +341,19 @@ class LiveDistance:
                 "max_excess_m": self.worst_excess_m, "wrong_lives": self.wrong_lives,
                 "judged_at_end": self.judged_at_end,
                 "passed": self.wrong_lives == 0}
+
+
+def lost_on_board(before: tuple[int, int], after: tuple[int, int], frames: int,
+                   bus_gaps: int) -> bool:
+    """Whether the firmware lost frames the bus carried between two ENC_E2E pages (ENC_E2E_LOST
+    and ENC_E2E_OK at each; ``frames``: the host took between them, ``bus_gaps``: the sender's
+    periods the bus lacked there): ``losses.lost_beyond_gaps``, its growth unwrapped by the
+    frames the firmware did not take alone (LOST_FRAMES not followed here: looser, never
+    tighter than ``analyze``)."""
+    if frames <= 0:
+        return False
+    excess = lost_beyond_gaps(np.array(before[0]), np.array(after[0]), np.array(0),
+                              np.array(frames + bus_gaps), np.array(frames),
+                              ok_growth=np.array((after[1] - before[1]) & 0xFFFF),
+                              total_growth=np.array(1 << 16))
+    return bool(excess > 0)

@@ -14,8 +14,17 @@ judged before it cannot be judged again (``distance.Feasible`` carries one inter
 twists naming the gap's frame or a later one wait, as ``host.judge.livechoice`` holds a choice,
 until the gap is decided: proven (its bound withdrawn from every twist after it), told and not
 proven, ``HOLD_FRAMES`` of frames later, or the watch or the life ends (its bound kept). The
-DISTANCE verdict lags such a gap by at most ``HOLD_FRAMES`` (1.8 s); bounded: ``KEPT_GAPS``
+DISTANCE verdict lags such a gap by at most ``HOLD_FRAMES`` (4.2 s); bounded: ``KEPT_GAPS``
 gaps held (more: the oldest decided with its bound).
+
+``HOLD_FRAMES`` was 3 page rotations (180 frames): under ``stall=2:0.05,delay=0.1:30`` (seed
+10, pmir figure8 and kobuki random) the ENC_E2E pages of 6.181 and 6.781 s came 30 ms after
+their summary (the delay), past ``PageKeeper``'s half cycle, so no page was kept from 5.551 to
+7.25 s and the gaps from encoder frame 450 (4.96 s) on were decided with their bound (6.97 to
+7.91 s) before the pages of 8.0 s proved them, as ``analyze`` proves them: a DISTANCE 10 mm
+high from 5 s PASSed live (``analyze``: FAIL by 9.996 mm). Now 7 rotations (420 frames), the
+most a twist can wait and still find the steps of the page span before its frame kept for
+``liveskip``'s allowance below (``liveskip.KEPT_FRAMES``, 8 rotations: older, unbounded there).
 """
 
 from __future__ import annotations
@@ -24,10 +33,11 @@ import math
 
 from odocan.host.judge.gapskips import took_none
 from odocan.host.judge.livegapseen import LiveSeen
-from odocan.host.judge.liveskip import WAIT_FRAMES
+from odocan.host.judge.liveskip import KEPT_FRAMES, PAGE_FRAMES
 
 UNIT_M = 2.0**-40  # a gap's bound rounded up to this (m): sums of them are exact floats
-HOLD_FRAMES = WAIT_FRAMES  # frames after a gap its proof is waited for (3 page rotations)
+HOLD_FRAMES = KEPT_FRAMES - PAGE_FRAMES  # frames after a gap its proof is waited for (7 page
+# rotations: module docstring)
 KEPT_GAPS = 64  # gaps held at once
 
 
