@@ -38,7 +38,7 @@ PROFILES = {  # odd robots a rig may be configured for (names are the tests' own
 Spec = tuple[str, str, int, int, str]  # profile, scenario, seed, duration s, faults
 TAMPER_MM = 10
 STALL_DELAY = "stall=3.0:0.05,delay=0.1:30"
-LIVE_LOSS_SPAN = (  # fixed (e2e_halts): the live judges FAIL the tamper by 9.9 mm beyond
+LIVE_LOSS_SPAN = (  # fixed (e2e_halts): the live judges FAIL the tamper, 9.97 mm beyond
     "issue #11: cpr12 figure8 seed 74, 10 s, stall=3.0:0.05,delay=0.1:30: ODOM_POSE_X raised 10 mm "
     "from 5 s on FAILs run's firmware twin and both analyzes (9.92 mm beyond), but the monitor "
     "and the bridge's judge stay OK, 0.0555 mm beyond, the samples 6.4..9.97 mm off. Traced: "
@@ -61,7 +61,7 @@ STALL_LATE_RUN = (  # fixed (latenames._joins_run): run and both analyzes PASS i
     "COUNTER 13 (heard 4.791 s, naming the late encoder COUNTER 12 heard 1 ms before it, seq "
     "492), placed at 4.741 s, named from encoder COUNTER 3 (seq 483) the frame a lap back (seq "
     "476): the pose of 4.79 s against the reference of 4.63 s")
-STALL_LIVE_HELD = (  # fixed (e2e_halts): the live judges PASS it
+STALL_LIVE_HELD = (  # fixed (e2e_halts): the live judges PASS it, 0.071 mm (half LSBs)
     "issue #11: the same drive (STALL_LATE_RUN) FAILs the monitor and the bridge by 79.26 mm "
     "beyond (79.80 mm, 81.7 mrad, one sample at 5.131 s), a cause of their own: after the "
     "firmware took the late encoder COUNTER 1 at 5.000 s its E2E locked out (refused 5.01 to "
