@@ -11,6 +11,7 @@ from collections.abc import Callable
 from math import isfinite
 from typing import TYPE_CHECKING
 
+from odocan.host.protocol import busfacts
 from odocan.host.protocol.decode import frame_key
 from odocan.host.protocol.e2e import (
     COUNTER_MASK,
@@ -122,7 +123,9 @@ class E2EMonitor:
         cycle_s = min((c.cycle_s for c in self._configs.values()
                        if c.min_periods == 0 and c.cycle_s), default=0.01)
         self._releases: ReleaseWatch | _SeenOnce = ReleaseWatch(cycle_s)  # (check_as: _SeenOnce)
-        self._halts = HaltWatch(frozenset(k for k, c in self._configs.items() if c.name in SENDS))
+        self._halts = HaltWatch(
+            frozenset(k for k, c in self._configs.items() if c.name in SENDS),
+            next((k for k, c in self._configs.items() if c.name == busfacts.ENC_MESSAGE), -1))
 
     def check(
         self, can_id: int, data: bytes, extended: bool = False, timestamp_s: float | None = None
@@ -133,7 +136,7 @@ class E2EMonitor:
         ``host.mqtt.liveplan``: a call with keywords takes CPython's slower call path)."""
         if timestamp_s is not None:
             self._releases.seen(timestamp_s, can_id)
-            self._halts.seen(can_id, timestamp_s)
+            self._halts.seen(can_id, timestamp_s, data[1] & COUNTER_MASK if len(data) > 1 else 0)
         live = self._live.get(frame_key(can_id, True) if extended else can_id)
         if live is None or len(data) != live.length:
             return self._check_first(frame_key(can_id, extended), data, timestamp_s)
