@@ -194,7 +194,7 @@ class LiveDistance:
         if self._lost is not None and (lost - self._lost) % 256 and self._page is not None:
             self._lossy.append((self._queued, (*self._page, seq, units)))
         self._lost, page_before, self._page = lost, self._page, (seq, units)
-        self._skips.on_page(ok, seq)
+        self._skips.on_page(ok, seq, tracker.late_refused)
         for first, end in self._skips.merged:  # past MAX_RUN frames skipped: the fine path
             start = page_before if page_before and page_before[0] == first else None
             self._union.add(first, start[1] if start else self._frames.get(first, (0,))[0],
