@@ -31,8 +31,11 @@ from odocan.host.judge.livefreshboot import TWIN_S, init_restart
 from odocan.host.judge.livelatehalves import POSE_NAMES
 from odocan.host.judge.livetwins import refused_encoders
 from odocan.host.judge.livewindow import CYCLE_S, HALF_LAP
+from odocan.host.judge.swappedskips import LATE_BEHIND
 from odocan.host.protocol.busfacts import ENC_COUNTER_MASK
 from odocan.host.protocol.e2e import REPEATED, WRONG_SEQUENCE
+
+LATE_KEPT = 256  # late frames refused kept for the DISTANCE judge's next page (liveskip)
 
 if TYPE_CHECKING:
     from odocan.host.judge.tracking import PoseTracker
@@ -129,6 +132,10 @@ def refused_frame(tracker: PoseTracker, can_id: int, signals: Any, t_s: float,
     and a gap's fill (``livetwins.refused_encoders``) and to ``tracker.boot_tick``."""
     refused_encoders(tracker.twins, signals, t_s, tracker.placer.fill)
     tracker.boot_tick.refused(can_id, signals, t_s, status, tracker.enc_seq)
+    rows = tracker.window.rows
+    if rows and 1 <= (int(rows[-1][2]) - int(signals["COUNTER"])) & ENC_COUNTER_MASK <= LATE_BEHIND:
+        tracker.late_refused.append(tracker.enc_seq + 1)  # swappedskips.late (liveskip)
+        del tracker.late_refused[:-LATE_KEPT]  # no page to drop them: bounded
 
 
 def refused_named(tracker: PoseTracker, can_id: int, name: str, signals: Callable[[], Any],

@@ -31,9 +31,10 @@ live verdict so lags the hole by at most ``PAGES_WAIT_S``; a pose that fits neit
 Bounded: one choice at a time, its twin's poses over ``PAGES_WAIT_S`` of frames. A hole of the
 frames heard while one waits makes it first (``ahead``), before the new gap is placed or the
 reference steps into it: from its first held sample, as it would be later (so a second such hole
-holds its own choice), unless it waits for pages (then a second such hole falls back: the
-re-prime) or holds no sample yet (then a second such hole falls back to the new start from the
-next pose, ``livedark.DarkRestarts.owe``).
+holds its own choice), unless it waits for pages (then a second such hole holds a choice of
+its own, made by its first sample as ``analyze`` makes it: ``livesecond``; a third falls back:
+the re-prime) or holds no sample yet (then a second such hole falls back to the new start from
+the next pose, ``livedark.DarkRestarts.owe``).
 """
 
 from __future__ import annotations
@@ -43,6 +44,7 @@ import math
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
+from odocan.host.judge import livesecond
 from odocan.host.judge.liveplace import Gap
 from odocan.host.judge.livepose import FramePose, difference
 from odocan.host.judge.livewindow import CYCLE_S
@@ -81,6 +83,7 @@ class LiveChoice:
     def __init__(self, tracker: PoseTracker) -> None:
         self._tracker = tracker
         self.pending: Pending | None = None
+        self.second: livesecond.Second | None = None  # a hole's while one waits (livesecond)
         self.until_s = math.inf  # bus time the pending choice is decided at (s)
         self.taken = self.reprimed = 0  # choices made each way
 
@@ -89,7 +92,9 @@ class LiveChoice:
         ``span_s[0]`` to ``span_s[1]`` whose frames' step was ``taken`` (counts): hold the
         choice (True), or False (a choice waits already, or no reference: a new start owed)."""
         ref = self._tracker.raw.odometry
-        if self.pending is not None or ref is None:
+        if self.pending is not None and ref is not None:
+            return self._second(seq, span_s, taken, ref)
+        if ref is None:
             return False
         twin = copy.copy(ref)
         twin.step_deltas(*taken)
@@ -98,6 +103,40 @@ class LiveChoice:
                                self._tracker.stall.last_compared)
         self.until_s = span_s[1] + (PAGES_WAIT_S if heard else WAIT_S)
         return True
+
+    def _second(self, seq: int, span_s: tuple[float, float], taken: tuple[int, int],
+                ref: ReferenceOdometry) -> bool:
+        """A hole while a choice waits for its pages: a second choice held
+        (``livesecond``; True), or False (one held already, no sample held before it to
+        move from, or the waiting choice waits for no page: it is made at the hole)."""
+        p = self.pending
+        assert p is not None
+        if self.second is not None or not p.heard or not p.held:
+            return False
+        self.second = livesecond.opened(seq, span_s, p.held[-1], (ref, p.twin), taken,
+                                        self._tracker.placer.gap_at(seq))
+        return True
+
+    def _second_made(self, pose: FramePose) -> None:
+        """The second choice made at ``pose``, the first sample naming its frame or later
+        (``livesecond.take``): taken, the reference and the first choice's twin become the
+        twins that took its step."""
+        second, self.second = self.second, None
+        assert second is not None and self.pending is not None
+        tracker = self._tracker
+        seen = tracker.placer.seen
+        if (seen.heard_in(*second.span_s) and seen.proven().gap_missed(second.seq)) or (
+                not livesecond.take(second, tracker.raw.at, pose)):
+            self.reprimed += 1
+            return
+        self.taken += 1
+        tracker.raw.odometry = second.twin
+        if not tracker.raw.blind:
+            tracker.raw.at.update(second.twin_at)
+        self.pending.twin = second.first_twin
+        self.pending.twin_at.update(second.first_twin_at)
+        if second.gap is not None:
+            tracker.placer.took_gap(second.gap)
 
     def paged(self, t_s: float) -> None:
         """A FRAME_TOTALS page kept at bus time ``t_s``: when pages were heard before the hole
@@ -114,6 +153,8 @@ class LiveChoice:
         if step is not None and seq != p.seq:
             p.twin.step_deltas(*step)
         p.twin_at[seq] = FramePose(seq, p.twin.x_m, p.twin.y_m, p.twin.heading_rad)
+        if self.second is not None:
+            livesecond.stepped(self.second, seq, step)
 
     def holds(self, pose: FramePose) -> bool:
         """Whether the on-board ``pose`` waits for the choice (it names the hole's frame or
@@ -124,6 +165,8 @@ class LiveChoice:
         p.held.append(pose)
         stall = self._tracker.stall
         stall.last_compared, stall.compared_t_s = pose.seq, self._tracker.pose_t_s
+        if self.second is not None and pose.seq >= self.second.seq:
+            self._second_made(pose)
         return True
 
     def ahead(self, counter: int, t_s: float, prev: tuple[float, ...]) -> None:
@@ -144,6 +187,9 @@ class LiveChoice:
         p, self.pending, self.until_s = self.pending, None, math.inf
         if p is None:
             return
+        if self.second is not None:  # its sample not come: the re-prime (livesecond)
+            self.second = None
+            self.reprimed += 1
         tracker = self._tracker
         if self._take(p):
             self.taken += 1

@@ -204,7 +204,7 @@ class LiveDistance:
             self._lossy.append((self._queued, (*self._page, seq, units)))
         self._lost, page_before, self._page = (lost, ok), self._page, (seq, units)
         self._bus_gaps = 0
-        self._skips.on_page(ok, seq)
+        self._skips.on_page(ok, seq, tracker.late_refused)
         for first, end in self._skips.merged:  # past MAX_RUN frames skipped: the fine path
             start = page_before if page_before and page_before[0] == first else None
             self._union.add(first, start[1] if start else self._frames.get(first, (0,))[0],

@@ -181,7 +181,8 @@ class SettleHold:
         whether the evidence changed a verdict of the stamps (``check_frames``' touched)."""
         before = self._context()
         touched: list[npt.NDArray[np.intp]] = []
-        _, accepted = check_frames(_arrays([*before, *(m for m, _ in held)]), self._db, touched)
+        _, accepted = check_frames(_arrays([*before, *(m for m, _ in held)]), self._db, touched,
+                                   settle_all=True)
         first = len(before)
         return [bool(accepted[first + k]) if self._is_encoder(msg) else None
                 for k, (msg, _) in enumerate(held)], any(len(at) for at in touched)

@@ -97,9 +97,11 @@ class LiveSkips:
         """A power-up at frame ``seq`` (the first): ENC_E2E_OK was 1 there."""
         self._page = (1, seq)
 
-    def on_page(self, ok: int, seq: int) -> None:
+    def on_page(self, ok: int, seq: int, late: list[int] | None = None) -> None:
         """An ENC_E2E page heard after frame ``seq`` (the host's latest taken), ``ok`` its
-        ENC_E2E_OK: a span if it grew by less than the host's frames since the page before."""
+        ENC_E2E_OK: a span if it grew by less than the host's frames since the page before,
+        its n grown by the ``late`` frames the host refused in it (each the frame taken after
+        it: ``swappedskips``' rule, ``analyze``'s; those before the span dropped from it)."""
         self.covered = max(self.covered, seq)
         if self._page is not None:
             ok_before, seq_before = self._page
@@ -107,7 +109,10 @@ class LiveSkips:
             if fewer > MAX_RUN:  # its fine path: a span of the judge's union (liveunion)
                 self.merged.append((seq_before, seq + 1))
             elif fewer > 0:
-                self._spans.append((seq_before, seq, fewer))
+                swapped = sum(seq_before < p <= seq + 1 for p in late or ())
+                self._spans.append((seq_before, seq, fewer + swapped))
+        if late:
+            late[:] = [p for p in late if p > seq + 1]
         self._page = (ok, seq)
 
     def allowance_m(self, e: int) -> float:

@@ -93,6 +93,7 @@ class PoseTracker:
         self._pos = 0  # frames fed so far (the order of encoder frames, pose halves, twists)
         self.window = Columns(ENC_COLUMNS, ENC_WINDOW)  # the latest encoder frames heard
         self.twins = TwinWatch(self.window.rows)  # frames with a twin: their poses left out
+        self.late_refused: list[int] = []  # a late frame refused: the next taken's (liveskip)
         self.boot_tick = BootTick()  # the latest refused since the last taken (liveboottick)
         self.pairs = HalfPairs(self)  # the pose halves heard, settled and paired (livehalves)
         self.late = LateHalves()  # ... those held back on the bus left out (livelatehalves)

@@ -337,6 +337,7 @@ def _rejudge(
 def check_frames(
     frames: FrameArrays, db: DatabaseSpec | None = None,
     touched: list[npt.NDArray[np.intp]] | None = None, decided: dict[int, bool] | None = None,
+    settle_all: bool = False,
 ) -> tuple[dict[str, dict[str, int]], npt.NDArray[np.bool_]]:
     """Profile 2 over every frame of a log.
 
@@ -347,7 +348,8 @@ def check_frames(
     frames whose verdict of the stamps the poses or the pages changed (evidence that may come
     after the frame: ``host.judge.stream_carry``, ``stream_e2e``); ``decided`` (bus positions
     asked) says of each encoder frame whether its verdict is one by every reading of its stamp
-    (``e2e_decided``).
+    (``e2e_decided``); ``settle_all``: the evidence read even where every reading agrees (a live
+    hold's few frames, judged as a log whose readings differ somewhere: ``e2e_halts``).
 
     The frames are grouped by message once (a stable sort of their message numbers) and the CRCs
     of all protected frames found in one pass; the sequence is then judged per message.
@@ -384,7 +386,7 @@ def check_frames(
             accepted[right_dlc] = True
             continue
         counts[config.name] = _check_message(frames, right_dlc, config, accepted, crc_ok, poses,
-                                             pages, touched, decided)
+                                             pages, touched, decided, settle_all)
     counts[UNKNOWN] = unknown
     return counts, accepted
 
@@ -406,14 +408,11 @@ def _crc_ok(
 
 
 def _check_message(
-    frames: FrameArrays,
-    index: npt.NDArray[np.intp],
-    config: E2EMessage,
-    accepted: npt.NDArray[np.bool_],
-    crc_ok: npt.NDArray[np.bool_],
-    poses: list[npt.NDArray[np.intp]] | None = None,
-    pages: OkPages | None = None,
+    frames: FrameArrays, index: npt.NDArray[np.intp], config: E2EMessage,
+    accepted: npt.NDArray[np.bool_], crc_ok: npt.NDArray[np.bool_],
+    poses: list[npt.NDArray[np.intp]] | None = None, pages: OkPages | None = None,
     touched: list[npt.NDArray[np.intp]] | None = None, decided: dict[int, bool] | None = None,
+    settle_all: bool = False,
 ) -> dict[str, int]:
     """Check the frames ``index`` of one protected message (``crc_ok``: of every frame); mark
     the accepted ones. ``poses``: the evidence frames' positions (``e2e_evidence``); ``pages``:
@@ -428,7 +427,7 @@ def _check_message(
                                cycle_s)
     if config.name in PER_PERIOD_WINDOW and config.cycle_s is not None and poses is not None:
         status = _settled(frames, index, counter, crc_ok[index], periods, status, config, poses,
-                          pages, touched, decided)
+                          pages, touched, decided, settle_all)
         counted = repeats_by_pages(status, counter, index, pages)  # e2e_repeats
         if touched is not None and counted is not status:
             touched.append(index[counted != status])
@@ -462,15 +461,16 @@ def _settled(frames: FrameArrays, index: npt.NDArray[np.intp], counter: npt.NDAr
              poses: list[npt.NDArray[np.intp]],
              pages: OkPages | None = None,
              touched: list[npt.NDArray[np.intp]] | None = None,
-             decided: dict[int, bool] | None = None) -> npt.NDArray[np.int8]:
-    """``status`` where the capture's stamps decide every frame; else settled from the
-    firmware's poses (``e2e_evidence``) and its counts (``e2e_pages``; a skip proof they
-    contradict dropped: ``e2e_skipveto``), the bus positions of
-    the frames where they change a verdict of the stamps' added to ``touched``."""
+             decided: dict[int, bool] | None = None, settle_all: bool = False
+             ) -> npt.NDArray[np.int8]:
+    """``status`` where the capture's stamps decide every frame (not with ``settle_all``); else
+    settled from the firmware's poses (``e2e_evidence``) and its counts (``e2e_pages``; a skip
+    proof they contradict dropped: ``e2e_skipveto``), the bus positions of the frames where
+    they change a verdict of the stamps' added to ``touched``."""
     assert config.cycle_s is not None
     t_s, cycle_s = frames.timestamp_s[index], new_cycle_s(config)
     wide, narrow = readings(t_s, counter, crc_ok, config.cycle_s, periods)
-    if all(np.array_equal(p, periods) or np.array_equal(
+    if not settle_all and all(np.array_equal(p, periods) or np.array_equal(
             status, sequence_statuses(crc_ok, counter, p, config.max_delta_init, t_s, cycle_s))
            for p in (wide, narrow)):
         if decided is not None:

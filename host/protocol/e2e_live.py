@@ -11,6 +11,7 @@ from collections.abc import Callable
 from math import isfinite
 from typing import TYPE_CHECKING
 
+from odocan.host.protocol import busfacts
 from odocan.host.protocol.decode import frame_key
 from odocan.host.protocol.e2e import (
     COUNTER_MASK,
@@ -37,6 +38,7 @@ from odocan.host.protocol.e2e_crc import (
 )
 from odocan.host.protocol.e2e_cycles import new_cycle_s
 from odocan.host.protocol.e2e_evidence import CAPTURE_HOLD_CYCLES, ReleaseWatch
+from odocan.host.protocol.e2e_halts import SENDS, HaltWatch
 from odocan.host.protocol.e2e_held import HELD, forced, new_cycle_pending, readings_differ
 from odocan.host.protocol.e2e_periods import (
     CAPTURE_TOLERANCE_CYCLES,
@@ -121,6 +123,9 @@ class E2EMonitor:
         cycle_s = min((c.cycle_s for c in self._configs.values()
                        if c.min_periods == 0 and c.cycle_s), default=0.01)
         self._releases: ReleaseWatch | _SeenOnce = ReleaseWatch(cycle_s)  # (check_as: _SeenOnce)
+        self._halts = HaltWatch(
+            frozenset(k for k, c in self._configs.items() if c.name in SENDS),
+            next((k for k, c in self._configs.items() if c.name == busfacts.ENC_MESSAGE), -1))
 
     def check(
         self, can_id: int, data: bytes, extended: bool = False, timestamp_s: float | None = None
@@ -131,6 +136,7 @@ class E2EMonitor:
         ``host.mqtt.liveplan``: a call with keywords takes CPython's slower call path)."""
         if timestamp_s is not None:
             self._releases.seen(timestamp_s, can_id)
+            self._halts.seen(can_id, timestamp_s, data[1] & COUNTER_MASK if len(data) > 1 else 0)
         live = self._live.get(frame_key(can_id, True) if extended else can_id)
         if live is None or len(data) != live.length:
             return self._check_first(frame_key(can_id, extended), data, timestamp_s)
@@ -149,7 +155,9 @@ class E2EMonitor:
                         and (readings_differ(live.state, timestamp_s - last,
                                              (counter - live.last) & COUNTER_MASK, counter,
                                              live.cycle_s)
-                             or new_cycle_pending(live.state, counter, timestamp_s))):
+                             or new_cycle_pending(live.state, counter, timestamp_s)
+                             or (self._halts.after(timestamp_s) and not live.state.waiting
+                                 and (counter - live.state.last_valid) & COUNTER_MASK > 1))):
                     live.last_s = last  # not heard yet: given back by ``check_as``
                     self._held_s = timestamp_s  # (its ``ReleaseWatch.seen`` was: once)
                     return HELD
