@@ -24,9 +24,28 @@ _latched: list[int] = []  # the signal numbers latched since the last ``clear``,
 
 def latch_and_raise(signum: int, frame: object) -> None:
     """The CLI's handler for SIGINT and SIGTERM: ``latch`` the signal, then raise where the
-    main thread is (``Terminated`` for SIGTERM, ``KeyboardInterrupt`` for SIGINT)."""
+    main thread is (``Terminated`` for SIGTERM, ``KeyboardInterrupt`` for SIGINT), unless
+    ``frame`` is importlib's module-lock callback (``_dropped_there``)."""
     latch(signum)
+    if _dropped_there(frame):
+        return
     raise Terminated if signum == signal.SIGTERM else KeyboardInterrupt
+
+
+# importlib's weakref callback of a module lock: CPython prints an exception raised in it
+# ("Exception ignored in: <function _get_module_lock.<locals>.cb ...>" and a traceback through
+# this handler) and drops it, so a Ctrl-C or SIGTERM landing there as odocan imported its modules
+# said a traceback before its one line (made exactly in tests/test_early_interrupt_cb.py)
+_MODULE_LOCK_CALLBACK = ("<frozen importlib._bootstrap>", "_get_module_lock.<locals>.cb")
+
+
+def _dropped_there(frame: object) -> bool:
+    """``frame`` is where an exception is dropped, not raised (``_MODULE_LOCK_CALLBACK``): the
+    latch alone stops the command there (its first safe point), as it did once the exception
+    was dropped; nothing printed."""
+    code = getattr(frame, "f_code", None)
+    return (getattr(code, "co_filename", None), getattr(code, "co_qualname", None)) \
+        == _MODULE_LOCK_CALLBACK
 
 
 def latch(signum: int) -> None:

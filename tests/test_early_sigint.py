@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -25,7 +26,11 @@ import pytest
 from odocan.host.cli.app import main
 
 ROOT = Path(__file__).resolve().parents[1]
-ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
+# the interpreter's options fixed: with warning options (PYTHONWARNINGS, dev mode) CPython
+# imports ``warnings`` as it starts, and a Ctrl-C there is printed ("'import warnings' failed")
+# and dropped, the run going on to its end: the test would wait out its timeout
+ENV = {**{k: v for k, v in os.environ.items() if k not in ("PYTHONWARNINGS", "PYTHONDEVMODE")},
+       "PYTHONPATH": str(ROOT)}
 OLD_LOG = "an older log, kept\n"
 
 
@@ -134,13 +139,22 @@ def _the_interpreters(err: str) -> bool:
     nothing (killed by SIGINT), a fatal error of its initialisation (``init_import_site`` as
     site runs, ``init_sys_streams`` as io loads: met under load at 10 ms), or runpy's traceback
     through frozen frames, after "Could not import runpy module" when the Ctrl-C lands as
-    ``-m`` imports runpy itself (CPython's ``pymain_run_module``, exit 1: CI met it at 20 ms)."""
+    ``-m`` imports runpy itself (CPython's ``pymain_run_module``, exit 1: CI met it at 20 ms).
+    The innermost frame may be ``odocan/__init__.py``'s or ``odocan/__main__.py``'s at line 0:
+    the Ctrl-C heard by the module's first instruction (3.11's ``RESUME`` checks signals),
+    before its first line runs (``_ON_ENTRY``)."""
     if err == "" or "Fatal Python error: init_" in err:
         return True
     err = err.removeprefix("Could not import runpy module\n")
-    frames = [line for line in err.splitlines() if line.lstrip().startswith("File ")]
+    frames = [line.strip() for line in err.splitlines() if line.lstrip().startswith("File ")]
+    if frames and _ON_ENTRY.fullmatch(frames[-1]):
+        frames.pop()
     return (err.startswith("Traceback") and err.rstrip().endswith("KeyboardInterrupt")
-            and all('"<frozen ' in line for line in frames))
+            and all(line.startswith('File "<frozen ') for line in frames))
+
+
+# odocan's package or ``__main__`` module entered, none of its lines run yet (line 0)
+_ON_ENTRY = re.compile(r'File ".*/odocan/__(init|main)__\.py", line 0, in <module>')
 
 
 def _without_ignored_interrupts(err: str) -> str:
@@ -177,6 +191,61 @@ def test_runpys_own_import_interrupted_is_the_interpreters() -> None:
     assert _the_interpreters(said)
     ours = said.replace('"<frozen runpy>"', '"/x/odocan/__main__.py"')
     assert not _the_interpreters(ours)
+
+
+# A sitecustomize that makes a Ctrl-C pending (``Py_AddPendingCall`` of ``PyErr_SetInterruptEx``)
+# as ``exec`` starts the module ODOCAN_TEST_ENTERED ends with: the interpreter runs the call at
+# its next check and hears the signal at the next, the module's first instruction
+ENTERED_HOOK = """
+import ctypes, os, sys
+_target = os.environ["ODOCAN_TEST_ENTERED"]
+_pend = ctypes.pythonapi.Py_AddPendingCall
+_pend.argtypes = [ctypes.c_void_p, ctypes.c_void_p]
+_interrupt = ctypes.cast(ctypes.pythonapi.PyErr_SetInterruptEx, ctypes.c_void_p)
+
+def _hook(event, args):
+    if event == "exec" and getattr(args[0], "co_filename", "").endswith(_target):
+        _pend(_interrupt, 2)  # SIGINT, the int PyErr_SetInterruptEx takes
+
+sys.addaudithook(_hook)
+"""
+
+
+@pytest.mark.parametrize("module", ["__init__.py", "__main__.py"])
+def test_a_ctrl_c_as_odocan_is_entered_is_the_interpreters(tmp_path: Path, module: str) -> None:
+    """A Ctrl-C heard as ``python -m`` enters ``odocan/__init__.py`` or ``odocan/__main__.py``,
+    before their first line (no handler of odocan's can exist yet): CPython's traceback through
+    runpy's frozen frames to that module at line 0, killed by SIGINT (3.11's
+    ``_Py_UnhandledKeyboardInterrupt``), nothing written. Before, the sweep below refused it
+    (a frame outside the frozen modules) and a correct run failed."""
+    (tmp_path / "sitecustomize.py").write_text(ENTERED_HOOK)
+    log = tmp_path / "drive.asc"
+    log.write_text(OLD_LOG)
+    done = subprocess.run(
+        [sys.executable, "-m", "odocan", "run", "--duration", "3600", "--log", str(log)],
+        cwd=ROOT, capture_output=True, text=True, timeout=120,
+        env={**ENV, "PYTHONPATH": f"{tmp_path}{os.pathsep}{ROOT}",
+             "ODOCAN_TEST_ENTERED": f"{os.sep}odocan{os.sep}{module}"})
+    assert done.returncode == -signal.SIGINT, done.stderr
+    assert f'odocan{os.sep}{module}", line 0, in <module>' in done.stderr, done.stderr
+    assert _the_interpreters(done.stderr), done.stderr
+    assert log.read_text() == OLD_LOG
+
+
+def test_odocans_own_lines_are_not_the_interpreters() -> None:
+    """Line 0 of odocan's entry modules only, and only as the innermost frame."""
+    said = ("Traceback (most recent call last):\n"
+            '  File "<frozen runpy>", line 198, in _run_module_as_main\n'
+            '  File "<frozen runpy>", line 88, in _run_code\n'
+            '  File "/x/odocan/__main__.py", line 0, in <module>\n'
+            "KeyboardInterrupt\n")
+    assert _the_interpreters(said)
+    assert not _the_interpreters(said.replace("line 0,", "line 12,"))
+    assert not _the_interpreters(said.replace("__main__.py", "host/cli/app.py"))
+    deeper = said.replace("KeyboardInterrupt\n",
+                          '  File "/x/odocan/host/__init__.py", line 7, in <module>\n'
+                          "KeyboardInterrupt\n")
+    assert not _the_interpreters(deeper)
 
 
 def test_an_ignored_interrupt_in_importlib_is_not_odocans() -> None:

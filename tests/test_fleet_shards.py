@@ -31,6 +31,7 @@ from odocan.sim import fleet as sim_fleet
 from odocan.sim import robot
 from odocan.sim.board import TICK_S
 from odocan.sim.fleet import Fleet, FleetConfig, frame_fields
+from tests.fleet_judged import wait_until_judged
 from tests.fleet_run_until import pace_never_late
 from tests.requires import require_executables
 
@@ -348,7 +349,7 @@ def test_sigterm_stops_every_worker_and_the_report_is_written(tmp_path: Path) ->
     assert proc.stderr is not None
     start = proc.stderr.readline()
     assert start.startswith("fleet: 3 robots running, telemetry on mqtt://127.0.0.1:"), start
-    time.sleep(1.0)
+    wait_until_judged(proc, start, ["robot001", "robot002", "robot003"])  # was a fixed 1 s
     began = time.monotonic()
     proc.send_signal(signal.SIGTERM)
     out, err = proc.communicate(timeout=60)

@@ -19,6 +19,8 @@ from pathlib import Path
 
 import pytest
 
+from tests.test_signals import _catches_sigterm
+
 ROOT = Path(__file__).resolve().parents[1]
 START_TIMEOUT_S = 120.0  # a loaded machine: imports and the embedded broker take their time
 EXIT_TIMEOUT_S = 60.0
@@ -47,6 +49,17 @@ def _wait_until(proc: subprocess.Popen[str], ready: Path) -> None:
         if proc.poll() is not None or time.monotonic() > deadline:
             proc.kill()
             pytest.fail(f"never ready: {proc.communicate()}")
+        time.sleep(0.05)
+
+
+def _wait_for_its_handler(proc: subprocess.Popen[str]) -> None:
+    """Until odocan handles SIGTERM (``main`` installed its handler; before, the signal kills
+    the interpreter: -15). Before, a fixed 4 s: a loaded machine can take longer to import."""
+    deadline = time.monotonic() + START_TIMEOUT_S
+    while not _catches_sigterm(proc.pid):
+        if proc.poll() is not None or time.monotonic() > deadline:
+            proc.kill()
+            pytest.fail(f"SIGTERM never handled: {proc.communicate()}")
         time.sleep(0.05)
 
 
@@ -89,7 +102,7 @@ def test_a_bridge_stopped_before_its_duration_exits_143(tmp_path: Path) -> None:
 def test_a_real_time_node_stopped_before_its_duration_exits_143(node: str) -> None:
     proc = _start(node, "-i", "virtual", "-c", f"stopped-{node}-{os.getpid()}",
                   "--duration", "600")
-    time.sleep(4.0)  # its loop under way (a signal before it is 143 as well, by main)
+    _wait_for_its_handler(proc)  # from then on 143 (its loop under way, or before it by main)
     code, _, err = _stop(proc, signal.SIGTERM)
     assert code == 143, err
     assert "Traceback" not in err

@@ -203,10 +203,10 @@ def test_sigterm_ends_a_fleet_with_its_report(tmp_path: Path) -> None:
     proc = _start("fleet", "-n", "2", "--duration", "600", "--report", str(report))
     assert proc.stderr is not None
     deadline = time.monotonic() + START_TIMEOUT_S
-    line = proc.stderr.readline()  # the start line: the clock is running
-    while not line.startswith("fleet: ") and time.monotonic() < deadline and line:
-        line = proc.stderr.readline()
-    assert "robots running" in line, line
+    said = [proc.stderr.readline()]  # the start line: the clock is running
+    while not said[-1].startswith("fleet: ") and time.monotonic() < deadline and said[-1]:
+        said.append(proc.stderr.readline())
+    assert "robots running" in said[-1], (proc.poll(), said)
     code, out, err = _terminate(proc)
     assert code == 143, err  # stopped before its 600 s: never 0, whatever the partial verdict
     assert out.startswith("fleet: 2 robots, "), out

@@ -46,7 +46,11 @@ from odocan.host.mqtt.options import configure_logging
 from odocan.sim.exceptions import ConfigurationError, OdocanError, Terminated
 
 MAX_SHARDS = 1000
-BROKER_START_S = 20.0  # spawn + importing amqtt on a loaded machine
+# spawn + importing amqtt on a loaded machine: 20 s was cut short under load (a CI-like 2-core
+# machine, nice 19, load ~10: "did not start within 20 s" while it was still importing)
+BROKER_START_S = 60.0
+BROKER_POLL_S = 0.1  # how often the start looks whether the broker process still lives
+BROKER_JOIN_S = 5.0  # a broker process that closed its pipe: its exit code within this
 WORKER_RESULT_S = 60.0  # after the duration: the goodbye of every link, then the report
 ORPHAN_CHECK_S = 1.0  # a worker or broker whose parent died stops within this
 Progress = Callable[[int, int], None]  # (ticks, late ticks) summed over the workers so far
@@ -117,15 +121,36 @@ class BrokerProcess:
                                  name="odocan-broker", daemon=True)
         self._proc.start()
         theirs.close()
-        if not ours.poll(timeout_s):
-            self.stop()
-            raise BrokerError(f"the embedded broker did not start within {timeout_s:g} s")
-        answer = ours.recv()
+        answer = self._answer(ours, timeout_s)
         if answer != "ok":
             self.stop()
             raise BrokerError(f"the embedded broker on {LOOPBACK}:{port}: {answer}")
         self.port = port
         return BrokerURL(host=LOOPBACK, port=port, v5=False)
+
+    def _answer(self, ours: Connection, timeout_s: float) -> str:
+        """The broker's first word on ``ours`` ("ok" or why not): waited for while its process
+        lives, ``timeout_s`` at most; ``BrokerError`` (the broker stopped) when it did not say
+        it in time, or its process ended first (before: an ``EOFError`` traceback)."""
+        deadline = time.monotonic() + timeout_s
+        while not ours.poll(BROKER_POLL_S):
+            if not self._proc.is_alive():
+                raise self._ended()
+            if time.monotonic() > deadline:
+                self.stop()
+                raise BrokerError(f"the embedded broker did not start within {timeout_s:g} s")
+        try:
+            return str(ours.recv())
+        except EOFError:  # its end closed the pipe
+            raise self._ended() from None
+
+    def _ended(self) -> BrokerError:
+        """The error of a broker process that ended before it listened (it is reaped)."""
+        proc = self._proc
+        proc.join(BROKER_JOIN_S)
+        self.stop()
+        return BrokerError(f"the embedded broker exited (code {proc.exitcode}) before it "
+                           "listened")
 
     @property
     def pid(self) -> int | None:
