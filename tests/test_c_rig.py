@@ -301,7 +301,7 @@ def test_the_readme_example_passes_against_a_c_firmware_process(
     firmware = subprocess.Popen(argv, cwd=ROOT, stderr=subprocess.PIPE, text=True)
     try:
         pytester.makepyfile(test_users_robot=EXAMPLE.read_text())
-        result = _plugin_run(pytester, "--odocan-bus", udp_bus)
+        result = _plugin_run(pytester, "--odocan-bus", udp_bus, *test_pytest_plugin.ACK_TIMEOUT)
     finally:
         firmware.send_signal(signal.SIGTERM)
         try:

@@ -65,9 +65,9 @@ from __future__ import annotations
 
 import asyncio
 import gc
-import signal
 import time
 from collections.abc import Callable
+from contextlib import ExitStack
 from dataclasses import dataclass
 from typing import Any
 
@@ -88,6 +88,7 @@ from odocan.host.mqtt.options import broker_for
 from odocan.host.mqtt.ticktrace import TickTrace, from_env
 from odocan.host.protocol.secoc import SecocSigner
 from odocan.host.stopped import Stopped
+from odocan.sim import interrupts
 from odocan.sim.board import TICK_S
 from odocan.sim.contract import cycle_ticks
 from odocan.sim.fleet import Fleet, FleetConfig, run_realtime
@@ -199,7 +200,8 @@ async def _paced(
         signals.append(signum)
         stop.set()
 
-    handled = _on_stop_signals(loop, on_signal)
+    handlers = ExitStack()  # the loop's until the run ends, the CLI's latching ones back after
+    handlers.enter_context(interrupts.loop_handlers_installed(loop, on_signal))
     await _phase_wait(run.clock_phase)
     started()
     collector = TickCollector(on_batch)
@@ -228,8 +230,7 @@ async def _paced(
         collector.close()
         if trace is not None:
             trace.write()
-        for signum in handled:
-            loop.remove_signal_handler(signum)
+        handlers.close()
 
 
 async def _phase_wait(phase: tuple[float, float] | None) -> None:
@@ -310,21 +311,6 @@ async def _watch(stats: DeadlineStats, on_progress: ProgressHook) -> None:
     while True:
         await asyncio.sleep(PROGRESS_PERIOD_S)
         on_progress(stats)
-
-
-def _on_stop_signals(
-    loop: asyncio.AbstractEventLoop, callback: Callable[[int], None]
-) -> list[signal.Signals]:
-    """SIGINT and SIGTERM call ``callback(signum)`` (main thread only; elsewhere nothing is
-    installed)."""
-    handled: list[signal.Signals] = []
-    for signum in (signal.SIGINT, signal.SIGTERM):
-        try:
-            loop.add_signal_handler(signum, callback, int(signum))
-        except (RuntimeError, ValueError, NotImplementedError):
-            continue
-        handled.append(signum)
-    return handled
 
 
 async def _all_connected(bridge: Bridge, timeout_s: float) -> None:

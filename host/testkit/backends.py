@@ -36,7 +36,7 @@ from odocan.sim.tickloop import TickLoop
 from odocan.sim.vehicle import Vehicle
 
 _LOCKSTEP_ACK_TIMEOUT_S = 1.0  # simulated seconds for an ODOM_ACK (it comes in the next tick)
-_EXTERNAL_ACK_TIMEOUT_S = 3.0  # wall-clock seconds on a real bus
+EXTERNAL_ACK_TIMEOUT_S = 3.0  # wall-clock seconds on a real bus (ini odocan_ack_timeout)
 _POLL_S = 0.01  # how often a real-time wait looks at what was heard
 _channels = itertools.count()
 
@@ -186,9 +186,10 @@ class ExternalBackend:
     """The robot around an external firmware, in real time on a real bus (module docstring)."""
 
     mode = "external"
-    ack_timeout_s = _EXTERNAL_ACK_TIMEOUT_S
 
-    def __init__(self, options: RigOptions, bus_kwargs: dict[str, Any]) -> None:
+    def __init__(self, options: RigOptions, bus_kwargs: dict[str, Any],
+                 ack_timeout_s: float = EXTERNAL_ACK_TIMEOUT_S) -> None:
+        self.ack_timeout_s = ack_timeout_s  # wall clock: a loaded CI machine may need more
         spec = fault_spec(options.faults, options.seed)
         if spec is not None and spec.mcu_active:  # no rig steps an external MCU: before a bus
             raise mcu_refused(spec)

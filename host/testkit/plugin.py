@@ -19,7 +19,7 @@ then a test's ``@pytest.mark.odocan(robot=..., ...)``; then the factory's keywor
 whatever firmware is on that bus: the fixture then does not start ours; it plays the motor
 controller, the ground truth and the scenario driver in real time there and judges what the
 firmware sends (``host.testkit``). ``odocan_attach_timeout`` (s, default 30) bounds the wait for
-the firmware's first ODOM_STATUS.
+the firmware's first ODOM_STATUS, ``odocan_ack_timeout`` (s, default 3) each command's ODOM_ACK.
 
 **Our C firmware**: ``--odocan-firmware c`` (or the ini option ``odocan_firmware``) runs the
 lockstep rigs on the C port (``firmware/c``, built with make on first use, ``sim.cboard``).
@@ -50,6 +50,7 @@ _INI = {
     ),
     "odocan_bus": ("can.Bus keywords of a bus with an external firmware (none: lockstep)", ""),
     "odocan_attach_timeout": ("seconds to wait for an external firmware to answer", "30"),
+    "odocan_ack_timeout": ("seconds an external firmware has to acknowledge a command", "3"),
     "odocan_firmware": ("our firmware in lockstep: python or c (firmware/c)", "python"),
 }
 _FIRMWARES = ("python", "c")  # sim.cboard.FIRMWARES, without importing the sim here
@@ -176,6 +177,7 @@ def odocan_rig(request: pytest.FixtureRequest) -> Iterator[RigFactory]:
             "under test is the one on that bus (run it with odocan firmware --firmware c)"
         )
     timeout_s = float(str(request.config.getini("odocan_attach_timeout")))
+    ack_timeout_s = float(str(request.config.getini("odocan_ack_timeout")))
     rigs: list[OdocanRig] = []
 
     def factory(**overrides: Any) -> OdocanRig:
@@ -187,7 +189,8 @@ def odocan_rig(request: pytest.FixtureRequest) -> Iterator[RigFactory]:
             raise pytest.UsageError("one odocan rig at a time on an external firmware's bus")
         encoder = None if bus is None else _encoder(request.config)
         options = RigOptions(**chosen, firmware=firmware)
-        rig = make_rig(options, bus=bus, encoder=encoder, attach_timeout_s=timeout_s)
+        rig = make_rig(options, bus=bus, encoder=encoder, attach_timeout_s=timeout_s,
+                       ack_timeout_s=ack_timeout_s)
         rigs.append(rig)
         return rig
 

@@ -33,7 +33,12 @@ from odocan.host.protocol.heard import UnknownMessageError
 from odocan.host.protocol.pose import Pose
 from odocan.host.protocol.secoc import SecocSigner, load_secoc_key
 from odocan.host.protocol.session import CommandNotAcked, CommandSession, SecocUnsynchronised
-from odocan.host.testkit.backends import Backend, ExternalBackend, LockstepBackend
+from odocan.host.testkit.backends import (
+    EXTERNAL_ACK_TIMEOUT_S,
+    Backend,
+    ExternalBackend,
+    LockstepBackend,
+)
 from odocan.host.testkit.judging import RigAssertions
 from odocan.host.testkit.options import CommandRefused, RigOptions, TestkitError, fault_spec
 from odocan.sim.board import TICK_S
@@ -351,14 +356,16 @@ def make_rig(
     bus: dict[str, Any] | None = None,
     encoder: CommandEncoder | None = None,
     attach_timeout_s: float = 30.0,
+    ack_timeout_s: float = EXTERNAL_ACK_TIMEOUT_S,
 ) -> OdocanRig:
     """A rig: lockstep with our firmware (``bus`` None), or around the external firmware on
-    ``bus`` (``can.Bus`` keywords), attached within ``attach_timeout_s``."""
+    ``bus`` (``can.Bus`` keywords), attached within ``attach_timeout_s``, each command's
+    ODOM_ACK awaited ``ack_timeout_s`` (wall clock; lockstep waits its simulated second)."""
     if bus is None:
         return OdocanRig(LockstepBackend(options), options, encoder)
     if fault_spec(options.fw_faults) is not None:
         raise TestkitError("fw_faults need our firmware (lockstep): the external one sends alone")
-    rig = OdocanRig(ExternalBackend(options, bus), options, encoder)
+    rig = OdocanRig(ExternalBackend(options, bus, ack_timeout_s), options, encoder)
     try:
         rig.attach(attach_timeout_s)
     except BaseException:

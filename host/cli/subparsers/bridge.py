@@ -20,9 +20,9 @@ from __future__ import annotations
 
 import argparse
 import asyncio
-import signal
 import sys
 import time
+from contextlib import ExitStack
 from pathlib import Path
 from typing import Any
 
@@ -47,7 +47,7 @@ from odocan.host.mqtt.options import (
 from odocan.host.mqtt.topics import check_robot_name
 from odocan.host.protocol.secoc import SecocSigner, load_secoc_key
 from odocan.host.stopped import early_stop
-from odocan.sim import robot
+from odocan.sim import interrupts, robot
 from odocan.sim.exceptions import ConfigurationError
 from odocan.sim.rig import INTEGRATORS
 
@@ -136,38 +136,39 @@ async def _bridge(
     """Bridge until ``--duration`` or Ctrl-C/SIGTERM; the signal that stopped it, if one did,
     and each robot's verdict, its watch ended (``Bridge.run``'s end)."""
     signals: list[int] = []
+    stop = asyncio.Event()
 
-    def on_signal(signum: int, stop: asyncio.Event) -> None:
+    def on_signal(signum: int) -> None:
         signals.append(signum)
         stop.set()
 
-    async with broker_for(url) as (broker, embedded):
-        config = BridgeConfig(broker=broker, **bridge_options(args))
-        endpoint = RobotEndpoint(name, bus, geometry, args.integrator,
-                                 counter_bits=profile.counter_bits, signer=signer,
-                                 profile_name=profile.name, from_page=args.robot is None)
-        bridge = Bridge([endpoint], config=config,
-                        end_rule=EndRule(require_firmware=args.require_firmware))
-        stop = asyncio.Event()
-        loop = asyncio.get_running_loop()
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            loop.add_signal_handler(sig, on_signal, int(sig), stop)
-        reader = BusFeed(bus, bridge, loop)
-        reader.start()
-        if args.duration is not None:
-            _stop_after(args.duration, stop)
-        banner = f"bridge {name}: {broker}{' (embedded)' if embedded else ''}"
-        announced = asyncio.create_task(_announce_when_connected(bridge, banner))
-        try:
-            await bridge.run(stop=stop)
-        finally:
-            announced.cancel()
-            reader.stop()
-        print(f"bridge {name}: {counters_line(bridge.counters())}", file=sys.stderr)
-        if said := bridge.robots[0].telemetry.robot.said(f"bridge {name}"):  # the page chose
-            print(said, file=sys.stderr)
-        if lost := lost_here_text(reader.reader.stats()):
-            print(f"bridge {name}: lost here: {lost}", file=sys.stderr)
+    handlers = ExitStack()  # the loop's from the bridge's start to its broker's end, then the CLI's
+    with handlers:
+        async with broker_for(url) as (broker, embedded):
+            config = BridgeConfig(broker=broker, **bridge_options(args))
+            endpoint = RobotEndpoint(name, bus, geometry, args.integrator,
+                                     counter_bits=profile.counter_bits, signer=signer,
+                                     profile_name=profile.name, from_page=args.robot is None)
+            bridge = Bridge([endpoint], config=config,
+                            end_rule=EndRule(require_firmware=args.require_firmware))
+            loop = asyncio.get_running_loop()
+            handlers.enter_context(interrupts.loop_handlers_installed(loop, on_signal))
+            reader = BusFeed(bus, bridge, loop)
+            reader.start()
+            if args.duration is not None:
+                _stop_after(args.duration, stop)
+            banner = f"bridge {name}: {broker}{' (embedded)' if embedded else ''}"
+            announced = asyncio.create_task(_announce_when_connected(bridge, banner))
+            try:
+                await bridge.run(stop=stop)
+            finally:
+                announced.cancel()
+                reader.stop()
+            print(f"bridge {name}: {counters_line(bridge.counters())}", file=sys.stderr)
+            if said := bridge.robots[0].telemetry.robot.said(f"bridge {name}"):  # page chose
+                print(said, file=sys.stderr)
+            if lost := lost_here_text(reader.reader.stats()):
+                print(f"bridge {name}: lost here: {lost}", file=sys.stderr)
     # judged once, when the watch ended: the verdicts the retained ``offline`` statuses carry
     return (signals[0] if signals else None), bridge.end_verdicts()
 
