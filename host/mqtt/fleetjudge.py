@@ -38,6 +38,8 @@ if TYPE_CHECKING:
     from odocan.host.judge.tracking import PoseTracker
 
 DEFAULT_MAX_MISS_RATIO = 0.001  # ``odocan fleet --max-miss-ratio``'s default
+STOPPED_UNJUDGED = ("a signal stopped the run before an on-board pose was compared with the "
+                    "reference: nothing judged")
 
 
 @dataclass
@@ -46,12 +48,15 @@ class FleetEndRule:
 
     ``frames_dropped``: the bridge's frames dropped or failed by then (none judged when any);
     ``stats``: the loop's deadline figures, set once its clock stopped (before the bridge's
-    stop: a verdict asked for earlier is a RuntimeError, none is made up)."""
+    stop: a verdict asked for earlier is a RuntimeError, none is made up); ``stopped``: set
+    with them when a signal stopped the clock early (a robot with no pose paired by then is
+    UNJUDGED, not FAILed: ``judge_robot``)."""
 
     fleet: Fleet
     frames_dropped: Callable[[], int]
     max_miss_ratio: float = DEFAULT_MAX_MISS_RATIO
     stats: DeadlineStats | None = None
+    stopped: bool = False  # a signal stopped the clock before its duration (``_paced``)
     entries: dict[str, dict[str, Any]] = field(default_factory=dict)
 
     def judge(self, telemetry: RobotTelemetry, profile_name: str | None) -> EndVerdict:
@@ -61,7 +66,7 @@ class FleetEndRule:
             raise RuntimeError("the fleet's clock has not stopped: no verdict")
         index = self.fleet.names.index(telemetry.name)
         entry = watched_verdict(telemetry, self.frames_dropped(),
-                                halted_of(self.fleet, index, self.stats))
+                                halted_of(self.fleet, index, self.stats), stopped=self.stopped)
         self.entries[telemetry.name] = entry
         return end_verdict(entry, telemetry, loop_figures(self.stats, self.max_miss_ratio))
 
@@ -122,17 +127,17 @@ def _errors(stats: ErrorStats) -> dict[str, Any] | None:
 
 
 def watched_verdict(
-    telemetry: RobotTelemetry, frames_dropped: int, halted: Halted | None
+    telemetry: RobotTelemetry, frames_dropped: int, halted: Halted | None, stopped: bool = False,
 ) -> dict[str, Any]:
     """One bridged robot's verdict when the watch ends: what its live judge still holds judged
     first (the frames held, ``livehold``; ``livegapseen.end_of_watch``: a held choice made, a
     new start's held samples judged), then ``judge_robot``, then the stretches between the
     loop's halts (``overload``), then ODOM_TWIST's judges (issue #11: a DISTANCE the bridge
-    FAILed was said beside a fleet PASS)."""
+    FAILed was said beside a fleet PASS). ``stopped``: a signal stopped the run early."""
     tracker = telemetry.tracker
     telemetry.end_watch()  # frames held judged, then what still waits (host.judge.watchend)
     verdict = judge_robot(tracker.vs_reference, tracker.vs_truth, frames_dropped=frames_dropped,
-                          beyond_allowance_m=tracker.max_beyond_allowance_m)
+                          beyond_allowance_m=tracker.max_beyond_allowance_m, stopped=stopped)
     if conflict := telemetry.sources.conflict_text():  # two firmwares: FAILed by name
         verdict = {**verdict, "verdict": "FAIL", "reason": _two_sources(conflict, tracker)}
     elif verdict["verdict"] in ("PASS", "FAIL") and halted is not None:
@@ -164,7 +169,7 @@ def _two_sources(conflict: str, tracker: PoseTracker) -> str:
 
 def judge_robot(
     vs_reference: ErrorStats, vs_truth: ErrorStats, *, frames_dropped: int = 0,
-    beyond_allowance_m: float | None = None,
+    beyond_allowance_m: float | None = None, stopped: bool = False,
 ) -> dict[str, Any]:
     """One robot's pose errors and verdict (see the module docstring): ``livefit.pose_wrong``
     on the largest position error beyond its loss allowance (m; ``beyond_allowance_m``, the
@@ -172,7 +177,9 @@ def judge_robot(
     and the largest heading error. Skipped releases of the worker's loop are no reason to leave
     a robot unjudged: their encoder samples were sent late, one 10 ms step each (module
     docstring); before, steps over several cycles moved a correct firmware's position 2-3 LSB off
-    the reference and the robot was UNJUDGED."""
+    the reference and the robot was UNJUDGED. No pose paired when a signal ``stopped`` the run
+    early is UNJUDGED, nothing judged (as ``run`` and the monitor say it): the run ended before
+    the firmware's first pose could be judged (before: a FAIL blaming a correct firmware)."""
     beyond_m = vs_reference.max_dpos_m if beyond_allowance_m is None else beyond_allowance_m
     entry: dict[str, Any] = {"pose_vs_reference": _errors(vs_reference),
                              "pose_vs_truth": _errors(vs_truth),
@@ -181,6 +188,8 @@ def judge_robot(
         return {**entry, "verdict": "UNJUDGED",
                 "reason": f"the bridge dropped {frames_dropped} frames: the reference is not "
                           "the firmware's"}
+    if not vs_reference.samples and stopped:
+        return {**entry, "verdict": "UNJUDGED", "reason": STOPPED_UNJUDGED}
     if not vs_reference.samples:
         return {**entry, "verdict": "FAIL",
                 "reason": "no on-board pose paired with the reference"}

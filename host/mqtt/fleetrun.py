@@ -160,6 +160,7 @@ async def run_fleet(
                         fleet, run, bridge.offer, lambda: _started(on_start, fleet, url),
                         on_progress, trace, bridge.gate)
                     rule.stats = stats  # the clock stopped: the loop's figures are final
+                    rule.stopped = stopped is not None  # by a signal, before its duration
                     stop.set()
             except BaseExceptionGroup as group:
                 raise first_error(group) from None
@@ -413,3 +414,13 @@ def failures(report: dict[str, Any], max_miss_ratio: float) -> list[str]:
             first = robots[names[0]]["reason"]
             out.append(f"{len(names)} of {len(robots)} robots {what} ({names[0]}: {first})")
     return out
+
+
+def run_verdict(report: dict[str, Any], max_miss_ratio: float) -> str:
+    """The run's word: PASS (no threshold broken), FAIL (a robot FAILed, or the loop missed
+    its deadlines), else UNJUDGED (robots not judged, none FAILed: a signal that stopped the
+    run before a robot's first pose blames no firmware, as ``run``'s partial UNJUDGED)."""
+    if not failures(report, max_miss_ratio):
+        return "PASS"
+    failed = any(r.get("verdict") == "FAIL" for r in report["per_robot"].values())
+    return "FAIL" if failed or report["deadline_miss_ratio"] > max_miss_ratio else "UNJUDGED"

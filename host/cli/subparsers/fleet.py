@@ -13,8 +13,10 @@ watches; ``--foxglove [PORT]`` serves every robot live to Foxglove: ``host.mqtt.
 ``--report`` writes the JSON contract of ``host.mqtt.fleetrun`` (``workers`` added by
 ``host.mqtt.shards``) with the run's verdict on top: ``passed`` and ``failures`` (each threshold
 broken, the exit line's words; ``passed`` false too for a run a signal stopped). The exit line
-says PASS, or FAIL and every threshold broken: exit 0, or 1 when ``deadline_miss_ratio`` exceeds
-``--max-miss-ratio`` or a robot's pose is out of tolerance or not judged.
+says PASS, or FAIL (UNJUDGED when no robot FAILed and the loop kept its deadlines: robots not
+judged) and every threshold broken: exit 0, or 1 when ``deadline_miss_ratio`` exceeds
+``--max-miss-ratio`` or a robot's pose is out of tolerance or not judged; a run a signal stopped
+exits as the signal ends a process (143 for SIGTERM), never 0 or 1.
 """
 
 from __future__ import annotations
@@ -35,7 +37,7 @@ from odocan.host.cli.options import SEED_LIMIT, add_seed_argument, float_in, int
 from odocan.host.io.export import FOXGLOVE_PORT
 from odocan.host.mqtt.broker import BrokerURL
 from odocan.host.mqtt.fleetjudge import DEFAULT_MAX_MISS_RATIO
-from odocan.host.mqtt.fleetrun import FleetRun, failures
+from odocan.host.mqtt.fleetrun import FleetRun, failures, run_verdict
 from odocan.host.mqtt.options import (
     add_mqtt_arguments,
     bridge_options,
@@ -230,7 +232,7 @@ def _do_fleet(args: argparse.Namespace) -> int:
                 report = _run(run, args.workers, debug, said, spawn)
     broken = failures(report, args.max_miss_ratio)
     report.update(passed=not broken and not report.get("stopped"), failures=broken)
-    _print_summary(report, broken)
+    _print_summary(report, broken, run_verdict(report, args.max_miss_ratio))
     if args.report is not None:
         write_text(args.report, json.dumps(report, indent=2) + "\n", "--report")
     if report.get("stopped"):
@@ -297,8 +299,9 @@ def _relabel(bar: Progress, label: str, ticks: int, late: int) -> None:
                  f"({late / max(ticks, 1):.4f} overall)")
 
 
-def _print_summary(report: dict[str, Any], broken: list[str]) -> None:
-    """The summary line, per-robot verdict counts, then PASS or FAIL with every reason."""
+def _print_summary(report: dict[str, Any], broken: list[str], word: str = "FAIL") -> None:
+    """The summary line, per-robot verdict counts, then PASS, or ``word`` (FAIL, UNJUDGED:
+    ``fleetrun.run_verdict``) with every reason."""
     verdicts = Counter(str(r.get("verdict")) for r in report["per_robot"].values())
     workers = len(report.get("workers", [])) or 1
     overall = report["late_ticks"] / max(report["ticks"], 1)
@@ -311,7 +314,7 @@ def _print_summary(report: dict[str, Any], broken: list[str]) -> None:
         f"{report['max_lateness_ms']:.1f} ms late), broker {report['broker']}"
     )
     print("poses: " + ", ".join(f"{n} {v}" for v, n in sorted(verdicts.items())))
-    verdict = "FAIL: " + "; ".join(broken) if broken else "PASS"
+    verdict = f"{word}: " + "; ".join(broken) if broken else "PASS"
     if report.get("stopped"):
         verdict = f"{stopped_text(report['stopped'])}: partial run {verdict}"
     print(verdict)
