@@ -129,11 +129,16 @@ def refused_frame(tracker: PoseTracker, can_id: int, signals: Any, t_s: float,
                   status: str) -> None:
     """A WHEEL_ENCODERS frame (11-bit ``can_id``) E2E refused (``status``) with its CRC right,
     decoded (``signals``: a mapping of its raw signals), heard at bus time ``t_s``: to the twins
-    and a gap's fill (``livetwins.refused_encoders``) and to ``tracker.boot_tick``."""
+    and a gap's fill (``livetwins.refused_encoders``) and to ``tracker.boot_tick``. A late one
+    (behind the latest taken) within a lock-out after the firmware resumed from an MCU halt
+    (``E2EMonitor.after_halt``) widens the DISTANCE judge's next span (``tracker.late_refused``,
+    ``liveskip``, as the trial36 stall drives need): widening by every late one refused PASSed
+    a DISTANCE 2 mm low under capture jitter with no halt (test_live_jitter_skipped_distance)."""
     refused_encoders(tracker.twins, signals, t_s, tracker.placer.fill)
     tracker.boot_tick.refused(can_id, signals, t_s, status, tracker.enc_seq)
-    rows = tracker.window.rows
-    if rows and 1 <= (int(rows[-1][2]) - int(signals["COUNTER"])) & ENC_COUNTER_MASK <= LATE_BEHIND:
+    rows, bound = tracker.window.rows, tracker.boot_tick.bound
+    if rows and bound is not None and bound[0].after_halt(t_s) \
+            and 1 <= (int(rows[-1][2]) - int(signals["COUNTER"])) & ENC_COUNTER_MASK <= LATE_BEHIND:
         tracker.late_refused.append(tracker.enc_seq + 1)  # swappedskips.late (liveskip)
         del tracker.late_refused[:-LATE_KEPT]  # no page to drop them: bounded
 

@@ -222,6 +222,11 @@ class E2EMonitor:
         crc_ok = crc8h2f_p02_one(data, live.data_ids[counter]) == data[0]
         return self._periods(live, timestamp_s - last, last, crc_ok, counter)
 
+    def after_halt(self, timestamp_s: float) -> bool:
+        """Whether bus time ``timestamp_s`` lies within a lock-out after the firmware resumed
+        from an MCU halt (``e2e_halts.HaltWatch.after``; the frames checked with a time)."""
+        return self._halts.after(timestamp_s)
+
     def last_taken(self, can_id: int) -> tuple[int, float] | None:
         """COUNTER and bus time (s) of the message's last frame accepted, if known."""
         state = self._states.get(can_id)
