@@ -94,15 +94,6 @@ def test_a_correct_firmware_passes_live_where_the_host_took_frames_it_refused(
     assert _live_distance(cut) == {"monitor": [], "bridge": []}
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "issue #11: the live DISTANCE judge widens a skipped span by each late encoder frame the "
-    "host refused (liveskip, analyze's swappedskips rule, needed since the live E2E follows the "
-    "firmware's lock-out after an MCU halt: without it pmir random 5 / kobuki random 6 under "
-    "stall=2:0.05,delay=0.1:30 FAILed a correct firmware live by 2.29 / 7.19 mm); on this "
-    "capture-jittered drive (no halt: faults delay=0.1:15) the late frames the live host refused "
-    "widen the span over the cut, and a DISTANCE 2 mm low from 283 s PASSes the "
-    "monitor and the bridge (analyze FAILs it). Next: count a refused frame for the widening only "
-    "within a lock-out after a halt (e2e_halts)"))
 def test_a_distance_2_mm_low_inside_the_cut_still_fails_live(
         right: tuple[Path, list[float], list[bytes]], tmp_path: Path) -> None:
     _, _, taken_right = right
