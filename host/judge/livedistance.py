@@ -59,6 +59,7 @@ from odocan.host.judge.liveskip import WAIT_FRAMES, LiveSkips
 from odocan.host.judge.liveunion import MergedSpans
 from odocan.host.judge.livewindow import HALF_WINDOW, Columns
 from odocan.host.judge.losses import lost_beyond_gaps
+from odocan.host.judge.posewrongs import PoseWrongs
 from odocan.host.judge.reference import PROFILE_SPEED, Geometry, SpeedBound
 from odocan.host.judge.samples import SILENCE_CYCLES
 from odocan.host.judge.tracking import PoseTracker
@@ -79,8 +80,8 @@ def robot_of(name: str, geometry: Geometry, counter_bits: int) -> RobotProfile:
 class LiveDistance:
     """The live DISTANCE judge (module docstring)."""
 
-    def __init__(self, robot: RobotProfile,
-                 max_wheel_speed_mm_s: SpeedBound = PROFILE_SPEED) -> None:
+    def __init__(self, robot: RobotProfile, max_wheel_speed_mm_s: SpeedBound = PROFILE_SPEED,
+                 wrongs: PoseWrongs | None = None) -> None:
         self.robot = robot
         self.max_wheel_speed_mm_s = max_wheel_speed_mm_s
         self._m = firmware_m_per_count(robot)
@@ -91,7 +92,21 @@ class LiveDistance:
         self.judged_at_end = 0  # twists judged at the watch's end, their page not heard
         self._held = HeldGaps()  # gaps whose bound above the pages may withdraw (livedistgaps)
         self.withdrawn_m = 0.0  # the gaps' bounds above the pages withdrew (m)
+        self.wrongs = wrongs  # the tracker's: its conflict (``follow``)
+        self._latched: list[tuple[float, float]] = []  # wrong lives: wrong from (s), excess m
         self.new_life()
+
+    def follow(self, wrongs: PoseWrongs) -> None:
+        """Judge as ``wrongs`` (the tracker's POSE WRONG episodes) judges: two firmwares on one
+        node ID from its ``judged_until_s`` on, no twist heard from then is judged, and a life
+        found wrong by one of them is withdrawn, as the pose's episodes are
+        (``PoseWrongs.unjudgeable_from``; before, the second firmware's DISTANCE, counted from
+        its own power-up, FAILed a correct one by 7536 mm beside the CONFLICT)."""
+        self.wrongs = wrongs
+
+    def _until_s(self) -> float:
+        """The bus time twists are judged until (a conflict's start; inf: none)."""
+        return math.inf if self.wrongs is None else self.wrongs.judged_until_s
 
     def reconfigure(self, geometry: Geometry, counter_bits: int) -> None:
         """New robot parameters (a config command): the firmware's DISTANCE goes on with its
@@ -118,6 +133,8 @@ class LiveDistance:
         self._held.gaps.clear()  # no page of the old life comes now: their bounds kept
         if getattr(self, "_waiting", None):  # the old life's twists judged with what is known
             self._take_waiting(math.inf)
+        if getattr(self, "_feasible", None) is not None:  # the old life's wrong latched (before,
+            self.verdict()  # lost unless a status had asked for the verdict before the reboot)
         self._held = HeldGaps()
         self._frames: dict[int, tuple[int, int, int, float]] = {}  # seq: units, n, c, up
         self._sums: tuple[int, int, int, float] = (0, 0, 0, 0.0)
@@ -141,9 +158,12 @@ class LiveDistance:
         self._feasible: Feasible | None = None
         self._zero = Feasible(0.0, 0.0)  # the same samples judged from 0 at the first frame
         self._wrong = False
+        self._wrong_at_s: float | None = None  # when the twist this life went wrong at was heard
         self._skips = LiveSkips()  # ENC_E2E_OK grown by less than the frames taken (liveskip)
-        # twists waiting for the page after their frame: frame, its path, (judge, lo, hi mm, up m)
-        self._waiting: list[tuple[int, int, list[tuple[Feasible, float, float, float]]]] = []
+        # twists waiting for the page after their frame: frame, its path, (judge, lo, hi mm,
+        # up m), bus time heard
+        self._waiting: list[tuple[int, int, list[tuple[Feasible, float, float, float]],
+                                  float]] = []
         self._queued = self._judged = 0  # twists queued, judged (``_lossy``)
         self.first_seq: int | None = None
         self.power_up = False  # the first life, heard from the firmware's power-up
@@ -230,7 +250,8 @@ class LiveDistance:
         quiet = (t_s - last_t >= (SILENCE_CYCLES - 0.5) * CYCLE_S
                  and tracker.enc_seq + 1 - last_heard >= SILENCE_CYCLES - 1)
         at = self._frames.get(e)
-        self._judged_last = not (self.suspended or quiet or not (first or resend) or at is None)
+        self._judged_last = not (self.suspended or quiet or not (first or resend) or at is None
+                                 or t_s >= self._until_s())  # (a conflict from then: follow)
         if not self._judged_last or at is None:
             return
         if self._stalls >= 0 and tracker.stall.stalls > self._stalls and self._last_e >= 0:
@@ -255,7 +276,7 @@ class LiveDistance:
         r0 = self._r0 or 0.0
         r = r0 + (r - r0) - WIRE_MM * round((r - r0) / WIRE_MM)
         takes.append((self._feasible, r - base, r + base, up))
-        self._waiting.append((e, units, takes))  # judged once a page covers its frame (liveskip)
+        self._waiting.append((e, units, takes, t_s))  # judged once a page covers it (liveskip)
         self.samples += 1
         self._queued += 1
 
@@ -282,8 +303,8 @@ class LiveDistance:
             f_units, f_n, f_c, f_up = frames[seq]
             frames[seq] = (f_units, f_n, f_c, f_up - extra_m)
         self._waiting = [(e, e_units, takes if e < b else [
-            (judge, lo, hi, up_m - extra_m) for judge, lo, hi, up_m in takes])
-                         for e, e_units, takes in self._waiting]
+            (judge, lo, hi, up_m - extra_m) for judge, lo, hi, up_m in takes], heard_s)
+                         for e, e_units, takes, heard_s in self._waiting]
 
     def _take_waiting(self, upto: float) -> None:
         """Judge the twists waiting whose frame is ``upto`` or before, in order, with the
@@ -296,7 +317,7 @@ class LiveDistance:
             upto = min(upto, held - 1)
         k = 0
         while k < len(self._waiting) and self._waiting[k][0] <= upto:
-            e, units, takes = self._waiting[k]
+            e, units, takes, heard_s = self._waiting[k]
             while self._lossy and self._lossy[0][0] <= self._judged:  # heard after the page:
                 self._union.add(*self._lossy.pop(0)[1])  # the twists before it judged without
             self._judged += 1
@@ -305,6 +326,9 @@ class LiveDistance:
             down_mm = 1e3 * (self._merged[1] / UNITS_PER_M + self._skips.allowance_m(e))
             for judge, lo, hi, up_m in takes:
                 judge.take_one(lo, hi, 1e3 * up_m, down_mm)
+            if self._wrong_at_s is None and self._feasible is not None \
+                    and self._feasible.excess_mm > 0.0:
+                self._wrong_at_s = heard_s  # (a conflict from then withdraws it: follow)
             k += 1
         del self._waiting[:k]
 
@@ -322,12 +346,20 @@ class LiveDistance:
         return waiting
 
     def verdict(self) -> list[str]:
-        """Why DISTANCE is wrong (empty: it is not), latched once found."""
+        """Why DISTANCE is wrong (empty: it is not), latched once found; a life found wrong by
+        a twist heard from a conflict's start on is not (``follow``)."""
+        until_s = self._until_s()
         excess = self._feasible.excess_mm * 1e-3 if self._feasible is not None else 0.0
-        if excess > 0.0 and not self._wrong:
-            self._wrong = True
-            self.wrong_lives += 1
-        self.worst_excess_m = max(self.worst_excess_m, excess)
+        at_s = -math.inf if self._wrong_at_s is None else self._wrong_at_s
+        if excess > 0.0 and at_s < until_s:
+            if not self._wrong:
+                self._wrong = True
+                self._latched.append((at_s, excess))
+            else:  # this life's, latched before
+                self._latched[-1] = (self._latched[-1][0], max(self._latched[-1][1], excess))
+        self._latched = [life for life in self._latched if life[0] < until_s]
+        self.wrong_lives = len(self._latched)
+        self.worst_excess_m = max((excess_m for _, excess_m in self._latched), default=0.0)
         if not self.wrong_lives:
             return []
         return [f"ODOM_TWIST DISTANCE off the reference's path length by "

@@ -28,6 +28,7 @@ from odocan.host.judge.compare import (
     TWIST_SILENCE_S,
 )
 from odocan.host.judge.livepose import aged
+from odocan.host.judge.posewrongs import PoseWrongs
 from odocan.host.judge.reference import Geometry
 from odocan.host.judge.samples import WIRE_COUNTER_BITS
 from odocan.host.judge.tracking import PoseTracker
@@ -78,14 +79,33 @@ def excess(value: float, a: Band, b: Band, zero: bool) -> float:
 class LiveTwist:
     """The live twist-speed judge (module docstring)."""
 
-    def __init__(self, geometry: Geometry, counter_bits: int) -> None:
+    def __init__(self, geometry: Geometry, counter_bits: int,
+                 wrongs: PoseWrongs | None = None) -> None:
         self.samples = 0
         self.suspended = False  # a config applied with parameters not known here
         self.max_linear_excess_mps = 0.0
         self.max_angular_excess_rad_s = 0.0
         self._undo: deque[tuple[float, int, float, float]] = deque(maxlen=UNDO_KEPT)  # before
         # each of the latest judged: bus time, samples, excesses
+        self.wrongs = wrongs  # the tracker's: its conflict (``follow``)
+        self._wrong_at_s: float | None = None  # the bus time a speed was first found wrong
         self.reconfigure(geometry, counter_bits)
+
+    def follow(self, wrongs: PoseWrongs) -> None:
+        """Judge as ``wrongs`` (the tracker's POSE WRONG episodes) judges: two firmwares on one
+        node ID from its ``judged_until_s`` on, no twist heard from then is judged, and speeds
+        first found wrong from then are withdrawn (``PoseWrongs.unjudgeable_from``, as
+        ``LiveDistance.follow``)."""
+        self.wrongs = wrongs
+
+    def _until_s(self) -> float:
+        """The bus time twists are judged until (a conflict's start; inf: none); speeds first
+        found wrong from then withdrawn (before then every excess was 0)."""
+        until_s = math.inf if self.wrongs is None else self.wrongs.judged_until_s
+        if self._wrong_at_s is not None and self._wrong_at_s >= until_s:
+            self.max_linear_excess_mps = self.max_angular_excess_rad_s = 0.0
+            self._wrong_at_s = None
+        return until_s
 
     def reconfigure(self, geometry: Geometry, counter_bits: int) -> None:
         """New robot parameters (a config command): judged from here as a new life."""
@@ -111,6 +131,8 @@ class LiveTwist:
         gone = [undo for undo in self._undo if undo[0] >= from_s]  # the new firmware's
         if gone:
             _, self.samples, self.max_linear_excess_mps, self.max_angular_excess_rad_s = gone[0]
+            if not self.wrong:
+                self._wrong_at_s = None
         self._undo.clear()
         self._prev: Frame | None = None  # the last accepted encoder frame
         self._steps: list[Step] = []  # after the last frame taken
@@ -179,7 +201,7 @@ class LiveTwist:
             self._since = 0
         self._since = 2 if self._since > 2 else self._since  # ``min`` (per twist frame)
         self._taken += 1
-        if self._taken < 3 or self.suspended:
+        if self._taken < 3 or self.suspended or t_s >= self._until_s():
             return
         zero = self._since <= 1
         linear = excess(linear_raw * TWIST_LSB, self._a[0], self._b[0], zero)
@@ -191,6 +213,8 @@ class LiveTwist:
         self.samples += 1
         self.max_linear_excess_mps = max(self.max_linear_excess_mps, linear)
         self.max_angular_excess_rad_s = max(self.max_angular_excess_rad_s, angular)
+        if self._wrong_at_s is None and self.wrong:
+            self._wrong_at_s = t_s
 
     def _segment(self, e: int) -> tuple[Band, Band]:
         """The bands of the steps after the last frame taken up to ``e`` (dropped from here)
@@ -227,7 +251,8 @@ class LiveTwist:
 
     @property
     def wrong(self) -> bool:
-        """A speed was found beyond its band (latched)."""
+        """A speed was found beyond its band (latched; withdrawn from a conflict: ``follow``)."""
+        self._until_s()
         return self.max_linear_excess_mps > 0.0 or self.max_angular_excess_rad_s > 0.0
 
     def verdict(self) -> list[str]:

@@ -129,8 +129,9 @@ class BusMonitor:
         self.tracker = PoseTracker(Geometry.of(robot), robot.counter_bits, integrator)
         self.tracker.boot_tick.bind(self.e2e, self._take_encoders)  # (livefreshboot)
         self.first_after = first_after_of(self.tracker, robot, self.db)  # livestallfirst
-        self.distance = LiveDistance(robot)  # ODOM_TWIST DISTANCE (host.judge.livedistance)
-        self.twist = LiveTwist(Geometry.of(robot), robot.counter_bits)  # its speeds (livetwist)
+        wrongs = self.tracker.wrongs  # no twist judged from a conflict on (follow)
+        self.distance = LiveDistance(robot, wrongs=wrongs)  # ODOM_TWIST DISTANCE (livedistance)
+        self.twist = LiveTwist(Geometry.of(robot), robot.counter_bits, wrongs)  # (livetwist)
         self.messages: dict[str, MessageStats] = {}
         self.unknown_ids: Counter[str] = Counter()
         self.status: dict[str, Any] = {}

@@ -111,11 +111,7 @@ class RobotTelemetry(CommandFollowing):
     """The bridge's view of one robot, built only from its bus."""
 
     def __init__(
-        self,
-        name: str,
-        geometry: Geometry,
-        integrator: str,
-        *,
+        self, name: str, geometry: Geometry, integrator: str, *,
         counter_bits: int,
         publish_hz: float = 10.0,
         publish_phase_s: float = 0.0,
@@ -140,8 +136,9 @@ class RobotTelemetry(CommandFollowing):
         self.hold = BridgeHold(self)  # ... held here (host.mqtt.livehold)
         self.tracker = PoseTracker(geometry, counter_bits, integrator)
         self.tracker.boot_tick.bind(self.e2e, self._on_encoders)  # (livefreshboot)
-        self.distance = LiveDistance(robot_of(name, geometry, counter_bits))  # DISTANCE judged
-        self.twist = LiveTwist(geometry, counter_bits)  # LINEAR_VEL, ANGULAR_VEL judged
+        wrongs = self.tracker.wrongs  # none judged from a conflict on: LiveDistance.follow
+        self.distance = LiveDistance(robot_of(name, geometry, counter_bits), wrongs=wrongs)
+        self.twist = LiveTwist(geometry, counter_bits, wrongs)  # LINEAR_VEL, ANGULAR_VEL
         self.publish_period_s = 1.0 / publish_hz if publish_hz > 0 else math.inf
         self._publish_phase_s = publish_phase_s  # the first pose waits this long (bus time)
         self.frames: dict[str, int] = {}  # accepted frames by message name
