@@ -93,7 +93,7 @@ class LiveDistance:
         self._held = HeldGaps()  # gaps whose bound above the pages may withdraw (livedistgaps)
         self.withdrawn_m = 0.0  # the gaps' bounds above the pages withdrew (m)
         self.wrongs = wrongs  # the tracker's: its conflict (``follow``)
-        self._latched: list[tuple[float, float]] = []  # wrong lives: wrong from (s), excess m
+        self._ended: list[tuple[float, float]] = []  # ended lives found wrong: from (s), m
         self.new_life()
 
     def follow(self, wrongs: PoseWrongs) -> None:
@@ -128,13 +128,17 @@ class LiveDistance:
         judged (what was found wrong stays latched)."""
         self.suspended = True
 
-    def new_life(self) -> None:
-        """A reboot: the firmware's DISTANCE restarts; so does the judgement (offset free)."""
+    def new_life(self, from_s: float = math.inf) -> None:
+        """A reboot: the firmware's DISTANCE restarts; so does the judgement (offset free).
+        ``from_s``: the bus time the new firmware's frames start from (its first ticks' twists
+        come before the summary that told the reboot: ``bootticks``, as ``LiveTwist.new_life``):
+        the twists heard from then are not the old life's, and what they found is withdrawn."""
         self._held.gaps.clear()  # no page of the old life comes now: their bounds kept
-        if getattr(self, "_waiting", None):  # the old life's twists judged with what is known
+        if waiting := getattr(self, "_waiting", None):  # the old life's twists judged with what
+            waiting[:] = [taken for taken in waiting if taken[3] < from_s]  # is known
             self._take_waiting(math.inf)
-        if getattr(self, "_feasible", None) is not None:  # the old life's wrong latched (before,
-            self.verdict()  # lost unless a status had asked for the verdict before the reboot)
+        if getattr(self, "_grew", None):  # the old life's wrong kept (before, lost unless a
+            self._end_life(from_s)  # status had asked for the verdict before the reboot)
         self._held = HeldGaps()
         self._frames: dict[int, tuple[int, int, int, float]] = {}  # seq: units, n, c, up
         self._sums: tuple[int, int, int, float] = (0, 0, 0, 0.0)
@@ -157,8 +161,8 @@ class LiveDistance:
         self._r0: float | None = None
         self._feasible: Feasible | None = None
         self._zero = Feasible(0.0, 0.0)  # the same samples judged from 0 at the first frame
-        self._wrong = False
-        self._wrong_at_s: float | None = None  # when the twist this life went wrong at was heard
+        self._grew: list[tuple[float, float]] = []  # this life's excess grown: heard (s), mm
+        self._heard_s = -math.inf  # when the last twist judged was heard
         self._skips = LiveSkips()  # ENC_E2E_OK grown by less than the frames taken (liveskip)
         # twists waiting for the page after their frame: frame, its path, (judge, lo, hi mm,
         # up m), bus time heard
@@ -218,6 +222,7 @@ class LiveDistance:
             if self._feasible is not None:  # judged from 0 all along, as the whole log is
                 self._zero.excess_mm = max(self._zero.excess_mm, self._feasible.excess_mm)
                 self._feasible, self._r0 = self._zero, 0.0
+                self._note(self._heard_s)
         seq, units = tracker.enc_seq, self._sums[0]
         if self._lost is not None and self._page is not None and lost_on_board(
                 self._lost, (lost, ok), seq - self._page[0], self._bus_gaps):
@@ -326,9 +331,7 @@ class LiveDistance:
             down_mm = 1e3 * (self._merged[1] / UNITS_PER_M + self._skips.allowance_m(e))
             for judge, lo, hi, up_m in takes:
                 judge.take_one(lo, hi, 1e3 * up_m, down_mm)
-            if self._wrong_at_s is None and self._feasible is not None \
-                    and self._feasible.excess_mm > 0.0:
-                self._wrong_at_s = heard_s  # (a conflict from then withdraws it: follow)
+            self._note(heard_s)
             k += 1
         del self._waiting[:k]
 
@@ -345,21 +348,30 @@ class LiveDistance:
         self.judged_at_end += waiting
         return waiting
 
+    def _note(self, heard_s: float) -> None:
+        """The excess after judging the twist heard at bus time ``heard_s``, kept where it grew
+        (``_end_life`` withdraws what the new firmware's twists found; ``follow``)."""
+        excess_mm = self._feasible.excess_mm if self._feasible is not None else 0.0
+        if excess_mm > (self._grew[-1][1] if self._grew else 0.0):
+            self._grew.append((heard_s, excess_mm))
+        self._heard_s = heard_s
+
+    def _end_life(self, from_s: float) -> None:
+        """The life ends: its wrong, as found by the twists heard before ``from_s``, kept."""
+        grew = [grown for grown in self._grew if grown[0] < from_s]
+        if grew:
+            self._ended.append((grew[0][0], grew[-1][1] * 1e-3))
+        self._grew = []
+
     def verdict(self) -> list[str]:
-        """Why DISTANCE is wrong (empty: it is not), latched once found; a life found wrong by
-        a twist heard from a conflict's start on is not (``follow``)."""
+        """Why DISTANCE is wrong (empty: it is not), latched once found (in a life's last
+        twists, withdrawn where they were the new firmware's: ``new_life``); a life found wrong
+        by a twist heard from a conflict's start on is not (``follow``)."""
         until_s = self._until_s()
-        excess = self._feasible.excess_mm * 1e-3 if self._feasible is not None else 0.0
-        at_s = -math.inf if self._wrong_at_s is None else self._wrong_at_s
-        if excess > 0.0 and at_s < until_s:
-            if not self._wrong:
-                self._wrong = True
-                self._latched.append((at_s, excess))
-            else:  # this life's, latched before
-                self._latched[-1] = (self._latched[-1][0], max(self._latched[-1][1], excess))
-        self._latched = [life for life in self._latched if life[0] < until_s]
-        self.wrong_lives = len(self._latched)
-        self.worst_excess_m = max((excess_m for _, excess_m in self._latched), default=0.0)
+        now = [(self._grew[0][0], self._grew[-1][1] * 1e-3)] if self._grew else []
+        lives = [life for life in self._ended + now if life[0] < until_s]
+        self.wrong_lives = len(lives)
+        self.worst_excess_m = max((excess_m for _, excess_m in lives), default=0.0)
         if not self.wrong_lives:
             return []
         return [f"ODOM_TWIST DISTANCE off the reference's path length by "

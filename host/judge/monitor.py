@@ -414,10 +414,10 @@ class BusMonitor:
                    self._take_encoders)
         detail += ": " + src.start_new_life(self.tracker, self.e2e, self.db, uptime_s, state, seq,
                                             self.sources)
-        self.distance.new_life()
         self.first_after.new_life()
         # its first ticks' (bootticks; its power-up pose's, its summary held back: bootnamed)
         since_s = self.tracker.powerup.life_from_s(self.sources.life_from_s) - SAME_TICK_S
+        self.distance.new_life(since_s)  # its first ticks' twists not the old life's
         self.tracker.withdraw_from(since_s)  # its poses vs the old reference
         # its first pose is no resume (livestallfirst): from its boot, UPTIME's whole seconds
         self.first_after.withdraw_from(min(since_s, self._bus_time_s - uptime_s - 1.0))

@@ -300,9 +300,9 @@ class RobotTelemetry(CommandFollowing):
         self.config_doubt = None  # and the config in doubt with them
         boot_frame(self.tracker, self.e2e, (uptime_s, state, seq, t_s), self._on_encoders)
         start_new_life(self.tracker, self.e2e, self.db, uptime_s, state, seq, self.sources)
-        self.distance.new_life()
         # its first ticks' (bootticks; its power-up pose's, its summary held back: bootnamed)
         since_s = self.tracker.powerup.life_from_s(self.sources.life_from_s) - SAME_TICK_S
+        self.distance.new_life(since_s)  # its first ticks' twists not the old life's
         self.tracker.withdraw_from(since_s)  # its poses vs the old reference
         self.twist.new_life(since_s)  # its first ticks' twists: the new one's
         self.set_pose.forget(since_s)  # what the new firmware ACKed: kept
