@@ -32,8 +32,10 @@ before the last named, or a frame with a twin, is left out). Its offset interval
 [r - upper, r + lower] must meet every earlier one of the life (``distance`` module
 docstring); in the first life, once the tracker has proven a power-up at frame 0 (its
 reference's exact start; or the first page came before any frame: it primes on the first), the
-offset must be 0. A reboot starts a new life (its offset free again); an interval found empty
-is latched (``wrong_lives``): the verdict DISTANCE WRONG, and the watch's exit 1."""
+offset must be 0. A reboot starts a new life (its offset free again; the twists heard from the
+new firmware's first tick, before the summary that told it, are not the old life's: ``new_life``);
+an interval found empty is latched (``wrong_lives``, an ended life's too): the verdict DISTANCE
+WRONG, and the watch's exit 1."""
 
 from __future__ import annotations
 
