@@ -133,7 +133,7 @@ from odocan.host.judge.losses import (
 )
 from odocan.host.judge.posestreams import one_source_cut
 from odocan.host.judge.powerup import saw_only_the_log, starts_at_power_up
-from odocan.host.judge.powerupjudged import fold_power_up, judge_power_up_pose
+from odocan.host.judge.powerupjudged import fold_power_up, power_up_errors
 from odocan.host.judge.primedon import each_prime
 from odocan.host.judge.reboots import Life, mark_two_sources, merge, split_lives
 from odocan.host.judge.reference import PROFILE_SPEED, Geometry, SpeedBound
@@ -397,7 +397,7 @@ def _analyze_life(
         np.max(pos_err - allowance - twin_allowed))
     (lone := judge_lone(halves, onboard, enc, ref_all, stalls, pose_sent_s, (
         robot, integrator, losses, placed), left_out.lone_rows)).fold(vs_ref)  # lonehalves
-    fold_power_up(vs_ref, judge_power_up_pose(frames, decoder, enc, ref_all, onboard.enc))
+    fold_power_up(vs_ref, power_up_errors(frames, decoder, enc, ref_all, onboard.enc, start_pose))
     passed = bool(
         vs_ref["max_position_error_beyond_allowance_m"] <= tolerance.position_m
         and vs_ref["max_heading_error_rad"] <= tolerance.heading_rad

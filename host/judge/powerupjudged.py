@@ -1,27 +1,26 @@
 """The power-up pose judged against its life's start pose (issue #11: a PASS must never hide a
-wrong pose), one rule for ``analyze`` (``judge_power_up_pose``) and the live judges
-(``tracking.PoseTracker``: ``names_the_prime``, ``start_errors``).
+wrong pose), one rule for ``analyze`` (``power_up_errors``) and the live judges
+(``livepowerpose``: ``names_the_prime``); a power-up's only, not a set pose's life.
 
 A firmware primes on the first encoder frame it accepts and sends its power-up pose in that tick
 (firmware/ecu.py step 5): ODOM_POSE_X and ODOM_POSE_Y of E2E COUNTER 0, naming the frame it
-primed on, zero delta since it: the life's start pose exactly, (0, 0, 0) at a power-up, or the
-pose set. The samples judge a pose at the encoder frame its ENC_COUNTER names
-(``samples.match_encoder``), and leave it out where that frame cannot be told: one with a twin
-(a held frame and the on-time one of the same COUNTER, the firmware had either) or one not heard
-yet from the latest frame heard (a pose the bus held back past the -8 .. +7 window). Kobuki random
-696 and 692 (``reboot=0.5:0.3,delay=0.1:150``): the new firmware primed on a held COUNTER 1 whose
-on-time twin came 10 ms later, and its power-up pose, 10 mm off, PASSed every judge
-(``tests/test_live_held_tick_start.py``).
+primed on, zero delta since it: the life's start pose exactly, (0, 0, 0). The samples leave a
+pose out where the frame it names cannot be told (``samples.match_encoder``): one with a twin (a
+held frame and the on-time one of one COUNTER: the firmware had either), or a pose the E2E check
+refused (held back on the bus past its successors). Kobuki random 696 and 692, 8 s,
+``reboot=0.5:0.3,delay=0.1:150``: the new firmware primed on a held COUNTER 1 whose on-time twin
+came 10 ms later; 696's power-up pose names that twinned frame, 692's was held back 150 ms and
+refused; raised 10 mm, each PASSed every judge (``tests/test_live_held_tick_start.py``).
 
 Either candidate gives the start pose: had the firmware primed on the twin, the twin would be its
-first frame, its pose zero delta there as well. So the power-up pose is judged against the start
-pose directly when the frame it names is the prime's (its ENC_COUNTER the prime's COUNTER) and
-no other accepted encoder frame of that COUNTER came after the prime before the pose was heard
-(``names_the_prime``: every candidate is the prime or its twin), heard less than a pose COUNTER
-lap (``POSE_LAP_S``) after the prime (a later pose of COUNTER 0 is the next lap's). Only where the
-life's reference starts exactly at the prime (power-up or set pose) and no sample judged the
-prime's frame already. A half whose partner was lost is judged on what it carries (X and
-HEADING, or Y)."""
+first frame, its pose zero delta there as well. So the power-up pose (the life's first ODOM_POSE_X
+and ODOM_POSE_Y of COUNTER 0 whose CRC holds, whatever its E2E sequence) is judged against the
+start directly when it names the prime's COUNTER and no other accepted encoder frame of that
+COUNTER came after the prime before the pose was heard (``names_the_prime``: every candidate is
+the prime or its twin), heard less than a pose COUNTER lap (``POSE_LAP_S``) after the prime (a
+later pose of COUNTER 0 is the next lap's). Only where the life's reference starts exactly at its
+first encoder frame at a power-up and no sample judged that frame already. A half whose partner
+was lost is judged on what it carries (X and HEADING, or Y)."""
 
 from __future__ import annotations
 
@@ -62,12 +61,15 @@ def start_errors(x_m: float | None, y_m: float | None, heading_rad: float | None
     return math.hypot(dx, dy), abs(math.pi - (math.pi - turn) % (2 * math.pi))
 
 
-def judge_power_up_pose(frames: FrameArrays, decoder: BulkDecoder, enc: Encoders,
-                        ref: Reference, judged: IntArray) -> tuple[float, float] | None:
+def power_up_errors(frames: FrameArrays, decoder: BulkDecoder, enc: Encoders, ref: Reference,
+                    judged: IntArray, set_pose: object = None) -> tuple[float, float] | None:
     """``analyze``'s power-up pose of one life (module docstring): its errors (position m,
     heading rad) from the start pose, None where it is not judged so (no exact start at the
-    life's first encoder frame, its frame judged by a sample already, no such pose)."""
-    if not ref.exact_start or ref.start != 0 or len(enc.index) == 0 or bool(np.any(judged == 0)):
+    life's first encoder frame, its frame judged by a sample already, no such pose, or a
+    set-pose's life, ``set_pose`` not None: its poses' COUNTERs do not restart there, and a
+    pose held back from before the pose was set may name a frame a lap before its first)."""
+    if (set_pose is not None or not ref.exact_start or ref.start != 0 or len(enc.index) == 0
+            or bool(np.any(judged == 0))):
         return None
     found = [_power_up_half(frames, decoder, enc, name) for name in HALVES]
     x_row, y_row = found
@@ -106,7 +108,7 @@ def _power_up_half(frames: FrameArrays, decoder: BulkDecoder, enc: Encoders, nam
 
 
 def fold_power_up(vs_ref: dict[str, float], errors: tuple[float, float] | None) -> None:
-    """Put the power-up pose's ``errors`` (``judge_power_up_pose``) into the report's
+    """Put the power-up pose's ``errors`` (``power_up_errors``) into the report's
     ``onboard_vs_reference`` (no allowance at the prime: its position error is beyond none)."""
     if errors is None:
         return
