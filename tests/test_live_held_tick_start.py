@@ -86,24 +86,9 @@ def test_x_10_mm_off_after_the_reboot_fails_every_judge(
     assert min(beyond_m) > 5e-3, beyond_m
 
 
-POWER_UP_POSES = [
-    pytest.param(
-        696, (0.8, 0.81), id="696",
-        marks=pytest.mark.xfail(strict=True, reason=(
-            "kobuki 696: the power-up pose (0.801 s, ENC_COUNTER 1) alone 10 mm off PASSes "
-            "every judge (analyze whole and streamed 0.083 mm beyond, monitor and bridge "
-            "0.082): it names a frame with a twin (the held COUNTER 1 of 0.800 s the firmware "
-            "primed on, the on-time 1 of 0.810 s it refused), and a sample naming a twinned "
-            "frame is not judged (samples.match_encoder: which one the firmware had is "
-            "unknown), though the pose must read (0, 0, 0) on either"))),
-    pytest.param(
-        692, (0.95, 0.952), id="692",
-        marks=pytest.mark.xfail(strict=True, reason=(
-            "kobuki 692: the power-up pose held back to 0.951 s alone 10 mm off PASSes every "
-            "judge (analyze 0.079 mm beyond, monitor and bridge 0.070): its ENC_COUNTER 1 "
-            "read from the latest frame heard (COUNTER 15 of 0.950 s) names the frame after "
-            "next, not heard yet (samples.match_encoder's -8 .. +7): not judged (1 m off "
-            "PASSes alike)"))),
+POWER_UP_POSES = [  # (the power-up pose judged against the start: ``powerupjudged``)
+    pytest.param(696, (0.8, 0.81), id="696"),  # names a frame with a twin
+    pytest.param(692, (0.95, 0.952), id="692"),  # held back past its successors: E2E-refused
 ]
 
 
@@ -113,7 +98,13 @@ def test_the_power_up_pose_10_mm_off_alone_fails(
     tmp_path: Path
 ) -> None:
     """The new firmware's power-up pose (COUNTER 0) alone raised 10 mm: a wrong pose, which
-    every judge must FAIL (the whole pose run raised FAILs: ``test_x_10_mm_off_...``)."""
+    every judge must FAIL (the whole pose run raised FAILs: ``test_x_10_mm_off_...``). It was
+    not judged: 696's names the held COUNTER 1 the firmware primed on, which has a twin (the
+    on-time 1 of 0.810 s; ``samples.match_encoder`` leaves a twinned frame's poses out), 692's,
+    held back to 0.951 s, is refused by the E2E check; both PASSed every judge (analyze
+    0.083 / 0.079 mm beyond, monitor and bridge 0.082 / 0.070). Either candidate gives the
+    start pose, so it is judged against (0, 0, 0) directly (``host.judge.powerupjudged``,
+    ``livepowerpose``): 10 mm beyond at every judge."""
     log = _drive("kobuki", seed, tmp_path_factory)
     tampered = tmp_path / "t.log"
     raise_first_x(log, tampered, TEN_MM_LSB, *span_s)

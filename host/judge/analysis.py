@@ -82,11 +82,9 @@ Everything comes from the bus (``FrameArrays``, live or from a log), decoded wit
    (``host.judge.twins``) is allowed from its frame on, summed (``reference_breaks``' ``twins``
    and ``twin_allowance_m``).
 
-6. **Reboots** (``host.judge.reboots``): a firmware restart inside the log (UPTIME going back,
-   or INIT after running: the live monitor's ``host.judge.sources.SourceWatch``) cuts the log
-   into lives, each judged on its own from the new firmware's power-up pose (0 at the encoder
-   frame it primed on), with E2E sequences starting afresh; ``reboots`` and a ``reboot`` event
-   in the report say where.
+6. **Reboots** (``host.judge.reboots``): a firmware restart (UPTIME going back, or INIT after
+   running: ``host.judge.sources.SourceWatch`` live) cuts the log into lives, each judged from its
+   power-up pose (0 at the frame it primed on; ``powerupjudged``), E2E afresh; a ``reboot`` event.
 
 The code: this module runs the steps and writes the report; ``host.judge.samples`` steps 1-3,
 ``reference_path`` 4, ``compare`` 5 (and the twist and the plot series), ``reboots`` 6.
@@ -135,6 +133,7 @@ from odocan.host.judge.losses import (
 )
 from odocan.host.judge.posestreams import one_source_cut
 from odocan.host.judge.powerup import saw_only_the_log, starts_at_power_up
+from odocan.host.judge.powerupjudged import fold_power_up, power_up_errors
 from odocan.host.judge.primedon import each_prime
 from odocan.host.judge.reboots import Life, mark_two_sources, merge, split_lives
 from odocan.host.judge.reference import PROFILE_SPEED, Geometry, SpeedBound
@@ -398,6 +397,7 @@ def _analyze_life(
         np.max(pos_err - allowance - twin_allowed))
     (lone := judge_lone(halves, onboard, enc, ref_all, stalls, pose_sent_s, (
         robot, integrator, losses, placed), left_out.lone_rows)).fold(vs_ref)  # lonehalves
+    fold_power_up(vs_ref, power_up_errors(frames, decoder, enc, ref_all, onboard.enc, start_pose))
     passed = bool(
         vs_ref["max_position_error_beyond_allowance_m"] <= tolerance.position_m
         and vs_ref["max_heading_error_rad"] <= tolerance.heading_rad

@@ -89,6 +89,8 @@ class HalfPairs:
         last = tracker.last_pair  # (``judge_resend`` judges only a frame sampled last)
         if seq < 0 or tracker.twins.twinned(seq) or (
                 last is not None and last[0].seq == seq and judge_resend(name, seq, half, tracker)):
+            if seq < 0 or tracker.twins.twinned(seq):  # a power-up pose's: livepowerpose
+                tracker.powerpose.left_out(name, half, tracker)
             return  # left out, as analyze leaves it out (unmatched); a resend judged
         if name == "x":
             if seq not in self._xs:
@@ -112,6 +114,7 @@ class HalfPairs:
         self.sampled.add(seq)
         self._xs_waiting.pop(seq, None)
         self._tracker.on_pair(seq, x, y, queued)
+        self._tracker.powerpose.judge(self._tracker)  # a power-up pose left out (livepowerpose)
 
     def _lone_before(self, seq: int) -> None:
         """The halves waiting for a partner naming frames before ``seq``, which is sampled

@@ -236,6 +236,7 @@ class Lives:
         tracker.losses.primed(primed)  # ENC_E2E_LOST counted from 0 there
         stalled = tracker.first.stalled_from if first_life and poses else None  # told before
         start_reference(tracker, FramePose(primed, 0.0, 0.0, 0.0), counts, poses, stalled)
+        tracker.powerpose.booted(counts)  # its power-up pose left out (livepowerpose)
         if not first_life:
             tracker.life_truth.booted(primed, tracker.raw.at)
 

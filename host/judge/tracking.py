@@ -38,6 +38,7 @@ from odocan.host.judge.livenewstart import NewStartHold
 from odocan.host.judge.liveplace import StallPlacer
 from odocan.host.judge.liveplacing import place_reference
 from odocan.host.judge.livepose import ErrorStats, FramePose, RestartLog, Sample, StepGate
+from odocan.host.judge.livepowerpose import PowerUpPose
 from odocan.host.judge.livereference import RawReference
 from odocan.host.judge.livereprime import ReprimeHold
 from odocan.host.judge.livereprimecount import PowerUpCount
@@ -118,6 +119,7 @@ class PoseTracker:
         self.lives = Lives(self)
         self.status_heard: tuple[float, int] | None = None  # the latest ODOM_STATUS: t, COUNTER
         self.powerup = LivePowerUp()  # the latest power-up pose heard (bootnamed)
+        self.powerpose = PowerUpPose()  # its halves left out, judged at the start (livepowerpose)
         self.truths = TruthJudge(self)  # SIM_TRUTH's parts, judged (livetruth)
         # the latest sample judged (``record``): on-board pose, corrected reference
         self.last_pair: tuple[FramePose, FramePose] | None = None
@@ -398,6 +400,7 @@ class PoseTracker:
         self.placer.restart()
         self.losses.restart(self.enc_seq, self.fast_path)
         self.lives.drop_backlog()
+        self.powerpose.restarted()
 
     def power_up(self, primed_now: bool, seq: int | None = None,
                  tick_s: float | None = None) -> None:
