@@ -39,6 +39,16 @@ def drive(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return log
 
 
+@pytest.fixture(scope="module")
+def kobuki_drive(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The same on kobuki: its 2 s halt ends in COUNTER_RESET (the step's bound reached)."""
+    log = tmp_path_factory.mktemp("halted_kobuki") / "d.log"
+    done = cli("run", "--robot", "kobuki", "--scenario", "random", "--seed", "7", "--duration",
+               "8", "--faults", f"stall={HALT_S}:2", "--log", str(log))
+    assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
+    return log
+
+
 def halted_mid_tick(src: Path, dst: Path, ids: frozenset[int]) -> float:
     """Copy ``src`` to ``dst`` with the frames of ``ids`` of the last firmware tick before the
     halt, but its ODOM_POSE_X, sent at the halt's end (just before the firmware's first frame
@@ -64,9 +74,9 @@ def halted_mid_tick(src: Path, dst: Path, ids: frozenset[int]) -> float:
     return resume_s - t0
 
 
-def _monitor_states(log: Path) -> tuple[BusMonitor, set[str]]:
-    """The monitor fed ``log``; the states its health said after each summary-bearing frame."""
-    monitor, states = BusMonitor(load("pmir"), "exact"), set()
+def _monitor_states(log: Path, robot: str = "pmir") -> tuple[BusMonitor, set[str]]:
+    """The monitor fed ``log``; the states its health said after each ODOM_STATUS frame."""
+    monitor, states = BusMonitor(load(robot), "exact"), set()
     for msg in can.LogReader(str(log)):
         monitor.feed(msg, now_s=msg.timestamp)
         if msg.arbitration_id == STATUS_ID:
@@ -120,6 +130,22 @@ def test_the_live_pose_after_a_pose_half_sent_after_the_halt_is_judged_right(
     log = tmp_path / "late_y.log"
     halted_mid_tick(drive, log, frozenset({0x201}))
     monitor = _monitor_states(log)[0]
+    assert monitor.tracker.vs_reference.max_dpos_m < 1e-4
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "live judges only (monitor, bridge), kobuki: the halted tick's summary and page 2 s late "
+    "make them miss the stall's re-prime (COUNTER_RESET): POSE WRONG 184.6 mm, -3073.8 mrad "
+    "(allowed 0.006 mm) on the correct firmware; analyze PASSes (6.8e-5 m). Before haltedsend "
+    "the same error (bridge 0.1846 m) lay under the false CONFLICT; pmir's POSE_UNCERTAIN "
+    "halt is judged right. Not traced further in this pass"))
+def test_the_live_reprime_after_a_summary_sent_after_the_halt_is_followed(
+        kobuki_drive: Path, tmp_path: Path) -> None:
+    log = tmp_path / "late_status.log"
+    halted_mid_tick(kobuki_drive, log, frozenset({STATUS_ID}))
+    monitor, states = _monitor_states(log, "kobuki")
+    assert "CONFLICT" not in states, states
+    assert bridge_of(log, "kobuki", "exact").sources.conflict_from_s is None
     assert monitor.tracker.vs_reference.max_dpos_m < 1e-4
 
 
