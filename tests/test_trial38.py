@@ -224,3 +224,54 @@ def test_restarted_firmware_is_a_reboot_event_and_judged_right(rig: _Rig) -> Non
     error = watch["error"]["pose_vs_reference"]
     assert error["max_dpos_beyond_allowance_m"] < 1e-4  # was 7.87 m before #11
     assert watch["health"]["pose_wrongs"]["episodes"] == 0
+
+
+def _stop_when(proc: subprocess.Popen[str], state: str) -> None:
+    """SIGSTOP ``proc`` once its ``/proc`` state is ``state`` ("S": asleep, between two ticks;
+    a machine without ``/proc``: at once)."""
+    stat = Path(f"/proc/{proc.pid}/stat")
+    end = time.monotonic() + BOUND_S
+    while stat.exists() and stat.read_text().rsplit(")", 1)[1].split()[0] != state:
+        if time.monotonic() > end:
+            pytest.fail(f"the firmware never in state {state} within {BOUND_S} s")
+    proc.send_signal(signal.SIGSTOP)
+
+
+def _stopped_2_s(rig: _Rig, state: str) -> tuple[subprocess.Popen[str], dict[str, Any]]:
+    """The firmware SIGSTOPped 2 s (in ``state``: ``_stop_when``) and SIGCONTed under the
+    monitor: the firmware's process and the monitor's JSON after 100 more poses."""
+    firmware = rig.start("firmware", "--firmware", "python")
+    rig.start("sim", "--scenario", "random", "--seed", "7", "--duration", "120")
+    log = rig.tmp / "w.log"
+    monitor = rig.start("monitor", "--json", "--duration", "120", "--log", str(log))
+    rig.listen_until(lambda: _logged_poses(log) > 100, "the monitor hearing poses")
+    _stop_when(firmware, state)
+    time.sleep(2.0)  # the fault itself: a firmware halted 2 s
+    firmware.send_signal(signal.SIGCONT)
+    after = _logged_poses(log)
+    rig.listen_until(lambda: _logged_poses(log) > after + 100, "100 poses after SIGCONT")
+    return firmware, _json_of(monitor)
+
+
+def test_firmware_stopped_2_s_ends_degraded_with_a_reason_and_its_pose_judged(rig: _Rig) -> None:
+    """SIGSTOP 2 s between two ticks, SIGCONT (issue #11: before, 398 releases skipped, 220
+    mailbox overflows, state OK, the pose 0.43 m off for good): the firmware says DEGRADED with
+    a reason, the monitor shows it, one firmware, and finds no pose wrong against the reference
+    (trial38: 8.5-9.9 mm vs the truth after, Python and C, with POSE_UNCERTAIN saying the pose
+    may be off). Stopped asleep, between ticks: a stop that lands mid-tick (a loaded host's,
+    now and then) sends the rest of the tick after the halt; its summary the halt's length late
+    was CONFLICT "two senders of ODOM_STATUS interleave" in the full run (fixed:
+    ``host.judge.haltedsend``), its late ODOM_POSE_Y is still POSE WRONG live (16.5 and 11.2 mm
+    in the two of three stops sent while it ran that split a tick after its ODOM_POSE_X): both
+    made by hand in ``tests/test_halted_send.py``."""
+    firmware, watch = _stopped_2_s(rig, "S")
+    assert watch["status"]["state"] == "DEGRADED", watch["status"]
+    assert watch["status"]["reason"] in ("TIME_LOST", "POSE_UNCERTAIN", "MAILBOX_OVERFLOW")
+    assert "TIME_LOST" in watch["status"]["latched_errors"]
+    kinds = [e["kind"] for e in watch["health"]["events"]]
+    assert "two sources" not in kinds, watch["health"]["events"]
+    assert watch["health"]["state"] == "DEGRADED", watch["health"]
+    assert "firmware reports DEGRADED" in watch["health"]["why"][-1]
+    assert watch["health"]["pose_wrongs"]["episodes"] == 0
+    assert watch["error"]["pose_vs_reference"]["max_dpos_beyond_allowance_m"] < 1e-4
+    assert firmware.poll() is None  # it runs on

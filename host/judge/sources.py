@@ -6,7 +6,8 @@ constant within ``UPTIME_MATCH_S``; a reboot moves that offset once, or sends an
 last one (even within ``UPTIME_MATCH_S``: a reboot a second or two after power-up), or says INIT
 after running, or (within its first second, UPTIME 0 again) its power-up tick's E2E COUNTERs
 (``host.judge.bootticks``); two sources on one ID make two offsets interleave (two sources whose
-offsets differ by less than ``UPTIME_MATCH_S`` look like reboots).
+offsets differ by less than ``UPTIME_MATCH_S`` look like reboots); a summary made before a halt
+and sent after it is neither (``haltedsend``).
 """
 
 from __future__ import annotations
@@ -42,6 +43,7 @@ from odocan.host.judge.distfall import (
     distance_field,
     fell_within,
 )
+from odocan.host.judge.haltedsend import sent_after_halt
 from odocan.host.judge.heldtick import TickPages, told_tick
 from odocan.host.judge.latefall import continues_twice, tied_late
 from odocan.host.judge.liveadopted import LATE_REBOOT
@@ -218,8 +220,8 @@ class SourceWatch:
             self.ticks.told, lambda s: self._fell_in_run(s) if self.ticks.fell is None else True)
         tick = None if booted else held_tick
         booted = booted or tick is not None  # held past its tick's page
-        if not booted and (self.order.passed_over(uptime_s, state) if late is None else late):
-            return None  # held back, it tells no reboot (``livelatestatus``)
+        if not booted and self._passed_over((t_s, uptime_s, state, counter), late):
+            return None  # held back, or made before a halt: no reboot, no second source
         broke = (None if booted or counter is None else
                  ahead_candidate(uptime_s, counter, t_s, self.summary_s, self.status_before))
         booted, ahead = booted or (ahead and broke is not None), ahead and not booted
@@ -257,6 +259,18 @@ class SourceWatch:
         self.held_tick_s = (  # its life starts where ``heldboot.held_start`` says (liveheldstart)
             self.held_tick_s if kind != "reboot" else None if held_tick is None else held_tick[0])
         return kind
+
+    def _passed_over(self, summary: tuple[float, int, str, int | None], late: bool | None
+                     ) -> bool:
+        """Whether the summary (bus time, UPTIME, STATE, COUNTER) says nothing of a reboot or
+        a second source: the bus held it back behind later frames of its sender
+        (``livelatestatus``; ``late``: a log's, None: ``order``'s, live), or its firmware made
+        it before a halt and sent it after (``haltedsend``)."""
+        if self.order.passed_over(*summary[1:3]) if late is None else late:
+            return True
+        return self.offset_s is not None and sent_after_halt(
+            summary, self.offset_s, UPTIME_MATCH_S, (self.last_uptime_s, self.last_state),
+            self.status_before)
 
     def _told_from(self, t_s: float, power_up_tick: bool) -> float:
         """Where a reboot told by the summary at bus time ``t_s`` began: the pose run's pose of

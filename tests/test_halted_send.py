@@ -1,0 +1,164 @@
+"""A firmware halted in the middle of a tick sends the rest of it when it resumes: one firmware,
+not two (issue #11 item 5, ``host.judge.haltedsend``).
+
+Found (trial38, ``tests/test_trial38.py``): ``odocan firmware`` stopped 2 s by ``kill -STOP``
+on a loaded host; the monitor said CONFLICT "two senders of ODOM_STATUS interleave" for the one
+resumed firmware. Traced (its ``--log``, and again with the stop sent while the firmware was
+runnable): the stop landed between the tick's ODOM_POSE_X and the rest of the tick, whose
+ODOM_STATUS summary (UPTIME read before the halt) came 2.1 s late; the next summary was back
+on the offset, and the two offsets "interleaved". Here the same sequence, made by hand from a
+lockstep drive (``--faults stall=2.91:2``, pmir): the halted tick's frames after its ODOM_POSE_X
+moved to just before the firmware's first frame after the halt (as the process log had them).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import can
+import pytest
+
+from odocan.host.judge.haltedsend import sent_after_halt
+from odocan.host.judge.monitor import BusMonitor
+from odocan.host.judge.sources import UPTIME_MATCH_S
+from odocan.sim.robot import load
+from tests.judges_cli import cli, reported_analyses, x_10_mm_off_fails
+from tests.test_live_reboot import bridge_of
+
+HALT_S = 2.91  # the stall's start: the tick before it (2.90 s) sends a summary and a page
+FIRMWARE_IDS = frozenset({0x200, 0x201, 0x202, 0x281, 0x380})  # pose X/Y, twist, nav, status
+STATUS_ID = 0x380
+
+
+@pytest.fixture(scope="module")
+def drive(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    log = tmp_path_factory.mktemp("halted") / "d.log"
+    done = cli("run", "--scenario", "random", "--seed", "7", "--duration", "8",
+               "--faults", f"stall={HALT_S}:2", "--log", str(log))
+    assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
+    return log
+
+
+@pytest.fixture(scope="module")
+def kobuki_drive(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The same on kobuki: its 2 s halt ends in COUNTER_RESET (the step's bound reached)."""
+    log = tmp_path_factory.mktemp("halted_kobuki") / "d.log"
+    done = cli("run", "--robot", "kobuki", "--scenario", "random", "--seed", "7", "--duration",
+               "8", "--faults", f"stall={HALT_S}:2", "--log", str(log))
+    assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
+    return log
+
+
+def halted_mid_tick(src: Path, dst: Path, ids: frozenset[int]) -> float:
+    """Copy ``src`` to ``dst`` with the frames of ``ids`` of the last firmware tick before the
+    halt, but its ODOM_POSE_X, sent at the halt's end (just before the firmware's first frame
+    after it, in their order): the bus time they come at, returned."""
+    msgs = list(can.LogReader(str(src)))
+    t0 = msgs[0].timestamp
+    last_s = max(m.timestamp for m in msgs
+                 if m.arbitration_id in FIRMWARE_IDS and m.timestamp - t0 < HALT_S)
+    tick = [m for m in msgs if m.timestamp == last_s and m.arbitration_id in FIRMWARE_IDS]
+    late = [m for m in tick[1:] if m.arbitration_id in ids]
+    assert late, tick
+    assert tick[0].arbitration_id == 0x200, tick  # its ODOM_POSE_X, sent before the halt
+    rest = [m for m in msgs if all(m is not x for x in late)]
+    k = next(i for i, m in enumerate(rest)
+             if m.arbitration_id in FIRMWARE_IDS and m.timestamp - t0 > HALT_S)
+    resume_s = rest[k].timestamp - 1e-3
+    assert resume_s - last_s > 2.0  # as long late as the halt
+    for i, msg in enumerate(late):
+        msg.timestamp = resume_s + i * 1e-5
+    with can.Logger(str(dst)) as out:
+        for msg in [*rest[:k], *late, *rest[k:]]:
+            out.on_message_received(msg)
+    return resume_s - t0
+
+
+def _monitor_states(log: Path, robot: str = "pmir") -> tuple[BusMonitor, set[str]]:
+    """The monitor fed ``log``; the states its health said after each ODOM_STATUS frame."""
+    monitor, states = BusMonitor(load(robot), "exact"), set()
+    for msg in can.LogReader(str(log)):
+        monitor.feed(msg, now_s=msg.timestamp)
+        if msg.arbitration_id == STATUS_ID:
+            states.add(monitor.health(msg.timestamp)["state"])
+    return monitor, states
+
+
+def test_a_summary_sent_after_the_halt_is_one_firmware_for_every_judge(
+        drive: Path, tmp_path: Path) -> None:
+    """The halted tick's ODOM_STATUS summary and page 2 s late: no judge says two firmwares
+    (before: analyze FAILed "two firmwares answered on one node ID from t=4.920 s", the monitor
+    and the bridge CONFLICT); each judges the pose right (the firmware is correct: run PASSed)."""
+    log = tmp_path / "late_status.log"
+    late_s = halted_mid_tick(drive, log, frozenset({STATUS_ID}))
+    for stream, code, report in reported_analyses(log, tmp_path):
+        assert report.get("two_sources") is None, (stream, report["two_sources"])
+        assert code == 0, stream
+    monitor, states = _monitor_states(log)
+    assert "CONFLICT" not in states, states
+    assert [e for e in monitor.events if e["kind"] in ("two sources", "uptime jump")] == []
+    assert monitor.health(monitor.bus_time_s)["state"] == "DEGRADED"  # the firmware's word
+    assert monitor.tracker.wrongs.count == 0
+    bridge = bridge_of(log, "pmir", "exact")
+    assert bridge.sources.conflict_from_s is None
+    for tracker in (monitor.tracker, bridge.tracker):
+        assert tracker.vs_reference.max_dpos_m < 1e-4, late_s
+    # the opposite error: a pose 10 mm off after the halt still FAILs
+    assert x_10_mm_off_fails(log, tmp_path / "x10.log", 6.0, 50) == []
+
+
+def test_the_whole_tick_sent_after_the_halt_is_no_conflict(drive: Path, tmp_path: Path) -> None:
+    """The rest of the tick (ODOM_POSE_Y, ODOM_TWIST, the summary, the page, NAV_STATUS) 2 s
+    late, as ``kill -STOP`` left it in trial38's log: no two firmwares, analyze PASSes."""
+    log = tmp_path / "late_tick.log"
+    halted_mid_tick(drive, log, FIRMWARE_IDS)
+    for stream, code, report in reported_analyses(log, tmp_path):
+        assert report.get("two_sources") is None, (stream, report["two_sources"])
+        assert code == 0, stream
+    assert "CONFLICT" not in _monitor_states(log)[1]
+    assert bridge_of(log, "pmir", "exact").sources.conflict_from_s is None
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "live judges only (monitor, bridge): the halted tick's ODOM_POSE_Y heard 2 s after its "
+    "ODOM_POSE_X (sent before the halt) makes them miss the re-placing across the stall: "
+    "POSE WRONG 63.999 mm (allowed 0.053 mm) on the correct firmware; analyze (whole and "
+    "streamed) PASSes the same log (6.8e-5 m). Not traced further in this pass; the same on "
+    "kobuki (226.2 mm). Found with the trial38 SIGSTOP test under load (16.5, 11.2 mm)"))
+def test_the_live_pose_after_a_pose_half_sent_after_the_halt_is_judged_right(
+        drive: Path, tmp_path: Path) -> None:
+    log = tmp_path / "late_y.log"
+    halted_mid_tick(drive, log, frozenset({0x201}))
+    monitor = _monitor_states(log)[0]
+    assert monitor.tracker.vs_reference.max_dpos_m < 1e-4
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "live judges only (monitor, bridge), kobuki: the halted tick's summary and page 2 s late "
+    "make them miss the stall's re-prime (COUNTER_RESET): POSE WRONG 184.6 mm, -3073.8 mrad "
+    "(allowed 0.006 mm) on the correct firmware; analyze PASSes (6.8e-5 m). Before haltedsend "
+    "the same error (bridge 0.1846 m) lay under the false CONFLICT; pmir's POSE_UNCERTAIN "
+    "halt is judged right. Not traced further in this pass"))
+def test_the_live_reprime_after_a_summary_sent_after_the_halt_is_followed(
+        kobuki_drive: Path, tmp_path: Path) -> None:
+    log = tmp_path / "late_status.log"
+    halted_mid_tick(kobuki_drive, log, frozenset({STATUS_ID}))
+    monitor, states = _monitor_states(log, "kobuki")
+    assert "CONFLICT" not in states, states
+    assert bridge_of(log, "kobuki", "exact").sources.conflict_from_s is None
+    assert monitor.tracker.vs_reference.max_dpos_m < 1e-4
+
+
+def test_a_second_firmware_s_summary_is_not_passed_over() -> None:
+    """The rule's edges (``haltedsend``): made before a silence and continuing the sequence,
+    passed over; not continuing it, going back, or with no silence before it (two firmwares
+    interleaving): not."""
+    offset_s, last = -0.5, (3, "OK")
+    before = (3.4, 13)  # the ODOM_STATUS frame heard before it: bus time, COUNTER
+    assert sent_after_halt((5.6, 3, "OK", 14), offset_s, UPTIME_MATCH_S, last, before)
+    assert not sent_after_halt((5.6, 3, "OK", 15), offset_s, UPTIME_MATCH_S, last, before)
+    assert not sent_after_halt((5.6, 2, "OK", 14), offset_s, UPTIME_MATCH_S, last, before)
+    assert not sent_after_halt((5.6, 3, "INIT", 14), offset_s, UPTIME_MATCH_S, last, before)
+    assert not sent_after_halt((5.6, 3, "OK", 14), offset_s, UPTIME_MATCH_S, last, (5.55, 13))
+    assert not sent_after_halt((5.6, 3, "OK", None), offset_s, UPTIME_MATCH_S, last, before)
+    assert not sent_after_halt((3.45, 3, "OK", 14), offset_s, UPTIME_MATCH_S, last, before)
