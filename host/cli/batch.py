@@ -172,12 +172,18 @@ def _diagnose(log: Path, report: dict[str, Any], profile: RobotProfile,
 
     said = profile_mismatch(running, profile, report["integrator"], given_as)
     hints = ([] if said is None else [said]) + later
+    whole = None
+    if own_dbc and report["integrator_source"] == "argument":  # not the firmware's: a FAIL
+        from odocan.host.judge.diagnosis import logged_integrator, mark_integrator
+
+        whole = read_log(log, warn=lambda message: None)
+        mark_integrator(report, logged_integrator(whole))  # its line: mismatches' hint
     if not report["passed"] and own_dbc:  # a wrong --robot must not read as a firmware fault
         from odocan.host.judge.diagnosis import mismatches
 
-        whole = read_log(log, warn=lambda message: None)
+        whole = whole if whole is not None else read_log(log, warn=lambda message: None)
         hints += mismatches(whole, with_bus_speed(profile, running), report["integrator"],
-                            report["integrator_source"], tolerance, given_as)
+                            report["integrator_source"], tolerance, given_as)  # wrong: said
     if hints:
         report["diagnosis"] = hints
 

@@ -12,7 +12,12 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from odocan.host.io.candump_line import CAN_ERR_FLAG, ID_MASK_29, parse_candump_line
+from odocan.host.io.candump_line import (
+    CAN_ERR_FLAG,
+    ID_MASK_29,
+    MAX_TIMESTAMP_S,
+    parse_candump_line,
+)
 from odocan.host.io.frames import (
     FLAG_EXTENDED,
     MAX_DLC,
@@ -319,6 +324,8 @@ def _parse_block(block: U8Array, c: _Columns) -> tuple[npt.NDArray[np.bool_], Fr
     if c.data_end < c.length:
         direction = block[:, c.data_end + 1] | 0x20  # lower case
         bad_rows.append(np.flatnonzero((direction != ord("r")) & (direction != ord("t"))))
+    seconds = _timestamps_s(block, c)
+    bad_rows.append(np.flatnonzero(seconds > MAX_TIMESTAMP_S))  # the line parser says why
     ok = np.ones(n, dtype=bool)
     for rows in bad_rows:
         ok[rows] = False
@@ -326,7 +333,7 @@ def _parse_block(block: U8Array, c: _Columns) -> tuple[npt.NDArray[np.bool_], Fr
     data[:, :nbytes] = payload
     flags = FLAG_EXTENDED if c.hash - c.id_start > 3 else 0
     frames = FrameArrays(
-        timestamp_s=_timestamps_s(block, c),
+        timestamp_s=seconds,
         can_id=(can_id & ID_MASK_29).astype(np.uint32),
         dlc=np.full(n, nbytes, dtype=np.uint8),
         data=data,

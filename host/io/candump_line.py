@@ -11,6 +11,10 @@ from odocan.host.io.frames import MAX_DLC, LogFormatError
 CAN_ERR_FLAG = 0x20000000  # candump: error frame marker in the ID (can/error.h)
 _CAN_ERR_BUSERROR = 0x00000080
 ID_MASK_29 = 0x1FFFFFFF
+# Beyond this a timestamp is no clock's (some 31 700 years of seconds; a candump's is Unix time, a
+# bench's from 0): one such line once leaked numpy's invalid cast of its period count and a
+# 300-digit "ms back" into the warnings, so it is a bad line, refused as '(nan)' is.
+MAX_TIMESTAMP_S = 1e12
 
 if TYPE_CHECKING:
     import can
@@ -72,6 +76,9 @@ def _parse_timestamp(text: str, where: str) -> float:
         raise LogFormatError(f"{where}: bad timestamp {text!r}") from None
     if not math.isfinite(seconds):  # '(nan)': every duration and rate after it would be nan
         raise LogFormatError(f"{where}: bad timestamp {text!r} (not a finite number)")
+    if abs(seconds) > MAX_TIMESTAMP_S:
+        raise LogFormatError(f"{where}: bad timestamp {text!r} (beyond {MAX_TIMESTAMP_S:g} s: "
+                             "no clock's time)")
     return seconds
 
 

@@ -160,6 +160,14 @@ class TimeOrder:
         self.frames += len(chunk)
         self.last_s = float(latest[-1])
 
+    def out_of_order(self) -> str | None:
+        """What is wrong when most frames go back (a reversed or shuffled log: no E2E sequence
+        nor summary reads in order), in words; None otherwise."""
+        if 2 * self.back <= self.frames:
+            return None
+        return (f"the log is not in time order ({self.back} of {self.frames} frames earlier "
+                "than the frame before: reversed or shuffled?)")
+
     def report(self, path: Path, warn: Callable[[str], None]) -> None:
         """One warning when any frame's time went back beyond the recorder's stamping."""
         if self.first is None:

@@ -124,7 +124,7 @@ from odocan.host.judge.gapseen import Seen, seen_in_log
 from odocan.host.judge.holepages import page_numbered
 from odocan.host.judge.judgedfloor import floored
 from odocan.host.judge.keptmark import mark_kept
-from odocan.host.judge.lonehalves import judge_lone
+from odocan.host.judge.lonehalves import judge_lone, unmatched_sent
 from odocan.host.judge.losses import (
     firmware_losses,
     firmware_ok_spans,
@@ -420,7 +420,7 @@ def _analyze_life(
             "onboard": len(onboard.enc),
             "truth": len(truth.enc), "truth_compared": len(truth_series["truth_x_m"]),
             "unmatched_poses": unmatched,
-            "encoder_frames": len(enc.index),
+            "encoder_frames": len(enc.index), "unmatched_sent": unmatched_sent(halves),
             "reference_restarts": ref_all.restarts,
             "unseen_restarts": len(ref_all.unseen_restarts),  # new starts: unseenrestart
             "implausible_encoder_frames": ref_all.implausible_frames, **left_out.counts(),

@@ -4,10 +4,15 @@ A wrong ``--robot`` makes every sample depart from the reference, and the verdic
 a firmware fault (pose and twist out of tolerance). Before blaming the firmware, the judge checks
 which profiles — the one given first, then the shipped ones — the logged on-board poses follow
 within the tolerance; a log that fits another profile is a robot mismatch, said by name. So is
-an ``--integrator`` other than the one the log's ODOM_STATUS reports.
+an ``--integrator`` other than the one the log's ODOM_STATUS reports, and that one FAILs the
+verdict whatever the poses (``mark_integrator``): a log judged with another integrator than its
+firmware's says nothing of that firmware (on a square drive exact and euler agree within the
+tolerance, and the PASS read as one of the given integrator).
 """
 
 from __future__ import annotations
+
+from typing import Any
 
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.analysis import AnalysisError, Tolerance, analyze
@@ -59,6 +64,29 @@ def logged_integrator(log: FrameArrays) -> str | None:
         return None
 
 
+def integrator_said(logged: str | None, given: str) -> str | None:
+    """``integrator mismatch: ...`` when the log's ODOM_STATUS reports ``logged``, not the
+    ``--integrator`` ``given``; None when it reports ``given`` or none."""
+    if logged is None or logged == given:
+        return None
+    return (f"integrator mismatch: the log's ODOM_STATUS reports {logged}, not {given} "
+            "(--integrator)")
+
+
+def mark_integrator(report: dict[str, Any], logged: str | None) -> str | None:
+    """``report`` FAILed (``integrator_mismatch``, ``passed`` false) when its integrator was
+    given (``integrator_source`` "argument") and differs from ``logged``, the log's
+    ODOM_STATUS's; the line said, None when nothing was marked."""
+    if report.get("integrator_source") != "argument":
+        return None
+    said = integrator_said(logged, report["integrator"])
+    if said is not None:
+        report["integrator_mismatch"] = {"logged": logged, "given": report["integrator"],
+                                         "detail": said}
+        report["passed"] = False
+    return said
+
+
 def mismatches(
     log: FrameArrays, given: RobotProfile, integrator: str, source: str, tolerance: Tolerance,
     given_as: str = "--robot",
@@ -68,8 +96,7 @@ def mismatches(
     with the log's own integrator."""
     hints = []
     logged = logged_integrator(log) if source == "argument" else None
-    if logged is not None and logged != integrator:
-        hints.append(f"integrator mismatch: the log's ODOM_STATUS reports {logged}, "
-                     f"not {integrator} (--integrator)")
+    if (said := integrator_said(logged, integrator)) is not None:
+        hints.append(said)
     robot_hint = robot_mismatch(log, given, logged or integrator, tolerance, given_as)
     return hints + ([] if robot_hint is None else [robot_hint])

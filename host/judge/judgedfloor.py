@@ -38,9 +38,10 @@ class _Verdict(Protocol):
     passed: bool
 
 
-def judged_share(report: dict[str, Any]) -> tuple[int, float] | None:
+def judged_share(report: dict[str, Any]) -> tuple[int, int] | None:
     """(poses judged, poses sent) of a report (``samples``: ``onboard`` judged,
-    ``unmatched_poses`` the halves left out, X and Y each; ``lone_halves_judged`` /
+    ``unmatched_sent`` the whole poses the halves left out stand for, ``lonehalves``; else
+    ``unmatched_poses``, those halves, X and Y each, half up; ``lone_halves_judged`` /
     ``_unjudged``: halves whose partner was lost, ``host.judge.lonehalves``); None without
     samples."""
     samples = report.get("samples") or {}
@@ -50,7 +51,8 @@ def judged_share(report: dict[str, Any]) -> tuple[int, float] | None:
         samples.get("lone_halves_judged") or 0)  # a half without its partner: one pose sent
     left = int(samples.get("stall_first_unjudged") or 0) - int(
         samples.get("stall_first_unmatched") or 0) + int(samples.get("lone_halves_unjudged") or 0)
-    return judged, judged + int(samples.get("unmatched_poses") or 0) / 2 + left
+    halves = int(samples.get("unmatched_poses") or 0)  # (the streamed analysis: halves only)
+    return judged, judged + int(samples.get("unmatched_sent", (halves + 1) // 2)) + left
 
 
 def mark_floor(report: dict[str, Any]) -> dict[str, Any]:

@@ -29,6 +29,7 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.judge.compare import pose_errors
+from odocan.host.judge.latehalves import NEAR_PERIODS
 from odocan.host.judge.losses import Placements, loss_allowance
 from odocan.host.judge.posehalves import BAM, x_half_heading_bam, y_half_heading_bam
 from odocan.host.judge.reference_path import Reference
@@ -43,6 +44,7 @@ from odocan.host.judge.samples import (
     Poses,
 )
 from odocan.host.judge.twins import twin_allowance_of
+from odocan.host.protocol.busfacts import POSE_PERIOD_S
 from odocan.sim.robot import RobotProfile
 
 
@@ -78,6 +80,38 @@ def lone_frames(halves: PoseHalves, paired: IntArray) -> tuple[IntArray, IntArra
     ix = np.flatnonzero((halves.ex >= 0) & ~np.isin(halves.ex, paired))
     iy = np.flatnonzero((halves.ey >= 0) & ~np.isin(halves.ey, paired))
     return ix, iy
+
+
+def unmatched_sent(halves: PoseHalves) -> int:
+    """The poses sent that the halves naming no encoder frame stand for, whole (``judgedfloor``:
+    the poses sent; counting halves / 2 said "judged 500 of 500.5" of an X renamed one frame on,
+    its Y judged alone): a half whose partner (the other message's accepted frame of its COUNTER
+    heard nearest it within half a COUNTER lap: one tick's, ``latehalves``) names a frame is
+    that partner's pose, counted with it; two unmatched partners are one pose, a half without
+    a partner heard one."""
+    t_x, t_y = halves.px["timestamp_s"], halves.py["timestamp_s"]
+    c_x, c_y = halves.px["COUNTER"], halves.py["COUNTER"]
+    near_s = NEAR_PERIODS * POSE_PERIOD_S
+    taken = np.zeros(len(t_y), dtype=bool)  # unmatched Y halves counted with their X
+    sent = 0
+    for i in np.flatnonzero(halves.ex < 0).tolist():
+        j = _partner(t_y, c_y, float(t_x[i]), int(c_x[i]), near_s)
+        sent += j is None or halves.ey[j] < 0
+        if j is not None:
+            taken[j] = True
+    for k in np.flatnonzero((halves.ey < 0) & ~taken).tolist():
+        x = _partner(t_x, c_x, float(t_y[k]), int(c_y[k]), near_s)
+        sent += x is None or halves.ex[x] < 0
+    return int(sent)
+
+
+def _partner(times_s: FloatArray, counters: npt.NDArray[np.generic], t_s: float, counter: int,
+             near_s: float) -> int | None:
+    """The frame of ``counter`` heard nearest ``t_s``, within ``near_s``; None without one."""
+    near = np.flatnonzero((np.abs(times_s - t_s) < near_s) & (counters == counter))
+    if len(near) == 0:
+        return None
+    return int(near[np.argmin(np.abs(times_s[near] - t_s))])
 
 
 def budgets(enc: Encoders, ref: Reference, breaks: IntArray, kept: Poses,

@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from odocan.host.io.logs import FrameArrays
+from odocan.host.io.logs import FrameArrays, TimeOrder
 from odocan.host.judge import floodnames
 from odocan.host.judge.latehalves import Half, halves_together
 from odocan.host.judge.latenames import sent_places
@@ -120,6 +120,21 @@ def accepted_rows(
     return {key: value[keep] for key, value in decoded.items()}
 
 
+def no_summary(frames: FrameArrays | TimeOrder) -> AnalysisError:
+    """The error of a log without an accepted ODOM_STATUS summary: that its times run back
+    when most do (a reversed log's summaries all fail their E2E sequence), else to give the
+    integrator."""
+    if isinstance(frames, TimeOrder):
+        order = frames
+    else:
+        order = TimeOrder()
+        order.feed(frames)
+    said = order.out_of_order()
+    return AnalysisError(f"{said}: no ODOM_STATUS summary read in order to tell the integrator"
+                         if said else
+                         "no ODOM_STATUS summary in the log to tell the integrator: give it")
+
+
 def pick_integrator(
     frames: FrameArrays,
     accepted: npt.NDArray[np.bool_],
@@ -140,7 +155,7 @@ def pick_integrator(
         page, signal = {}, None
     values = page["INTEGRATOR"][accepted[page["index"]]] if page else np.zeros(0)
     if signal is None or len(values) == 0:
-        raise AnalysisError("no ODOM_STATUS summary in the log to tell the integrator: give it")
+        raise no_summary(frames)
     choices: dict[Any, Any] = dict(signal.choices or {})
     name = str(choices.get(int(values[-1]), "")).lower()
     if name not in INTEGRATORS:

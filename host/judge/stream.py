@@ -194,6 +194,13 @@ class StreamPoses:
     _offset: int = 0
     _enc_count: int = 0
     _recent: dict[str, np.ndarray] = field(default_factory=dict)  # g, index, counter, seq, t
+
+    def unmatched_sent(self) -> int:
+        """``lonehalves.unmatched_sent`` of a streamed log: a log with a lone half is read
+        whole (``stream_first``), so here an unmatched half's partner is unmatched too (its
+        pose's two, one pose) or lost (half up: one alone is one pose)."""
+        return (self.unmatched + 1) // 2
+
     _pending: dict[str, _Halves] = field(default_factory=dict)  # (not causal) frames waiting
     _first: dict[str, dict[int, tuple[int, dict[str, float], float]]] = field(
         default_factory=lambda: {"ODOM_POSE_X": {}, "ODOM_POSE_Y": {}})

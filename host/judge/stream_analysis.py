@@ -452,7 +452,7 @@ def _judged(
             "truth": first.truths,
             "truth_compared": truth.compared,
             "unmatched_poses": first.poses.unmatched,
-            "encoder_frames": first.encoders,
+            "encoder_frames": first.encoders, "unmatched_sent": first.poses.unmatched_sent(),
             "reference_restarts": info.segments, "unseen_restarts": 0,  # else: whole_only
             "implausible_encoder_frames": info.refused, **left_out.counts(),
         },

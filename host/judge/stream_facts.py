@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from odocan.host.io.logs import FrameArrays
+from odocan.host.io.logs import FrameArrays, TimeOrder
 from odocan.host.judge.finalstate import latched_fields
 from odocan.host.judge.powerup import (
     NAMED_SPAN,
@@ -39,7 +39,7 @@ from odocan.host.judge.powerup import (
 )
 from odocan.host.judge.powerup_times import TickTimes
 from odocan.host.judge.reference import INTEGRATORS
-from odocan.host.judge.samples import ENC_E2E_PAGE, AnalysisError, Poses
+from odocan.host.judge.samples import ENC_E2E_PAGE, AnalysisError, Poses, no_summary
 from odocan.host.judge.statuslatch import StatusLatch, latch_summaries
 from odocan.host.protocol import busfacts
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
@@ -99,6 +99,7 @@ class StreamFacts:
     _tail: npt.NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
     _times: TickTimes = field(default_factory=TickTimes)  # powerup.heard_by_tick's evidence
     latch: StatusLatch = field(default_factory=StatusLatch)  # host.judge.statuslatch
+    _order: TimeOrder = field(default_factory=TimeOrder)  # a log not in time order: said
     firmware_events: list[dict[str, Any]] = field(default_factory=list)  # ... its events
 
     def firmware_fields(self) -> dict[str, Any]:
@@ -107,6 +108,7 @@ class StreamFacts:
 
     def feed(self, chunk: FrameArrays, accepted: npt.NDArray[np.bool_]) -> None:
         """Take the next chunk's facts."""
+        self._order.feed(chunk)
         if len(chunk):
             if self._first_s is None:
                 self._first_s = float(chunk.timestamp_s[0])
@@ -201,7 +203,7 @@ class StreamFacts:
             signal = None
         last = self._integrator.last if self._has_status and self._integrator.present else None
         if signal is None or last is None:
-            raise AnalysisError("no ODOM_STATUS summary in the log to tell the integrator: give it")
+            raise no_summary(self._order)
         choices: dict[Any, Any] = dict(signal.choices or {})
         name = str(choices.get(last, "")).lower()
         if name not in INTEGRATORS:

@@ -121,6 +121,8 @@ def verdict_check(report: dict[str, Any]) -> list[Check]:
     reasons = [str(r) for r in report.get("faults") or []]
     if report.get("two_sources"):  # two firmwares on one ID: the pose there is not judged
         reasons.append(str(report["two_sources"]["detail"]))
+    if report.get("integrator_mismatch"):  # --integrator not the firmware's (diagnosis)
+        reasons.append(str(report["integrator_mismatch"]["detail"]))
     if report.get("judged_floor"):  # too few poses judged (host.judge.judgedfloor)
         reasons.append(str(report["judged_floor"]["detail"]))
     return [Check("verdict", bool(report["passed"]), "; ".join(reasons) or "FAIL",

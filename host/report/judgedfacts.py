@@ -16,7 +16,7 @@ def judged_fact(report: dict[str, Any]) -> tuple[str, str] | None:
     samples = report.get("samples") or {}
     if "judged_fraction" not in samples:
         return None
-    judged, sent = judged_share(report) or (0, 0.0)
+    judged, sent = judged_share(report) or (0, 0)
     return "judged", (f"{judged} of {sent:g} on-board poses compared with the reference "
                       f"({100 * samples['judged_fraction']:.4g} %)" + _first_said(report))
 

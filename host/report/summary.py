@@ -235,6 +235,10 @@ def _own_lines(report: dict[str, Any], console: Console, said: tuple[str, str], 
                       f"({conflict['frames_not_judged']} frames from there not judged)",
                       soft_wrap=True)
         verdict, style = "before it", "bold" if met else style
+    wrong = report.get("integrator_mismatch")
+    if wrong:  # --integrator other than the firmware's (host.judge.diagnosis): a FAIL of its own
+        console.print(f"[{style}]{verdict}[/{style}]: {wrong['detail']}", soft_wrap=True)
+        verdict, style = "otherwise", "bold" if met else style
     floor = report.get("judged_floor")
     if floor:  # too few poses judged (judgedfloor): UNJUDGED when nothing else failed
         word = "UNJUDGED" if all_met and verdict == "FAIL" else verdict

@@ -201,6 +201,7 @@ def _analyze_single(args: argparse.Namespace) -> int:
         analysis.report["bus"] = busstats.from_frames(frames, args.bitrate).as_dict()
     analysis.report["inputs"] = choice.recorded(
         log_inputs(args.log, profile, analysis.report["integrator"], args.dbc))
+    wrong, frames = _wrong_integrator(analysis, frames, args.log, own_dbc=db is None)
     said = profile_mismatch(running, profile, analysis.report["integrator"], choice.given_as)
     hints: list[str] = [] if said is None else [said]  # the firmware's PROFILE page names it
     if db is None:  # the pages after an applied config: its robot's
@@ -215,12 +216,28 @@ def _analyze_single(args: argparse.Namespace) -> int:
     if hints:
         analysis.report["diagnosis"] = hints
     code = finish(analysis, args, title=f"odocan analyze: {args.log}")
-    for hint in hints:
+    for hint in [hint for hint in hints if hint != wrong]:  # (the verdict said that one)
         print(f"  - {hint}")
     write_checks(args, "analyze", analysis_checks(analysis.report), choice.properties())
     if whole_log is not None:
         write_exports(args, whole_log, analysis, db)
     return code
+
+
+def _wrong_integrator(analysis: Analysis, frames: FrameArrays | None, log: Path, *,
+                      own_dbc: bool) -> tuple[str | None, FrameArrays | None]:
+    """An ``--integrator`` other than the one the log's ODOM_STATUS reports: the analysis
+    FAILed (``diagnosis.mark_integrator``, as a wrong ``--robot``) and its line; and the whole
+    log, read for it when the analysis streamed."""
+    if not own_dbc or analysis.report["integrator_source"] != "argument":
+        return None, frames
+    from odocan.host.io.logs import read_log
+    from odocan.host.judge.diagnosis import logged_integrator, mark_integrator
+
+    frames = frames if frames is not None else read_log(log, warn=lambda message: None)
+    wrong = mark_integrator(analysis.report, logged_integrator(frames))
+    analysis.passed = analysis.passed and wrong is None
+    return wrong, frames
 
 
 def _later(frames: FrameArrays | None, pages: ConfigPages, profile: robot.RobotProfile,

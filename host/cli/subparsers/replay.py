@@ -115,11 +115,8 @@ def _do_replay(args: argparse.Namespace) -> int:
     feed = ReplayInput.from_log(frames)
     logged = logged_integrator(frames, feed.accepted)
     integrator = args.integrator or logged or "exact"
-    if logged is not None and logged != integrator:  # a replay of another firmware: say so
-        warn_on_stderr(f"integrator mismatch: {args.log}'s ODOM_STATUS reports {logged}, "
-                       f"--integrator asks {integrator}: this replays a firmware other than "
-                       "the one that recorded it")
     running = running_profile(frames)  # ODOM_STATUS PROFILE: what the recording firmware ran
+    _warn_integrator(args.log, logged, integrator)
     said = profile_mismatch(running, profile, logged or integrator, choice.given_as)
     if said is not None:
         warn_on_stderr(said)
@@ -146,6 +143,7 @@ def _do_replay(args: argparse.Namespace) -> int:
     section.update(passed=not reasons and blind is None, faults=reasons,
                    unjudged=blind)
     title = f"odocan replay: {args.log} on {profile.name}, {integrator} integrator"
+    analysis.passed = analysis.passed and _integrator_kept(analysis.report, logged)
     ran_passed = analysis.passed
     code = finish(analysis, args, title=title)  # prints the run's verdict (vs the reference)
     verdict = ([f"{'FAIL' if ran_passed else 'and'}: the replayed firmware departs from the log's",
@@ -160,6 +158,24 @@ def _do_replay(args: argparse.Namespace) -> int:
     write_checks(args, "replay", analysis_checks(analysis.report), choice.properties())
     stopped = analysis.report.get("stopped")
     return code if stopped is None else stop_code(stopped)
+
+
+def _warn_integrator(log: Path, logged: str | None, integrator: str) -> None:
+    """The warning up front when ``integrator`` is not the ``logged`` one (the verdict FAILs
+    it too: ``_integrator_kept``)."""
+    if logged is not None and logged != integrator:  # a replay of another firmware: say so
+        warn_on_stderr(f"integrator mismatch: {log}'s ODOM_STATUS reports {logged}, "
+                       f"--integrator asks {integrator}: this replays a firmware other than "
+                       "the one that recorded it")
+
+
+def _integrator_kept(report: dict[str, Any], logged: str | None) -> bool:
+    """False, ``report`` FAILed (``diagnosis.mark_integrator``, as a wrong ``--robot``), when
+    ``--integrator`` is not the one the log's ODOM_STATUS reports: a replay of another
+    firmware says nothing of the one recorded, even when its poses stay within tolerance."""
+    from odocan.host.judge.diagnosis import mark_integrator  # (the pose fit: when needed)
+
+    return mark_integrator(report, logged) is None
 
 
 def _judged(section: dict[str, Any], tolerance: Any) -> tuple[list[str], str | None]:
