@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import signal
+import subprocess
 from pathlib import Path
 from typing import Any
 
@@ -221,8 +222,14 @@ def test_a_sim_process_killed_and_restarted_is_a_counter_reset_never_ok(
     OK, and the monitor's model of the frames heard never says OK or POSE WRONG after it."""
     bus_argv, listener = udp_bus
     firmware = _start(["firmware", *bus_argv])
-    sims = [_start(["sim", "--scenario", "circle", "--duration", "30", *bus_argv])]
+    sims: list[subprocess.Popen[str]] = []
     try:
+        # the sim starts once the firmware is heard (its status, before any encoder frame): a
+        # firmware still starting (a loaded machine) joined the drive 16 or more encoder frames
+        # late, where ENC_COUNTER (4 bits) no longer names the frame its pose is on
+        up = _listen(listener, lambda c: bool(c.of(fr.ODOM_STATUS_ID)), START_TIMEOUT_S + 40)
+        assert up.of(fr.ODOM_STATUS_ID), "the firmware was not heard"
+        sims.append(_start(["sim", "--scenario", "circle", "--duration", "30", *bus_argv]))
         first = _listen(listener, lambda c: len(c.of(fr.WHEEL_ENCODERS_ID)) >= 160,
                         START_TIMEOUT_S + 5)
         sims[0].kill()
@@ -239,7 +246,7 @@ def test_a_sim_process_killed_and_restarted_is_a_counter_reset_never_ok(
     monitor = BusMonitor(load("pmir"))
     verdicts: list[tuple[float, str]] = []
     status: list[tuple[float, str, str]] = []
-    for msg in [*first.frames, *again.frames]:
+    for msg in [*up.frames, *first.frames, *again.frames]:
         monitor.feed(msg, now_s=msg.timestamp)
         if msg.timestamp > back_s:
             verdicts.append((msg.timestamp, monitor.health(msg.timestamp)["state"]))

@@ -57,15 +57,34 @@ sys.exit(main(["run", "--robot", "kobuki", "--duration", "6", "--seed", "1", "--
 """
 
 # ``odocan monitor --dbc`` on a virtual bus the log is played onto at its pace; SIGTERM (the
-# monitor's normal end without --duration) once the monitor has taken every frame
+# monitor's normal end without --duration) once the monitor has judged every frame: its judge
+# came back for more (``BusReader.get`` found nothing) after it had taken them all (a signal
+# leaves the frames read and not taken unjudged: ``judge_pending``). Not a fixed wait: on a
+# loaded machine the judge could still be behind 0.5 s after the bus was read.
 MONITOR = """
 import os, signal, sys, threading, time
 import can
 from can.interfaces import virtual
+from odocan.host.io import busreader
 
 CHANNEL = "dbc-other-%d" % os.getpid()
+JUDGED_WITHIN_S = 60.0
+taken = [0]  # frames the judge took (each judged before it asks for the next)
+idle = threading.Event()  # set when the judge asked and nothing was left
+get = busreader.BusReader.get
+
+def judged_get(self, timeout_s):
+    msg = get(self, timeout_s)
+    if msg is None:
+        idle.set()
+    else:
+        taken[0] += 1
+    return msg
+
+busreader.BusReader.get = judged_get
 
 def play(log):
+    sent = 0
     with can.Bus(interface="virtual", channel=CHANNEL, preserve_timestamps=True) as out:
         while len(virtual.channels.get(CHANNEL, [])) < 2:
             time.sleep(0.01)
@@ -75,9 +94,13 @@ def play(log):
                 first, t0 = msg.timestamp, time.monotonic()
             time.sleep(max(0.0, t0 + msg.timestamp - first - time.monotonic()))
             out.send(msg)
-        while any(q.qsize() for q in virtual.channels[CHANNEL]):
+            sent += 1
+        end = time.monotonic() + JUDGED_WITHIN_S
+        while time.monotonic() < end:
+            idle.clear()
+            if taken[0] >= sent and idle.wait(max(0.0, end - time.monotonic())):
+                break
             time.sleep(0.05)
-        time.sleep(0.5)
     os.kill(os.getpid(), signal.SIGTERM)
 
 threading.Thread(target=play, args=(sys.argv[1],), daemon=True).start()

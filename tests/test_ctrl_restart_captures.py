@@ -1,0 +1,68 @@
+"""Two captures of tests/test_ctrl_restart.py's process test (``odocan firmware`` and ``odocan
+sim`` killed and started again) on a loaded machine (4 busy loops, every process at nice 19),
+where the judges blamed the correct firmware: 4 of 7 runs said POSE WRONG. Captured by the
+test's listener (the frames a monitor on the channel heard), kept as BLF.
+
+``restart_lagged_first_pose.blf``: the sim started while the firmware was still starting; the
+firmware's first pose (ENC_COUNTER 2) is on the encoder frame 53 of the capture (the float
+reference there: 0.02 mm, 0.05 mrad off), 16 encoder frames before the newest frame with that
+counter (73), which the judges take: 79.31 mm, 78.49 mrad off. The firmware was that far behind
+(FRAME_TOTALS: 18 frames overflowed its mailbox next); its next poses name the newest frames.
+A 4-bit ENC_COUNTER cannot name a frame 16 or more behind: the judges need another cue (the
+firmware's pace, its next poses) before they blame it. The process test now starts the sim
+once the firmware is heard (0 of 8 runs said POSE WRONG since); the judges still FAIL the
+capture.
+
+``restart_live_two_lsb.blf``: after the restart (the firmware's FRAME_TOTALS: 26 frames lost,
+overflowed), ``analyze`` passes (0.29 mm within its 1.681 mm allowance for the frames the
+firmware lost); the live monitor said POSE WRONG for 1 s from the restarted controller's fourth
+frame: 0.1985 mm against one LSB (0.1 mm), with no allowance yet for the lost frames.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import can
+import pytest
+
+from odocan.host.io.logs import read_log
+from odocan.host.judge.analysis import analyze
+from odocan.host.judge.monitor import BusMonitor
+from odocan.sim.robot import load
+
+FILES = Path(__file__).resolve().parent / "files"
+PMIR = load("pmir")
+
+
+def live_states(path: Path) -> set[str]:
+    """Every state the monitor said, frame by frame."""
+    monitor = BusMonitor(PMIR)
+    states = set()
+    for msg in can.LogReader(path):
+        monitor.feed(msg, now_s=msg.timestamp)
+        states.add(monitor.health(msg.timestamp)["state"])
+    return states
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "the firmware's first pose names (ENC_COUNTER 2) an encoder frame 16 frames before the "
+    "newest with that counter: analyze FAILs it by 79.60 mm, 78.49 mrad, the monitor says "
+    "POSE WRONG (the pose fits the older frame within 0.02 mm, 0.05 mrad)"))
+def test_a_firmware_16_frames_behind_at_its_first_pose_is_not_blamed() -> None:
+    path = FILES / "restart_lagged_first_pose.blf"
+    assert analyze(read_log(path), PMIR).report["passed"]
+    assert "POSE WRONG" not in live_states(path)
+
+
+def test_the_whole_log_passes_the_restart_with_lost_frames() -> None:
+    report = analyze(read_log(FILES / "restart_live_two_lsb.blf"), PMIR).report
+    assert report["passed"], report["onboard_vs_reference"]
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "after the restart, frames the firmware lost (26, FRAME_TOTALS): the monitor says POSE "
+    "WRONG 1 s for 0.1985 mm against one LSB, where analyze allows 1.681 mm for them and "
+    "passes (0.29 mm)"))
+def test_the_monitor_passes_the_restart_with_lost_frames() -> None:
+    assert "POSE WRONG" not in live_states(FILES / "restart_live_two_lsb.blf")
