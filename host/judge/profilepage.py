@@ -26,7 +26,7 @@ from collections import deque
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol, TypeVar
 
 from odocan.host.io.logs import FrameArrays, iter_log
 from odocan.host.judge.reference import INTEGRATORS
@@ -143,6 +143,16 @@ def head_profile(
     """``pick`` (``running_profile``, ``first_page``) of a log's first ``head_frames`` frames (a
     streamed analysis: the page comes every 600 ms, so the head of a log holds it); None when
     they hold none or the log cannot be read (the analysis says why)."""
+    return head_read(path, pick, head_frames)
+
+
+_Read = TypeVar("_Read")
+
+
+def head_read(path: Path, pick: Callable[[FrameArrays], _Read | None],
+              head_frames: int = HEAD_FRAMES) -> _Read | None:
+    """``pick`` of a log's first ``head_frames`` frames, the whole log left unread; None when
+    it picks nothing or the log cannot be read (the analysis says why)."""
     try:
         for chunk in iter_log(path, chunk_frames=head_frames, warn=lambda _text: None):
             return pick(chunk)

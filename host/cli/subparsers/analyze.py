@@ -201,7 +201,7 @@ def _analyze_single(args: argparse.Namespace) -> int:
         analysis.report["bus"] = busstats.from_frames(frames, args.bitrate).as_dict()
     analysis.report["inputs"] = choice.recorded(
         log_inputs(args.log, profile, analysis.report["integrator"], args.dbc))
-    wrong, frames = _wrong_integrator(analysis, frames, args.log, own_dbc=db is None)
+    wrong = _wrong_integrator(analysis, frames, args.log, own_dbc=db is None)
     said = profile_mismatch(running, profile, analysis.report["integrator"], choice.given_as)
     hints: list[str] = [] if said is None else [said]  # the firmware's PROFILE page names it
     if db is None:  # the pages after an applied config: its robot's
@@ -225,19 +225,20 @@ def _analyze_single(args: argparse.Namespace) -> int:
 
 
 def _wrong_integrator(analysis: Analysis, frames: FrameArrays | None, log: Path, *,
-                      own_dbc: bool) -> tuple[str | None, FrameArrays | None]:
+                      own_dbc: bool) -> str | None:
     """An ``--integrator`` other than the one the log's ODOM_STATUS reports: the analysis
-    FAILed (``diagnosis.mark_integrator``, as a wrong ``--robot``) and its line; and the whole
-    log, read for it when the analysis streamed."""
+    FAILed (``diagnosis.mark_integrator``, as a wrong ``--robot``) and its line. A streamed
+    analysis reads it from the log's head (``head_read``): the whole log stays unread."""
     if not own_dbc or analysis.report["integrator_source"] != "argument":
-        return None, frames
-    from odocan.host.io.logs import read_log
+        return None
     from odocan.host.judge.diagnosis import logged_integrator, mark_integrator
+    from odocan.host.judge.profilepage import head_read
 
-    frames = frames if frames is not None else read_log(log, warn=lambda message: None)
-    wrong = mark_integrator(analysis.report, logged_integrator(frames))
+    logged = logged_integrator(frames) if frames is not None else head_read(
+        log, logged_integrator)
+    wrong = mark_integrator(analysis.report, logged)
     analysis.passed = analysis.passed and wrong is None
-    return wrong, frames
+    return wrong
 
 
 def _later(frames: FrameArrays | None, pages: ConfigPages, profile: robot.RobotProfile,
