@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
 import can
 import cantools
@@ -31,7 +32,7 @@ from odocan.host.protocol.decode import BulkDecoder
 from odocan.host.protocol.e2e import check_frames
 from odocan.sim import contract
 from tests.dbc_typed import dbc_attribute
-from tests.judges_cli import live_judges
+from tests.judges_cli import fails_by_position, live_judges, raise_x_10_mm
 
 NAMING = ("ODOM_POSE_X", "ODOM_POSE_Y", "ODOM_TWIST")  # the frames one firmware tick sends
 TEN_MM_LSB = 100
@@ -70,8 +71,8 @@ def name_ahead(src: Path, dst: Path, first: int, last: int, step: int, dx_lsb: i
             if message is not None:
                 k, seen[msg.arbitration_id] = seen[msg.arbitration_id], seen[msg.arbitration_id] + 1
                 if first <= k <= last:
-                    raw = message.decode(bytes(msg.data), scaling=False, decode_choices=False)
-                    assert isinstance(raw, dict)
+                    raw = _raw(message.decode(bytes(msg.data), scaling=False,
+                                              decode_choices=False))
                     raw["ENC_COUNTER"] = (int(raw["ENC_COUNTER"]) + step) % 16
                     if message.name == "ODOM_POSE_X":
                         raw["X"] = int(raw["X"]) + dx_lsb
@@ -107,16 +108,22 @@ def named_before_sent(log: Path) -> set[tuple[str, float, float]]:
                     found.add((pose, round(t, 6), round(msg.timestamp, 6)))
             waiting = [w for w in waiting if msg.timestamp - w[1] < 0.08 and w[2] != counter]
         elif msg.arbitration_id in poses:
-            named = db.get_message_by_frame_id(msg.arbitration_id).decode(
-                bytes(msg.data), scaling=False, decode_choices=False)["ENC_COUNTER"]
-            before = max((t for t, c in encoders if c == named), default=None)
+            named = int(_raw(db.get_message_by_frame_id(msg.arbitration_id).decode(
+                bytes(msg.data), scaling=False, decode_choices=False))["ENC_COUNTER"])
+            latest = max((t for t, c in encoders if c == named), default=None)
             sent[msg.arbitration_id] = sent.get(msg.arbitration_id, 0) + 1
-            if before is not None and sent[msg.arbitration_id] > SENDS_BEFORE:
-                waiting.append((poses[msg.arbitration_id], msg.timestamp, int(named), before))
+            if latest is not None and sent[msg.arbitration_id] > SENDS_BEFORE:
+                waiting.append((poses[msg.arbitration_id], msg.timestamp, named, latest))
     return found
 
 
-def _analyze(log: Path, stream: str, work: Path) -> tuple[int, dict, str]:
+def _raw(decoded: object) -> dict[str, Any]:
+    """cantools' decoded signals (raw, no choices) as a plain dict."""
+    assert isinstance(decoded, dict)
+    return dict(decoded)
+
+
+def _analyze(log: Path, stream: str, work: Path) -> tuple[int, dict[str, Any], str]:
     report, junit = work / f"{stream}.json", work / f"{stream}.xml"
     code = main(["analyze", str(log), "--stream", stream, "--report", str(report),
                  "--junit", str(junit)])
@@ -138,18 +145,21 @@ def test_a_pose_naming_a_frame_not_yet_sent_fails_every_judge(
     for stream in ("never", "always"):
         code, report, junit = _analyze(tampered, stream, tmp_path)
         ahead = report.get("names_ahead")
-        assert code == 1 and not report["passed"] and ahead, (stream, code, ahead)
+        assert (code, report["passed"], bool(ahead)) == (1, False, True), (stream, ahead)
+        assert ahead is not None
         said = ahead["first"]
         assert (said["message"], round(said["t_s"], 6), round(said["sent_s"], 6)) == earliest
         assert ahead["frames"] == len(truth), (stream, ahead["frames"], len(truth))
-        assert "encoder_named_after_sent" in junit and "<failure" in junit
+        assert "encoder_named_after_sent" in junit
+        assert "<failure" in junit
     monitor, bridge = live_judges("pmir", tampered)
     health = monitor.health(monitor.bus_time_s)
     assert health["state"] == "POSE WRONG", health["why"]
     assert f"{earliest[0]} at {earliest[1]:.6f} s names WHEEL_ENCODERS" in health["why"][0]
     bridge.end_watch()
     verdict = end_verdict(bridge)
-    assert verdict.verdict == "FAIL" and "not sent until" in verdict.reason, verdict
+    assert verdict.verdict == "FAIL", verdict
+    assert "not sent until" in verdict.reason, verdict
 
 
 def test_every_pose_naming_ahead_is_a_fail_not_bad_input(
@@ -162,7 +172,8 @@ def test_every_pose_naming_ahead_is_a_fail_not_bad_input(
         capsys.readouterr()
         assert main(["analyze", str(tampered), "--stream", stream]) == 1
         err = capsys.readouterr().err
-        assert err.startswith("FAIL: ODOM_POSE_X at ") and "not sent until" in err, err
+        assert err.startswith("FAIL: ODOM_POSE_X at "), err
+        assert "not sent until" in err, err
 
 
 def test_the_correct_drive_passes_and_no_judge_finds_a_name_ahead(drive: Path,
@@ -172,11 +183,13 @@ def test_the_correct_drive_passes_and_no_judge_finds_a_name_ahead(drive: Path,
     assert named_before_sent(drive) == set()
     for stream in ("never", "always"):
         code, report, _ = _analyze(drive, stream, tmp_path)
-        assert code == 0 and "names_ahead" not in report
+        assert code == 0
+        assert "names_ahead" not in report
     monitor, bridge = live_judges("pmir", drive)
     assert monitor.health(monitor.bus_time_s)["state"] == "OK"
     bridge.end_watch()
-    assert end_verdict(bridge).verdict == "PASS" and bridge.ahead.count == 0
+    assert end_verdict(bridge).verdict == "PASS"
+    assert bridge.ahead.count == 0
 
 
 @pytest.mark.parametrize("chunk", [1, 37, 1000])
@@ -201,3 +214,63 @@ def test_the_live_rule_and_the_scan_find_the_same_frames(drive: Path, tmp_path: 
                 live.heard(message.name, float(frames.timestamp_s[k]),
                            bytes(frames.data[k][:message.length]), bool(accepted[k]))
         assert (scan.count, scan.found) == (live.count, live.found)
+
+
+def written_before_encoders(src: Path, dst: Path) -> int:
+    """A recorder's reorder (the trial's swap.log): each run of ODOM_POSE_X, ODOM_POSE_Y,
+    ODOM_TWIST lines moved before the WHEEL_ENCODERS line they name, nearest before them (the
+    pose stamped 1 ms after it); stamps kept. The runs moved."""
+    db = _db()
+    enc_id = db.get_message_by_name("WHEEL_ENCODERS").frame_id
+    tick = {db.get_message_by_name(n).frame_id for n in NAMING}
+    lines = src.read_text().splitlines(keepends=True)
+    ids = [int(line.split()[2].split("#")[0], 16) for line in lines]
+    out: list[str] = []
+    moved, k = 0, 0
+    while k < len(lines):
+        end = k
+        while end < len(lines) and ids[end] in tick:
+            end += 1
+        enc = max((j for j in range(len(out) - 1, max(len(out) - 8, -1), -1)
+                   if int(out[j].split()[2].split("#")[0], 16) == enc_id), default=None)
+        if end > k and enc is not None:
+            out[enc:enc] = lines[k:end]
+            moved, k = moved + 1, end
+        else:
+            out.append(lines[k])
+            k += 1
+    dst.write_text("".join(out))
+    assert sorted(out) == sorted(lines)
+    return moved
+
+
+def test_a_recorders_reorder_within_its_jitter_pairs_and_passes(drive: Path,
+                                                                tmp_path: Path) -> None:
+    """Pose lines written ~1 ms before their encoder line (stamps after it: a recorder's order,
+    within the 1 ms stamping the log reader tolerates) pair with it: ``analyze`` PASSes (it
+    exited 2, "no ODOM_POSE_X/ODOM_POSE_Y pair names an encoder frame"), judging most poses;
+    and X raised 10 mm from 5 s on still FAILs by the position."""
+    swapped = tmp_path / "swap.log"
+    assert written_before_encoders(drive, swapped) > 450
+    assert named_before_sent(swapped) == set()  # within the jitter: nothing named ahead
+    for stream in ("never", "always"):
+        code, report, _ = _analyze(swapped, stream, tmp_path)
+        assert code == 0, stream
+        assert "names_ahead" not in report
+        assert report["samples"]["onboard"] > 450, report["samples"]
+    tampered = tmp_path / "swap_x.log"
+    assert raise_x_10_mm(swapped, tampered, 5.0) > 200
+    assert fails_by_position(tampered, tmp_path) == []
+
+
+@pytest.mark.xfail(strict=True, reason="the live judges pair a pose only with an encoder frame "
+                   "heard before it: on the reordered drive (every pose line 1 ms before its "
+                   "encoder line) the monitor compares none, UNVERIFIED 'no on-board pose "
+                   "compared with the reference yet' (no false PASS nor FAIL); pairing a pose "
+                   "with a frame heard after it needs the live tracker to hold it for that frame")
+def test_the_live_judges_pair_a_recorders_reorder_too(drive: Path, tmp_path: Path) -> None:
+    """The monitor on the reordered drive: OK, as on the drive as recorded."""
+    swapped = tmp_path / "swap.log"
+    written_before_encoders(drive, swapped)
+    monitor, _ = live_judges("pmir", swapped)
+    assert monitor.health(monitor.bus_time_s)["state"] == "OK"

@@ -107,7 +107,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from odocan.host.io.logs import FrameArrays
-from odocan.host.judge import acrosscut, cutreprime, floodnames, gapskips, namesahead, reportfacts
+from odocan.host.judge import acrosscut, aheadcheck, cutreprime, floodnames, gapskips, reportfacts
 from odocan.host.judge.compare import (
     check_twist,
     error_summary,
@@ -204,7 +204,7 @@ class Analysis:
     passed: bool = False
 
 
-@namesahead.checked  # a pose naming an encoder frame not yet sent: FAIL
+@aheadcheck.checked  # a pose naming an encoder frame not yet sent: FAIL
 @floored  # fewer than half the poses judged: no PASS
 def analyze(
     frames: FrameArrays,

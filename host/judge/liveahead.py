@@ -82,7 +82,8 @@ class LiveAhead:
         if not self._waiting:
             return
         for frame, pose, pose_t, named in self._waiting:
-            if frame == number and run >= ENC_COUNTER_LAP and t_s - pose_t > STAMPING_S + STAMP_S:
+            late_s = t_s - pose_t
+            if frame == number and run >= ENC_COUNTER_LAP and late_s > STAMPING_S + STAMP_S:
                 self._found(Ahead(pose, pose_t, named, t_s))
         self._waiting = [w for w in self._waiting if w[0] > number]
 

@@ -37,20 +37,15 @@ its reads may write a pose line before its encoder line. That pose is not a defe
 
 from __future__ import annotations
 
-import functools
-from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, ParamSpec, Protocol, TypeVar
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import STAMPING_S, FrameArrays
-from odocan.host.judge.samples import AnalysisError
 from odocan.host.protocol.busfacts import ENC_COUNTER_LAP, ENC_COUNTER_MASK, POSE_PERIOD_S
-from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.protocol.decode import BulkDecoder
-from odocan.host.protocol.e2e import check_frames
 
 HALF_LAP = ENC_COUNTER_LAP // 2  # a name is resolved -8..+7 from the latest frame
 ON_TIME_SENDS = 8  # the pose sender's sends at cadence before it: a lap of encoder frames
@@ -63,11 +58,6 @@ KEEP_FOUND = 8  # findings kept (the earliest); all are counted
 IntArray = npt.NDArray[np.int64]
 FloatArray = npt.NDArray[np.float64]
 BoolArray = npt.NDArray[np.bool_]
-
-
-class _Verdict(Protocol):
-    report: dict[str, Any]
-    passed: bool
 
 
 @dataclass(frozen=True)
@@ -110,6 +100,42 @@ def run_lengths(rows: Rows, period_s: float) -> IntArray:
     start = np.maximum.accumulate(np.where(linked, 0, at)) if n else at
     runs: IntArray = np.where(rows.ok, at - start, -1).astype(np.int64)
     return runs
+
+
+def rows_of(frames: FrameArrays, accepted: BoolArray, decoder: BulkDecoder, name: str,
+            offset: int = 0) -> Rows:
+    """Every frame of ``name`` in ``frames`` (its positions ``offset`` on) as ``Rows``."""
+    d = decoder.decode(frames, name)
+    index = d["index"].astype(np.int64)
+    named = d["ENC_COUNTER"].astype(np.int64) if "ENC_COUNTER" in d else index[:0]
+    return Rows(index + offset, d["timestamp_s"].astype(np.float64),
+                d["COUNTER"].astype(np.int64), accepted[index], named)
+
+
+def cycle_of(decoder: BulkDecoder, name: str = "WHEEL_ENCODERS") -> float:
+    """``name``'s DBC cycle time (s; 10 ms when it has none)."""
+    return (decoder.message(name).cycle_time or 10) / 1000.0
+
+
+def reordered(frames: FrameArrays, accepted: BoolArray, decoder: BulkDecoder, enc_index: IntArray,
+              name: str, index: IntArray, named: IntArray) -> IntArray:
+    """``named`` (the encoder frame each accepted frame of ``name`` at ``index`` names, an index
+    into the accepted encoder frames at ``enc_index``; -1: none) with each frame written in the
+    log before the encoder frame it names, within the stamping jitter (``names_ahead``'s
+    ``reordered``: a recorder's order), paired with that frame."""
+    found = names_ahead(rows_of(frames, accepted, decoder, "WHEEL_ENCODERS"),
+                        rows := rows_of(frames, accepted, decoder, name), cycle_of(decoder))
+    if not found.reordered.any() or len(index) == 0:
+        return named
+    k = np.minimum(np.searchsorted(rows.pos, index), len(rows.pos) - 1)
+    take = (rows.pos[k] == index) & found.reordered[k] & (named < 0)
+    if not take.any():
+        return named
+    at = rows_of(frames, accepted, decoder, "WHEEL_ENCODERS").pos[np.maximum(found.frame[k], 0)]
+    e = np.minimum(np.searchsorted(enc_index, at), max(len(enc_index) - 1, 0))
+    take &= (enc_index[e] == at) if len(enc_index) else False
+    paired: IntArray = np.where(take, e, named).astype(np.int64)
+    return paired
 
 
 @dataclass(frozen=True)
@@ -209,20 +235,16 @@ class AheadScan:
 
     def feed(self, chunk: FrameArrays, accepted: BoolArray) -> None:
         """The next frames of the log (``accepted``: their E2E verdict)."""
-        cycle_ms = self.decoder.message("WHEEL_ENCODERS").cycle_time
+        cycle_s = cycle_of(self.decoder)
         self._enc = self._enc.join(self._rows(chunk, accepted, "WHEEL_ENCODERS"))
         for name in POSES:
             rows = self._poses.get(name, empty_rows()).join(self._rows(chunk, accepted, name))
-            self._poses[name] = self._judge(name, rows, (cycle_ms or 10) / 1000.0)
+            self._poses[name] = self._judge(name, rows, cycle_s)
         self._enc = self._enc.tail(max(0, len(self._enc.t) - KEEP_ENC))
         self._offset += len(chunk)
 
     def _rows(self, chunk: FrameArrays, accepted: BoolArray, name: str) -> Rows:
-        d = self.decoder.decode(chunk, name)
-        index = d["index"].astype(np.int64)
-        named = d["ENC_COUNTER"].astype(np.int64) if "ENC_COUNTER" in d else index[:0]
-        return Rows(index + self._offset, d["timestamp_s"].astype(np.float64),
-                    d["COUNTER"].astype(np.int64), accepted[index], named)
+        return rows_of(chunk, accepted, self.decoder, name, self._offset)
 
     def _judge(self, name: str, rows: Rows, cycle_s: float) -> Rows:
         """Record the frames of ``rows`` decided now; the rows to carry."""
@@ -239,43 +261,3 @@ class AheadScan:
             self._done[name] = int(rows.pos[first_open - 1])
         return rows.tail(max(0, first_open - ON_TIME_SENDS - 1))
 
-
-class NamesAheadError(AnalysisError):
-    """Nothing to compare, and pose frames name encoder frames not yet sent: the firmware's
-    defect is the verdict (a FAIL, exit 1), not bad input."""
-
-    exit_code = 1
-
-
-P = ParamSpec("P")
-R = TypeVar("R", bound=_Verdict)
-
-
-def checked(analyze: Callable[P, R]) -> Callable[P, R]:
-    """``analyze`` (its first argument the frames, ``db`` a keyword) whose verdict is a FAIL
-    when a pose frame names an encoder frame not yet sent (``mark``), and whose "nothing to
-    compare" names that defect (``NamesAheadError``)."""
-
-    @functools.wraps(analyze)
-    def wrapper(*args: P.args, **kwargs: P.kwargs) -> R:
-        frames = args[0]
-        assert isinstance(frames, FrameArrays)
-        db = kwargs.get("db") or default_plan()
-        scan = AheadScan(BulkDecoder(db))
-        scan.feed(frames, check_frames(frames, db)[1])
-        try:
-            result = analyze(*args, **kwargs)
-        except AnalysisError as exc:
-            raise failed(scan, exc) from exc
-        mark(result.report, scan)
-        result.passed = result.passed and bool(result.report["passed"])
-        return result
-
-    return wrapper
-
-
-def failed(scan: AheadScan, exc: AnalysisError) -> AnalysisError:
-    """``exc``, or a ``NamesAheadError`` saying the defect ``scan`` found."""
-    if not scan.count:
-        return exc
-    return NamesAheadError(f"{report_of(scan.found, scan.count)['detail']} ({exc})")
