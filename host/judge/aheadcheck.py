@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Callable
-from typing import Any, ParamSpec, Protocol, TypeVar
+from typing import TYPE_CHECKING, Any, ParamSpec, Protocol, TypeVar, cast
 
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.namesahead import AheadScan, mark, report_of
@@ -14,6 +14,9 @@ from odocan.host.judge.samples import AnalysisError
 from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.protocol.decode import BulkDecoder
 from odocan.host.protocol.e2e import check_frames
+
+if TYPE_CHECKING:  # a cantools Database or a plan of it (host.protocol.dbcplan)
+    from odocan.host.protocol.dbcplan import DatabaseSpec
 
 
 class _Verdict(Protocol):
@@ -41,7 +44,7 @@ def checked(analyze: Callable[P, R]) -> Callable[P, R]:
     def wrapper(*args: P.args, **kwargs: P.kwargs) -> R:
         frames = args[0]
         assert isinstance(frames, FrameArrays)
-        db = kwargs.get("db") or default_plan()
+        db = cast("DatabaseSpec", kwargs.get("db") or default_plan())
         scan = AheadScan(BulkDecoder(db))
         scan.feed(frames, check_frames(frames, db)[1])
         try:
