@@ -123,15 +123,17 @@ def reordered(frames: FrameArrays, accepted: BoolArray, decoder: BulkDecoder, en
     into the accepted encoder frames at ``enc_index``; -1: none) with each frame written in the
     log before the encoder frame it names, within the stamping jitter (``names_ahead``'s
     ``reordered``: a recorder's order), paired with that frame."""
-    found = names_ahead(rows_of(frames, accepted, decoder, "WHEEL_ENCODERS"),
-                        rows := rows_of(frames, accepted, decoder, name), cycle_of(decoder))
-    if not found.reordered.any() or len(index) == 0:
+    if not (named < 0).any():  # every frame paired (a log in bus order): nothing to look at
+        return named
+    enc = rows_of(frames, accepted, decoder, "WHEEL_ENCODERS")
+    found = names_ahead(enc, rows := rows_of(frames, accepted, decoder, name), cycle_of(decoder))
+    if not found.reordered.any():
         return named
     k = np.minimum(np.searchsorted(rows.pos, index), len(rows.pos) - 1)
     take = (rows.pos[k] == index) & found.reordered[k] & (named < 0)
     if not take.any():
         return named
-    at = rows_of(frames, accepted, decoder, "WHEEL_ENCODERS").pos[np.maximum(found.frame[k], 0)]
+    at = enc.pos[np.maximum(found.frame[k], 0)]
     e = np.minimum(np.searchsorted(enc_index, at), max(len(enc_index) - 1, 0))
     take &= (enc_index[e] == at) if len(enc_index) else False
     paired: IntArray = np.where(take, e, named).astype(np.int64)
