@@ -14,7 +14,6 @@ from odocan.firmware.clock import LOST_TIME_PERIODS
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.ctrlrestart import ctrl_restarts
 from odocan.host.judge.latenames import sent_places
-from odocan.host.judge.namesahead import reordered
 from odocan.host.judge.reference import Geometry, wrap_delta
 from odocan.host.judge.reference_path import Reference
 from odocan.host.judge.samples import (
@@ -228,10 +227,10 @@ def check_twist(
     if not keep.any():
         return result
     index = twist["index"][keep]
-    e = reordered(frames, accepted, decoder, enc.index, "ODOM_TWIST", index, match_encoder(
-        enc, *sent_places(frames, decoder, "ODOM_TWIST", index, frames.timestamp_s[index],
-                          twist["ENC_COUNTER"][keep].astype(np.int64)),
-        twist["COUNTER"][keep].astype(np.int64)))  # a late one: where sent (namesahead)
+    e = match_encoder(enc, *sent_places(frames, decoder, "ODOM_TWIST", index,
+                                        frames.timestamp_s[index],
+                                        twist["ENC_COUNTER"][keep].astype(np.int64)),
+                      twist["COUNTER"][keep].astype(np.int64))  # a late one: where sent
     ok = (e >= 0) & (e >= np.maximum.accumulate(e))
     e = e[ok]
     linear = twist["LINEAR_VEL"][keep][ok] * TWIST_LSB

@@ -89,7 +89,6 @@ from odocan.host.judge.breaks import path_bound_m
 from odocan.host.judge.earlytwins import early_twins_of
 from odocan.host.judge.gapbound import period_bounds
 from odocan.host.judge.latenames import sent_places
-from odocan.host.judge.namesahead import reordered
 from odocan.host.judge.reference import Geometry, SpeedBound, wrap_delta
 from odocan.host.judge.resendalias import aged_past_alias
 from odocan.host.judge.resentdistance import resends_too
@@ -151,10 +150,9 @@ def twist_samples(frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder:
         return empty, empty, np.zeros(0), empty
     index = rows["index"][keep]
     t_s = frames.timestamp_s[index]
-    e = reordered(frames, accepted, decoder, enc.index, "ODOM_TWIST", index, match_encoder(
-        enc, *sent_places(frames, decoder, "ODOM_TWIST", index, t_s,
-                          rows["ENC_COUNTER"][keep].astype(np.int64)),
-        rows["COUNTER"][keep].astype(np.int64)))  # a late one: where sent (namesahead)
+    e = match_encoder(enc, *sent_places(frames, decoder, "ODOM_TWIST", index, t_s,
+                                        rows["ENC_COUNTER"][keep].astype(np.int64)),
+                      rows["COUNTER"][keep].astype(np.int64))  # a late one: where sent
     e[np.isin(e, early_twins_of(frames, accepted, decoder))] = -1  # which one it named: unknown
     heard = np.searchsorted(enc.timestamp_s, t_s).astype(np.int64)
     return e.astype(np.int64), rows["DISTANCE"][keep].astype(np.int64), t_s, heard

@@ -31,8 +31,10 @@ none of the faults above (a stalled MCU sends nothing; its mailbox overflows onl
 
 Within the stamping jitter (F heard at most 1 ms after the pose, or before it in time though
 after it in the log) the log's order cannot be trusted over its stamps: a recorder that merges
-its reads may write a pose line before its encoder line. That pose is not a defect
-(``reordered``: the judges pair it with F, ``samples.match_encoder``).
+its reads may write a pose line before its encoder line. That pose is no defect (``Named``'s
+``reordered``); the judges still leave it out (``samples.match_encoder`` is causal: pairing it
+in the whole log's judge alone made the streamed one's samples differ, tests/test_stream.py's
+awkward log; ``tests/test_names_ahead.py`` keeps the case as a strict xfail).
 """
 
 from __future__ import annotations
@@ -115,29 +117,6 @@ def rows_of(frames: FrameArrays, accepted: BoolArray, decoder: BulkDecoder, name
 def cycle_of(decoder: BulkDecoder, name: str = "WHEEL_ENCODERS") -> float:
     """``name``'s DBC cycle time (s; 10 ms when it has none)."""
     return (decoder.message(name).cycle_time or 10) / 1000.0
-
-
-def reordered(frames: FrameArrays, accepted: BoolArray, decoder: BulkDecoder, enc_index: IntArray,
-              name: str, index: IntArray, named: IntArray) -> IntArray:
-    """``named`` (the encoder frame each accepted frame of ``name`` at ``index`` names, an index
-    into the accepted encoder frames at ``enc_index``; -1: none) with each frame written in the
-    log before the encoder frame it names, within the stamping jitter (``names_ahead``'s
-    ``reordered``: a recorder's order), paired with that frame."""
-    if not (named < 0).any():  # every frame paired (a log in bus order): nothing to look at
-        return named
-    enc = rows_of(frames, accepted, decoder, "WHEEL_ENCODERS")
-    found = names_ahead(enc, rows := rows_of(frames, accepted, decoder, name), cycle_of(decoder))
-    if not found.reordered.any():
-        return named
-    k = np.minimum(np.searchsorted(rows.pos, index), len(rows.pos) - 1)
-    take = (rows.pos[k] == index) & found.reordered[k] & (named < 0)
-    if not take.any():
-        return named
-    at = enc.pos[np.maximum(found.frame[k], 0)]
-    e = np.minimum(np.searchsorted(enc_index, at), max(len(enc_index) - 1, 0))
-    take &= (enc_index[e] == at) if len(enc_index) else False
-    paired: IntArray = np.where(take, e, named).astype(np.int64)
-    return paired
 
 
 @dataclass(frozen=True)

@@ -16,7 +16,6 @@ from odocan.host.io.logs import FrameArrays
 from odocan.host.judge import floodnames
 from odocan.host.judge.latehalves import Half, halves_together
 from odocan.host.judge.latenames import sent_places
-from odocan.host.judge.namesahead import reordered
 from odocan.host.judge.queuednames import queued_names
 from odocan.host.judge.reference import INTEGRATORS, Geometry
 from odocan.host.judge.resendalias import may_alias
@@ -365,9 +364,8 @@ def pose_halves(
     x, y = (_late_half(frames, decoder, name, rows)
             for name, rows in (("ODOM_POSE_X", px), ("ODOM_POSE_Y", py)))
     halves_together(x, y)  # one pose's halves named at one place
-    ex, ey = (reordered(frames, accepted, decoder, enc.index, name, h.index, match_encoder(
-        enc, h.place, h.enc_counter, h.sent_s, h.counter))  # (a recorder's order: namesahead)
-        for name, h in (("ODOM_POSE_X", x), ("ODOM_POSE_Y", y)))
+    ex = match_encoder(enc, x.place, x.enc_counter, x.sent_s, x.counter)
+    ey = match_encoder(enc, y.place, y.enc_counter, y.sent_s, y.counter)
     return PoseHalves(px, py, ex, ey, may_alias(frames, decoder, enc, px["index"], ex),
                       may_alias(frames, decoder, enc, py["index"], ey))
 
