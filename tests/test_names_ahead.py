@@ -27,6 +27,7 @@ from odocan.host.io.logs import read_log
 from odocan.host.judge.liveahead import LiveAhead
 from odocan.host.judge.namesahead import AheadScan
 from odocan.host.mqtt.endverdict import end_verdict
+from odocan.host.mqtt.fleetjudge import watched_verdict
 from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.protocol.decode import BulkDecoder
 from odocan.host.protocol.e2e import check_frames
@@ -136,7 +137,8 @@ def test_a_pose_naming_a_frame_not_yet_sent_fails_every_judge(
         drive: Path, tmp_path: Path, first: int, last: int, step: int) -> None:
     """The trial's tamper (and its 100..349, +2, +5 variants): ``analyze`` whole and streamed
     exit 1 naming the first such pose as the test's own reading finds it, ``--junit`` has the
-    failure, the monitor says POSE WRONG and the bridge's end verdict FAIL, with that reason."""
+    failure, the monitor says POSE WRONG, the bridge's end verdict and the fleet's FAIL, with
+    that reason."""
     tampered = tmp_path / "ahead.log"
     assert name_ahead(drive, tampered, first, last, step, TEN_MM_LSB) == last - first + 1
     truth = named_before_sent(tampered)
@@ -160,6 +162,9 @@ def test_a_pose_naming_a_frame_not_yet_sent_fails_every_judge(
     verdict = end_verdict(bridge)
     assert verdict.verdict == "FAIL", verdict
     assert "not sent until" in verdict.reason, verdict
+    fleet = watched_verdict(bridge, 0, None)  # the fleet's verdict of a bridged robot
+    assert fleet["verdict"] == "FAIL", fleet
+    assert "not sent until" in fleet["reason"], fleet
 
 
 def test_every_pose_naming_ahead_is_a_fail_not_bad_input(
