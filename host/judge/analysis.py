@@ -107,7 +107,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from odocan.host.io.logs import FrameArrays
-from odocan.host.judge import acrosscut, cutreprime, floodnames, gapskips, reportfacts
+from odocan.host.judge import acrosscut, aheadcheck, cutreprime, floodnames, gapskips, reportfacts
 from odocan.host.judge.compare import (
     check_twist,
     error_summary,
@@ -184,7 +184,6 @@ if TYPE_CHECKING:  # a cantools Database or a plan of it (host.protocol.dbcplan)
 @dataclass(frozen=True)
 class Tolerance:
     """Pass limits of on-board vs reference (position as a distance, heading wrapped)."""
-
     position_m: float = POSITION_LSB_M  # one LSB of the pose position signals
     heading_rad: float = HEADING_LSB_RAD  # one LSB of HEADING
 
@@ -205,6 +204,7 @@ class Analysis:
     passed: bool = False
 
 
+@aheadcheck.checked  # a pose naming an encoder frame not yet sent: FAIL
 @floored  # fewer than half the poses judged: no PASS
 def analyze(
     frames: FrameArrays,

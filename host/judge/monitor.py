@@ -60,6 +60,7 @@ from cantools.database.can import Database, Message
 
 from odocan.host.judge import sources as src  # status_frame, start_new_life
 from odocan.host.judge.busstats import LoadWindow
+from odocan.host.judge.liveahead import LiveAhead
 from odocan.host.judge.liveboottick import boot_frame, refused_named
 from odocan.host.judge.liveconfig import SAME_TICK_S, ConfigFollower, follow_config_ack, rebooted
 from odocan.host.judge.livedistance import LiveDistance
@@ -129,6 +130,7 @@ class BusMonitor:
         self.tracker = PoseTracker(Geometry.of(robot), robot.counter_bits, integrator)
         self.tracker.boot_tick.bind(self.e2e, self._take_encoders)  # (livefreshboot)
         self.first_after = first_after_of(self.tracker, robot, self.db)  # livestallfirst
+        self.ahead = LiveAhead(self.db)  # a pose naming a frame not yet sent (liveahead)
         wrongs = self.tracker.wrongs  # no twist judged from a conflict on (follow)
         self.distance = LiveDistance(robot, wrongs=wrongs)  # ODOM_TWIST DISTANCE (livedistance)
         self.twist = LiveTwist(Geometry.of(robot), robot.counter_bits, wrongs)  # (livetwist)
@@ -233,6 +235,7 @@ class BusMonitor:
         """A known frame of the right length by its E2E ``status``: an accepted one used, a
         CRC-right refused encoder frame kept for the twins and gaps, a command message
         (ODOM_CONFIG, ODOM_SET_POSE, NAV_GOAL) watched for a second sender."""
+        self.ahead.heard(message.name, timestamp_s, data, status in ACCEPTED)
         crc_right = status in ACCEPTED or status in CRC_RIGHT_REFUSED
         if crc_right and message.frame_id in self.senders.watches:
             self._watch_senders(message.frame_id, data, timestamp_s)
@@ -437,8 +440,7 @@ class BusMonitor:
         return src.status_frame(self.tracker, message, data, config, self._bus_time_s)
 
     @property
-    def bus_time_s(self) -> float:
-        """The latest bus timestamp heard (s)."""
+    def bus_time_s(self) -> float:  # the latest bus timestamp heard (s)
         return self._bus_time_s
 
     def health(self, now_s: float | None = None) -> dict[str, Any]:

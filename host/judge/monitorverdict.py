@@ -62,12 +62,13 @@ def verdict(model: BusMonitor, firmware: dict[str, Any] | None) -> tuple[str, li
     if model.sources.conflict_from_s is not None:  # whose pose is it? (posewrongs: none judged)
         return "UNVERIFIED", [model.sources.conflict_text()]
     error = model.tracker.vs_reference.latest
-    if not error:  # nothing compared yet, or nothing is (liverobot: the page contradicts)
+    if not error and not model.ahead.count:  # nothing compared yet, or nothing is (liverobot)
         return "UNVERIFIED", [model.robot.unjudged
                               or "no on-board pose compared with the reference yet"]
     if model.tracker.awaiting_boot:
         return "UNVERIFIED", ["rebooted: waiting for the encoder frame it primed on"]
-    for state, why in (("POSE WRONG", partial(pose_wrong_why, model.tracker)),  # livestanding
+    for state, why in (("POSE WRONG", model.ahead.why),  # named before sent (liveahead)
+                       ("POSE WRONG", partial(pose_wrong_why, model.tracker)),  # livestanding
                        ("POSE WRONG", model.first_after.wrong),  # livestallfirst
                        ("DISTANCE WRONG", model.distance.verdict),  # latched, in this order
                        ("TWIST WRONG", model.twist.verdict),  # LINEAR_VEL, ANGULAR_VEL
@@ -85,7 +86,8 @@ def reported_verdict(model: BusMonitor, reported: str) -> tuple[str, list[str]]:
     (``livestanding``: the latest sample, or an episode of the pose's current life)."""
     said = f"firmware reports {reported} ({reason_text(str(model.status.get('reason', '?')))})"
     if reported == "DEGRADED":
-        for state, why in (("POSE WRONG", _pose_wrong_degraded(model)),
+        for state, why in (("POSE WRONG", model.ahead.why()),  # liveahead
+                           ("POSE WRONG", _pose_wrong_degraded(model)),
                            ("POSE WRONG", model.first_after.wrong()),  # livestallfirst
                            ("DISTANCE WRONG", model.distance.verdict()),
                            ("TWIST WRONG", model.twist.verdict())):

@@ -34,7 +34,7 @@ import numpy as np
 
 from odocan.host.io.frames import concat_frames
 from odocan.host.io.logs import CHUNK_FRAMES, FrameArrays, iter_log, warn_on_stderr
-from odocan.host.judge import acrosscut, stallrestart
+from odocan.host.judge import acrosscut, namesahead, stallrestart
 from odocan.host.judge.analysis import Tolerance
 from odocan.host.judge.breaks import placed_offsets
 from odocan.host.judge.configs import ConfigPages, in_force
@@ -141,7 +141,7 @@ def analyze_file(
         e2e, lives = StreamE2E(db), StreamLives(decoder)  # one decoder: its cache too
         facts, cuts = StreamFacts(decoder), StreamCuts(decoder)
         senders = LogSenders(db)  # two tools on a command message (#11)
-        streams = PoseStreams(db)  # two firmwares' pose frames interleaved (#11)
+        streams, ahead = PoseStreams(db), namesahead.AheadScan(decoder)  # two firmwares (#11)
         for chunk in carried(iter_log(path, chunk_frames=chunk_frames, warn=warn), db):
             count.frames += len(chunk)
             spill.write(chunk)
@@ -151,6 +151,7 @@ def analyze_file(
             cuts.feed(chunk, accepted)
             senders.feed(chunk)
             streams.feed(chunk)
+            ahead.feed(chunk, accepted)
         spill.close()
         if not e2e.exact:  # its accepted frames may not be the whole log's: nor its lives
             raise NotStreamable(UNSETTLED)
@@ -176,7 +177,7 @@ def analyze_file(
         if len(spans) != len(firmware):  # a set-pose is no reboot: one latch per firmware
             report.update(latched_per_firmware(firmware, frames_of, db))
         report["events"] = [*report.get("events", []), *senders.events]
-        return mark_floor(lives.marked(report, count.frames))  # judged floor: judgedfloor
+        return namesahead.mark(mark_floor(lives.marked(report, count.frames)), ahead)  # judgedfloor
 
 
 def _analyze_lives(

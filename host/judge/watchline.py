@@ -57,12 +57,13 @@ class Watched:
     counts: dict[str, dict[str, int]]
     unjudged: str | None = None
     seconds: float | None = None
+    ahead: tuple[str, ...] = ()  # a pose named a frame not yet sent (``liveahead.why``)
 
 
 def watch_verdict(w: Watched, *, judged_as: str = "", require_firmware: bool = False
                   ) -> tuple[VerdictName, list[str]]:
     """The verdict and its reasons (FAIL: one each; else one), module docstring."""
-    fails = failures(w.tracker, w.distance, w.twist, w.sources, judged_as)
+    fails = [*w.ahead, *failures(w.tracker, w.distance, w.twist, w.sources, judged_as)]
     if stuck := stuck_counters(w.counts):
         fails.insert(0, stuck)
     heard = list(w.heard)

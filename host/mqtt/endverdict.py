@@ -112,7 +112,8 @@ def end_verdict(telemetry: RobotTelemetry, *, profile_name: str | None = None,
     name, reasons = watch_verdict(Watched(
         telemetry.tracker, telemetry.distance, telemetry.twist, telemetry.sources,
         telemetry.kept, telemetry.db, telemetry.frames, telemetry.e2e.counts(),
-        telemetry.robot.unjudged), judged_as=judged_as, require_firmware=require_firmware)
+        telemetry.robot.unjudged, ahead=tuple(telemetry.ahead.why())), judged_as=judged_as,
+        require_firmware=require_firmware)
     return EndVerdict(name, "; ".join(reasons) + _mismatch(telemetry),
                       worst_episode(telemetry) if name == "FAIL" else None)
 

@@ -140,6 +140,8 @@ def watched_verdict(
                           beyond_allowance_m=tracker.max_beyond_allowance_m, stopped=stopped)
     if conflict := telemetry.sources.conflict_text():  # two firmwares: FAILed by name
         verdict = {**verdict, "verdict": "FAIL", "reason": _two_sources(conflict, tracker)}
+    elif ahead := telemetry.ahead.why():  # a pose naming a frame not yet sent (liveahead)
+        verdict = {**verdict, "verdict": "FAIL", "reason": ahead[0]}
     elif verdict["verdict"] in ("PASS", "FAIL") and halted is not None:
         verdict = after_halts(verdict, halted, tracker, telemetry.stretches)
     # ODOM_TWIST's DISTANCE wrong in some life FAILs as the bridge's end verdict does

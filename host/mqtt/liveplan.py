@@ -131,9 +131,12 @@ def _handled(telemetry: RobotTelemetry, can_id: int, route: Route, check: Check)
     refused, undecodable = telemetry._refused, telemetry._undecodable
     name, decode, handler, advances = route.name, route.decode, route.handler, route.advances
     recent = telemetry.hold.recent.append  # a hold's context (host.mqtt.livehold)
+    ahead = telemetry.ahead.hearer(name)  # a pose naming a frame not yet sent (liveahead)
 
     def plan(t_s: float, data: bytes) -> list[Publication]:
         status = check(can_id, data, False, t_s)  # the window widens with time (by position)
+        if ahead is not None and len(data) == route.message.length:
+            ahead(t_s, data, status in ACCEPTED_E2E)
         if status not in ACCEPTED_E2E:
             return refused(route, can_id, data, t_s, status)
         recent((t_s, can_id, data, True))

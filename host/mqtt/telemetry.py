@@ -55,6 +55,7 @@ import can
 from cantools.database.can import Database
 
 from odocan.host.judge.bootticks import POSE_MESSAGE, pose_heard
+from odocan.host.judge.liveahead import LiveAhead
 from odocan.host.judge.liveboottick import boot_frame, refused_named
 from odocan.host.judge.liveconfig import SAME_TICK_S, rebooted
 from odocan.host.judge.livedistance import LiveDistance, robot_of
@@ -139,6 +140,7 @@ class RobotTelemetry(CommandFollowing):
         wrongs = self.tracker.wrongs  # none judged from a conflict on: LiveDistance.follow
         self.distance = LiveDistance(robot_of(name, geometry, counter_bits), wrongs=wrongs)
         self.twist = LiveTwist(geometry, counter_bits, wrongs)  # LINEAR_VEL, ANGULAR_VEL
+        self.ahead = LiveAhead(self.db)  # a pose naming a frame not yet sent (liveahead)
         self.publish_period_s = 1.0 / publish_hz if publish_hz > 0 else math.inf
         self._publish_phase_s = publish_phase_s  # the first pose waits this long (bus time)
         self.frames: dict[str, int] = {}  # accepted frames by message name
@@ -482,10 +484,11 @@ class RobotTelemetry(CommandFollowing):
         ))
 
     def _adopted(self) -> dict[str, Any]:
-        """``reference_adopted`` while the reference carries a start at the firmware's own pose
-        (``liveadopted``: the monitor's OK says it too); nothing else (a clean drive's)."""
-        adopted = self.tracker.adopted.as_dict()
-        return {"reference_adopted": adopted} if adopted else {}
+        """``reference_adopted`` while the reference starts at the firmware's pose (liveadopted),
+        ``names_ahead`` once a pose named a frame not yet sent (``liveahead``); else nothing."""
+        adopted, ahead = self.tracker.adopted.as_dict(), self.ahead.as_dict()
+        return {**({"reference_adopted": adopted} if adopted else {}),
+                **({"names_ahead": ahead} if ahead else {})}
 
 
 def _handlers() -> dict[str, Any]:

@@ -22,7 +22,7 @@ import math
 from pathlib import Path
 from typing import Any
 
-from odocan.host.judge import verdictfacts
+from odocan.host.judge import namesahead, verdictfacts
 from odocan.host.outputs import check_writable, write_text
 from odocan.host.report.junit import Check, junit_xml
 from odocan.host.stopped import stopped_text
@@ -82,7 +82,8 @@ def analysis_checks(report: dict[str, Any]) -> list[Check]:
         checks.append(Check("replay_vs_logged_firmware", bool(versus["passed"]),
                             "the replayed firmware departs from the logged one", dict(versus)))
     stuck, unjudged = verdictfacts.reasons_of(report)
-    for name, reasons in (("e2e_counters_advance", stuck), ("judged", unjudged)):
+    for name, reasons in (("encoder_named_after_sent", namesahead.detail(report)),
+                          ("e2e_counters_advance", stuck), ("judged", unjudged)):
         if reasons:  # a stuck E2E COUNTER; a check on 0 samples (host.judge.verdictfacts)
             checks.append(Check(name, False, "; ".join(reasons), {"reasons": reasons}))
     stopped = report.get("stopped")

@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from odocan.host.jsonutil import write_report
-from odocan.host.judge import verdictfacts
+from odocan.host.judge import namesahead, verdictfacts
 from odocan.host.judge.analysis import Analysis, Tolerance
 from odocan.host.judge.finalstate import final_text
 from odocan.host.judge.samples import POSITION_LSB_M
@@ -180,6 +180,7 @@ def print_summary(
     distance = report.get("onboard_distance_vs_reference") or {"passed": True}
     verdict, style = _own_lines(report, console, (verdict, style), pose_met and twist["passed"],
                                 pose_met and twist["passed"] and distance["passed"])
+    stuck = [*namesahead.detail(report), *stuck]  # a pose naming a frame not yet sent first
     line = "; ".join([*stuck, *unjudged, _criteria_line(report, tolerance, pose_met, bool(stuck)),
                       *kept_unjudged(report)])
     console.print(f"[{style}]{verdict}[/{style}]: {line}", soft_wrap=True)

@@ -205,7 +205,8 @@ def _say_verdict(args: argparse.Namespace, model: BusMonitor, profile: robot.Rob
                  if model.tracker.wrongs.count else "")  # (the hint reads the whole --log)
     name, reasons = watch_verdict(Watched(
         model.tracker, model.distance, model.twist, model.sources, model.kept, model.db,
-        model.messages, model.e2e.counts(), model.robot.unjudged, watched_s),
+        model.messages, model.e2e.counts(), model.robot.unjudged, watched_s,
+        tuple(model.ahead.why())),
         judged_as=judged_as, require_firmware=args.require_firmware)
     silent = name == "UNJUDGED" and not model.robot.unjudged and nothing_judged(
         model.db, model.messages, model.tracker.vs_reference.samples)  # no firmware: as before
