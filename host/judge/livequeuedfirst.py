@@ -1,6 +1,6 @@
-"""A sample whose ODOM_POSE_Y read queued right after a silence: a burst's, or the firmware's
-first after a stall, told by the sample after it (issue #11: a FAIL must never blame a correct
-firmware; the live half of ``stalls.after_stalls``' ``queued``).
+"""A sample whose halves straddle a silence, its ODOM_POSE_Y read queued: the firmware's first
+after a stall, or a burst's, told by the sample after it (issue #11: a FAIL must never blame a
+correct firmware; the live half of ``stalls.after_stalls``' ``queued``).
 
 ``analyze`` tells a sample the bus let out in a burst from the firmware's first sample after a
 silence by the samples' own times (``queued_frames`` over their ODOM_POSE_Y bus times: less than
@@ -16,53 +16,62 @@ next sample was judged against the reference stepped across the stall, POSE WRON
 pmir, 226.2 mm on kobuki (its re-prime missed), on the correct firmware, which ``analyze``
 PASSed (``tests/test_halted_send.py``).
 
-So such a sample waits (``holds``) for the next one compared: sent less than
-``QUEUED_GAP_S`` after it, a burst's (judged queued, as before); later (or a reference
-restarted since), the firmware's first after the stall: judged not queued, so the stall rule
-leaves it out and owes the placement, and a long stall's re-prime hold starts there
-(``livereprime``), as ``analyze`` leaves it out. No next sample: left out, as ``analyze``
-leaves a sample after a silence with none close after it.
+So such a sample, its ODOM_POSE_X heard a silence before its ODOM_POSE_Y (the firmware fell
+silent between its halves: a halt mid-tick, or its node bus-off), waits (``holds``) for the
+next sample made (``paired``): sent less than ``QUEUED_GAP_S`` after it, a burst's (judged
+queued, as before); later (or a reference restarted since), the firmware's first after the
+stall: judged not queued, so the stall rule leaves it out and owes the placement, and a long
+stall's re-prime hold starts there (``livereprime``), as ``analyze`` leaves it out. It is
+judged before the lone halves heard before that next sample are (``livelone``: after the
+latest sample compared only). A sample whose halves both came after the silence (the bus let
+the poses out at once) is judged as before: queued, compared at once, the lone halves among
+its burst judged after it (``analyze`` may read such a burst, its samples apart, as a stall:
+the live judges judge its poses as sent, which a correct firmware meets).
 """
 
 from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from odocan.host.judge.livewindow import QUEUED_GAP_S, silent_since
+from odocan.host.judge.livewindow import CYCLE_S, QUEUED_GAP_S, silent_since
+from odocan.host.judge.samples import SILENCE_CYCLES
 
 if TYPE_CHECKING:
     from odocan.host.judge.livepose import FramePose, Sample
     from odocan.host.judge.livewindow import Half
     from odocan.host.judge.tracking import PoseTracker
 
+QUIET_S = (SILENCE_CYCLES - 0.5) * CYCLE_S  # halves this far apart straddle a silence
+
 
 class QueuedFirst:
-    """The tracker's hold of a queued sample after a silence (module docstring)."""
+    """The tracker's hold of a queued sample straddling a silence (module docstring)."""
 
     def __init__(self, tracker: PoseTracker) -> None:
         self._tracker = tracker
         # the sample held (pose, its ODOM_POSE_Y half) and the stall rule's last sample time
         self._held: tuple[FramePose, Half, float | None] | None = None
         self._sample: Sample | None = None  # its settled sample, unjudged (``sampled``)
+        self._x_s = 0.0  # the ODOM_POSE_X bus time of the latest sample made (``paired``)
         self._judging = False  # (its judgement: not held again)
+
+    def paired(self, seq: int, x_s: float, y_s: float) -> None:
+        """The sample of encoder frame ``seq`` is made (its ODOM_POSE_X and ODOM_POSE_Y at bus
+        times ``x_s``, ``y_s``; ``livehalves``): a sample held before it is judged first."""
+        self._x_s, held = x_s, self._held
+        if held is not None and seq > held[0].seq:
+            self._held = None
+            self._judge(held, y_s - held[1].t_s < QUEUED_GAP_S)
 
     def holds(self, pose: FramePose, y: Half, queued: bool) -> bool:
         """Whether the sample ``pose`` (its ODOM_POSE_Y ``y``, ``queued`` by its naming) waits
-        for the next; a sample held before it judged first (module docstring)."""
-        tracker, held = self._tracker, self._held
-        if self._judging:
-            return False
-        if held is not None and pose.seq > held[0].seq:
-            self._held = None
-            self._judge(held, y.t_s - held[1].t_s < QUEUED_GAP_S)
-        elif held is not None:  # (one held back longer, judged at its release: not the next)
-            return False
-        stall = tracker.stall  # (a sample another hold releases is judged as it comes)
-        if (not queued or pose is not tracker.pose or tracker.raw.odometry is None
-                or stall.last_t_s is None
+        for the next sample made (module docstring)."""
+        tracker, stall = self._tracker, self._tracker.stall
+        if (self._judging or self._held is not None or not queued or pose is not tracker.pose
+                or y.t_s - self._x_s < QUIET_S or tracker.raw.odometry is None
                 or not silent_since(stall.last_t_s, y.t_s, tracker.pairs.halves["y"],
                                     tracker.window)):
-            return False
+            return False  # (``pose is not tracker.pose``: another hold's, released: as it comes)
         self._held, self._sample = (pose, y, stall.last_t_s), None
         return True
 
