@@ -64,7 +64,7 @@ class CutHold:
         stall's when judged at ``release``, and the stall's re-prime hold, declared by
         COUNTER_RESET, restarted the reference at the firmware's own pose (10 mm off: OK)."""
         tracker = self._tracker
-        talked = tracker.first.talked_before(tracker.now_s)
+        talked = tracker.first.made_before(tracker.now_s)
         if talked is None or not possible(tracker.now_s - talked[0], CYCLE_S,
                                           tracker.raw.gate.least):
             return

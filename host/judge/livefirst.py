@@ -46,7 +46,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from odocan.host.judge.livewindow import window_encoders
+from odocan.host.judge.livewindow import QUEUED_GAP_S, window_encoders
 from odocan.host.judge.powerup import holds_first_cycle
 from odocan.host.judge.stallpowerup import INIT, UNPROVEN
 from odocan.host.judge.stalls import first_after_stall
@@ -79,6 +79,10 @@ class FirstStall:
         self.posed_s: float | None = None  # the first pose half's bus time
         self.unproven = False  # its power-up stalled over a moving robot (``unproven_why``)
         self.told_s: tuple[float, ...] = ()  # a told-ahead life's frames before it was told
+        # a halted tick's ODOM_STATUS frames sent after the halt (``halted_sent``): bus times,
+        # and the latest's bus time and COUNTER (the next of its burst follows it)
+        self.sent_late: deque[float] = deque(maxlen=STATUS_KEPT)
+        self._late: tuple[float, int] | None = None
 
     def keep_first(self, times_s: tuple[float, ...],
                    counts: tuple[tuple[int, int], ...] = ()) -> None:
@@ -150,6 +154,37 @@ class FirstStall:
         sample comes after them: no stall (issue #11: a reset at tick 10, its first pose pair
         lost, read as a stall; the position placed at a wrong firmware's pose, 1 LSB PASSed)."""
         self.told_s = tuple(heard_s)
+
+    def talked(self, t_s: float, heard: int, counter: int | None) -> None:
+        """An accepted ODOM_STATUS at bus time ``t_s`` (``heard``: the encoder frames heard
+        before it; ``counter``: its E2E COUNTER, None: not told): kept in ``alive``; the next
+        frame of a halted tick's burst (``halted_sent``: its COUNTER the next, less than
+        ``QUEUED_GAP_S`` after) kept as sent late too."""
+        self.alive.append((t_s, heard))
+        late = self._late
+        if (late is not None and counter is not None and 0 < t_s - late[0] < QUEUED_GAP_S
+                and counter == (late[1] + 1) % busfacts.STATUS_COUNTER_LAP):
+            self._late = (t_s, counter)
+            self.sent_late.append(t_s)
+
+    def halted_sent(self, t_s: float, counter: int | None) -> None:
+        """The summary heard at bus time ``t_s`` (E2E ``counter``) was made before its
+        firmware halted and sent after (``haltedsend``, told by ``sources.SourceWatch``): it
+        and the rest of its tick's burst say nothing of when the firmware last talked
+        (``made_before``)."""
+        self.sent_late.append(t_s)
+        self._late = None if counter is None else (t_s, counter)
+
+    def made_before(self, t_s: float) -> tuple[float, int] | None:
+        """``talked_before`` of the ODOM_STATUS frames made when sent: a halted tick's sent
+        after the halt left out (``halted_sent``). A stall's silence is measured from it
+        (``livereprime``, as ``stallreprime.around`` takes the summaries around the stall:
+        issue #11, kobuki halted 2 s mid-tick, its summary 2 s late read as talk 1 ms before
+        the stall's first sample: the re-prime it declared was missed, POSE WRONG 184.6 mm
+        on the correct firmware)."""
+        late = self.sent_late
+        before = [frame for frame in self.alive if frame[0] < t_s and frame[0] not in late]
+        return before[-1] if before else None
 
     def talked_before(self, t_s: float) -> tuple[float, int] | None:
         """The latest ODOM_STATUS before bus time ``t_s`` (its time, the frames heard before),

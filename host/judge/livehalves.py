@@ -110,6 +110,7 @@ class HalfPairs:
         self._ys.pop(seq, None)
         if seq in self.sampled:
             return
+        self._tracker.queued.paired(seq, x.t_s, y.t_s)  # one held before judged (livequeuedfirst)
         self._lone_before(seq)
         self.sampled.add(seq)
         self._xs_waiting.pop(seq, None)

@@ -215,7 +215,7 @@ class ReprimeHold:
         first_s = float(sent[k])  # the stall's first pose, unnamed
         if not silent_since(last_s, first_s, ys, tracker.window):
             return False
-        self.stalled(pose.seq, first_s, tracker.first.talked_before(first_s),
+        self.stalled(pose.seq, first_s, tracker.first.made_before(first_s),
                      tracker.raw.gate.least)
         return self.holds(pose, y, queued)
 

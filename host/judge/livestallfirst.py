@@ -101,7 +101,10 @@ class LiveFirst:
             return
         _, x_m, heading_rad, t_s = self._x
         self._x = None
-        frame = next((f for f in reversed(self._recent) if f[1] == named), None)
+        # the frame it names when its X was sent (its Y may come a halt later: the rest of a
+        # tick halted after its X; read at the Y, a frame 16 on: test_halted_send)
+        frame = next((f for f in reversed(self._recent) if f[1] == named and f[4] <= t_s),
+                     None)
         pose = Pair(t_s, named, -1 if frame is None else frame[0], x_m, y_m,
                     turns * 2 * math.pi + heading_rad)
         if self._quiet:  # since the X before it (any, paired or not)

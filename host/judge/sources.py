@@ -265,12 +265,17 @@ class SourceWatch:
         """Whether the summary (bus time, UPTIME, STATE, COUNTER) says nothing of a reboot or
         a second source: the bus held it back behind later frames of its sender
         (``livelatestatus``; ``late``: a log's, None: ``order``'s, live), or its firmware made
-        it before a halt and sent it after (``haltedsend``)."""
+        it before a halt and sent it after (``haltedsend``: told to the live tracker's
+        ``first``, ``livefirst.FirstStall.halted_sent``)."""
         if self.order.passed_over(*summary[1:3]) if late is None else late:
             return True
-        return self.offset_s is not None and sent_after_halt(
-            summary, self.offset_s, UPTIME_MATCH_S, (self.last_uptime_s, self.last_state),
-            self.status_before)
+        if self.offset_s is None or not sent_after_halt(
+                summary, self.offset_s, UPTIME_MATCH_S, (self.last_uptime_s, self.last_state),
+                self.status_before):
+            return False
+        if self.first is not None:
+            self.first.halted_sent(summary[0], summary[3])
+        return True
 
     def _told_from(self, t_s: float, power_up_tick: bool) -> float:
         """Where a reboot told by the summary at bus time ``t_s`` began: the pose run's pose of

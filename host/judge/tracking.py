@@ -39,6 +39,7 @@ from odocan.host.judge.liveplace import StallPlacer
 from odocan.host.judge.liveplacing import place_reference
 from odocan.host.judge.livepose import ErrorStats, FramePose, RestartLog, Sample, StepGate
 from odocan.host.judge.livepowerpose import PowerUpPose
+from odocan.host.judge.livequeuedfirst import QueuedFirst
 from odocan.host.judge.livereference import RawReference
 from odocan.host.judge.livereprime import ReprimeHold
 from odocan.host.judge.livereprimecount import PowerUpCount
@@ -109,6 +110,7 @@ class PoseTracker:
         self.restarts.choose = self.choice.open
         self.newstart = NewStartHold(self)  # a new start's samples wait for its fit
         self.reprime = ReprimeHold(self)  # a long stall's wait for the firmware's word
+        self.queued = QueuedFirst(self)  # a queued sample after a silence (livequeuedfirst)
         self.cut = CutHold(self)  # ... a staged APPLY just after it (livecutreprime)
         self.adopted = AdoptedStarts()  # starts at the firmware's own pose, said (liveadopted)
         self.laps = LapHold(self)  # samples after a lap of the stamps wait for its evidence
@@ -234,7 +236,7 @@ class PoseTracker:
         if self.lives.page is not None and counter is not None:  # a count page's send told
             self.lives.on_status(t_s, counter)
         self.status_heard = None if counter is None else (t_s, counter)  # (``Lives.on_counts``)
-        self.first.alive.append((t_s, self.enc_seq + 1))
+        self.first.talked(t_s, self.enc_seq + 1, counter)  # (a halted tick's: livefirst)
         self.reprime.quiet.since = 0  # the firmware talked (``reprimereplay.QuietFrames``)
         if signals is not None:
             self.reprime.on_status(signals, t_s)
@@ -262,11 +264,10 @@ class PoseTracker:
         return self._pos
 
     def named(self, halves: Columns, pos: int) -> tuple[int, bool]:
-        """The encoder frame (seq) the half at ``pos`` names, -1 when none, and whether it
-        queued: ``host.judge.samples.match_encoder`` over the window (the held and queued rules,
-        the age bound, the causal rule); a half neither queued nor repeating its predecessor's
-        ENC_COUNTER by the plain rule alone, in plain Python (``named_plain``: the same
-        result)."""
+        """The encoder frame (seq) the half at ``pos`` names, -1 when none, and whether it queued:
+        ``host.judge.samples.match_encoder`` over the window (the held and queued rules, the age
+        bound, the causal rule); a half neither queued nor repeating its predecessor's ENC_COUNTER
+        by the plain rule alone, in plain Python (``named_plain``: the same result)."""
         if self.fast_path:
             plain = named_plain(halves.rows, self.window, pos)
             if plain is not None:  # (no rename of a flood: ``follow`` keeps it, not called)
@@ -277,8 +278,7 @@ class PoseTracker:
         return self.floods.follow(seq, halves.rows, pos), queued  # (livefloodnames)
 
     def on_pair(self, seq: int, x: Half, y: Half, queued: bool) -> None:
-        """The X and Y halves naming encoder frame ``seq`` (``livehalves``): one on-board
-        sample, judged."""
+        """The X and Y halves naming encoder frame ``seq`` (``livehalves``): a sample, judged."""
         pose = self.pose = FramePose(seq, x.value, y.value, y.extra * TURN_RAD + x.extra)
         self.pose_t_s = y.t_s
         self.placer.dark.due(seq, self.newstart.restart)  # after a dark restart: livedark
@@ -288,6 +288,7 @@ class PoseTracker:
             self.lives.held[seq] = sample
         self.newstart.sampled(sample)  # ... or held after an unseen restart (livenewstart)
         self.reprime.sampled(sample)  # ... or after a long stall (livereprime)
+        self.queued.sampled(sample)  # ... or queued after a silence (livequeuedfirst)
         self.cut.sampled(sample)  # ... or a staged APPLY just after it (livecutreprime)
 
     def compare(self, pose: FramePose, y: Half, queued: bool) -> FramePose | None:
@@ -295,7 +296,7 @@ class PoseTracker:
         stall and hold rule (``livestall``), then against the reference; the reference at its
         encoder frame, None when unknown or held (``livelaphold`` compares a held one when its
         hold ends)."""
-        if self.laps.holds((pose, y, queued)):  # compared once its lap is numbered
+        if self.queued.holds(pose, y, queued) or self.laps.holds((pose, y, queued)):
             return None
         if self.cut.pending is not None and self.cut.holds(pose, y, queued):  # its re-prime
             return None
@@ -305,7 +306,7 @@ class PoseTracker:
         if (last_s is None and left_out_first(self, pose, y.t_s, queued)) or (
                 self._left_out(pose.seq, y.t_s, queued, started)):  # livefirst, livestall
             if self.raw.odometry is not None or not self.reference_starts:  # (power-up too)
-                self.reprime.stalled(pose.seq, y.t_s, self.first.talked_before(y.t_s),
+                self.reprime.stalled(pose.seq, y.t_s, self.first.made_before(y.t_s),
                                      self.raw.gate.least)
             return None
         if started and self.reprime.unnamed_first(pose, y, queued, last_s):
@@ -372,8 +373,7 @@ class PoseTracker:
 
     @property
     def max_beyond_allowance_m(self) -> float:
-        """The largest on-board vs reference position error beyond its loss allowance (m);
-        analyze's ``max_position_error_beyond_allowance_m``."""
+        """The largest position error past its loss allowance (m), analyze's ``max_position_*``."""
         return self.losses.max_beyond_m() if self.vs_reference.samples else 0.0
 
     # --- lives and restarts ---
@@ -404,15 +404,14 @@ class PoseTracker:
 
     def power_up(self, primed_now: bool, seq: int | None = None,
                  tick_s: float | None = None) -> None:
-        """A reboot (``sources``): the new life starts at (0, 0, 0) at the encoder frame it
-        primed on, as ``analyze`` starts it: the one its first ENC_E2E_OK page names
-        (``on_enc_counts``), whatever the summary said; its samples wait for that page, or
-        ``BOOT_COUNT_WAIT_S``; without it, the latest frame when the boot summary says UPTIME 0
-        and not INIT (``primed_now``: primed in its first tick; ``seq``: the latest at the
-        summary, when the reboot was told after it), else the next. Above both: the
-        frame its power-up pose named, heard up to 80 ms before the summary
-        (``bootnamed``: the ODOM_STATUS frames may be stamped late). No pose is
-        adopted, so a firmware that comes up wrong shows its error. A summary held past its tick
+        """A reboot (``sources``): the new life starts at (0, 0, 0) at the encoder frame it primed
+        on, as ``analyze`` starts it: the one its first ENC_E2E_OK page names (``on_enc_counts``),
+        whatever the summary said; its samples wait for that page, or ``BOOT_COUNT_WAIT_S``; without
+        it, the latest frame when the boot summary says UPTIME 0 and not INIT (``primed_now``:
+        primed in its first tick; ``seq``: the latest at the summary, when the reboot was told after
+        it), else the next. Above both: the frame its power-up pose named, heard up to 80 ms before
+        the summary (``bootnamed``: the ODOM_STATUS frames may be stamped late). No pose is adopted,
+        so a firmware that comes up wrong shows its error. A summary held past its tick
         (``tick_s``): at once on ``heldboot.held_start``'s frame (``liveheldstart``), unless its
         pose names a later one. Without a known integrator: ``restart_reference``."""
         self.new_life()
