@@ -16,9 +16,10 @@ same frames, never the whole log in memory). Both read:
 * anything else python-can reads (``.asc``, ``.blf``, ``.trc``, ``.csv``, ...): ``can.LogReader``.
 
 Every problem a person can cause (a missing file, a malformed line, an empty log, a frame whose
-time is no clock's in any format: ``frames.timestamp_fault``) is a one-line ``LogFormatError``. One exception: a ``.log`` whose last line has no newline and is incomplete (a
-recorder killed mid-line leaves one: it does not parse, or carries fewer data bytes than the
-other frames of its ID) is read without that line, with a one-line warning that counts it.
+time is no clock's in any format: ``frames.timestamp_fault``) is a one-line ``LogFormatError``.
+One exception: a ``.log`` whose last line has no newline and is incomplete (a recorder killed
+mid-line leaves one: it does not parse, or carries fewer data bytes than the other frames of
+its ID) is read without that line, with a one-line warning that counts it.
 """
 
 from __future__ import annotations
