@@ -1,7 +1,9 @@
 """``odocan analyze LOG…``'s outputs: the table of the logs' verdicts and the exit code.
 
 A log whose verdict is UNJUDGED (``host.judge.verdictfacts``: a check judged on no sample)
-counts apart from the FAILs (its row, the tally, its stderr line) and exits 1 as they do.
+counts apart from the FAILs (its row, the tally, its stderr line) and exits 1 as they do. A log
+judged with an ``--integrator`` other than its firmware's FAILs for that (its stderr line),
+counted out of tolerance only when its poses or checks failed too.
 """
 
 from __future__ import annotations
@@ -66,9 +68,13 @@ def batch_exit(results: list[LogResult], problems: list[str]) -> int:
     ]
     unjudged = [r.path for r in results if r.report is not None and not r.passed
                 and verdict_name(r.report) == "UNJUDGED"]  # no pass either (verdictfacts)
-    if len(failed) > len(unjudged):
-        out = [path for path in failed if path not in unjudged]
+    out, mismatched, given = _fail_reasons(results, unjudged)
+    if out:
         print(f"FAIL: {len(out)} of {len(results)} logs out of tolerance: {', '.join(out)}",
+              file=sys.stderr)
+    if mismatched:
+        print(f"FAIL: {len(mismatched)} of {len(results)} logs with an integrator mismatch "
+              f"(--integrator {given}, not their firmware's): {', '.join(mismatched)}",
               file=sys.stderr)
     if unjudged:
         print(f"UNJUDGED: {len(unjudged)} of {len(results)} logs with a check judged on no "
@@ -77,3 +83,22 @@ def batch_exit(results: list[LogResult], problems: list[str]) -> int:
         print(f"error: {len(bad)} unreadable: {'; '.join(bad)}", file=sys.stderr)
         return 2
     return 1 if failed else 0
+
+
+def _fail_reasons(results: list[LogResult], unjudged: list[str]
+                  ) -> tuple[list[str], list[str], str]:
+    """The failed logs (not ``unjudged``) by reason: out of tolerance (any failure but an
+    integrator mismatch: ``passed_otherwise`` false, or no mismatch), with an integrator
+    mismatch (``host.judge.diagnosis.mark_integrator``; a log with both is in both), and the
+    integrator given."""
+    out, mismatched, given = [], [], ""
+    for r in results:
+        if r.report is None or r.passed or r.path in unjudged:
+            continue
+        wrong = r.report.get("integrator_mismatch")
+        if wrong:
+            mismatched.append(r.path)
+            given = str(wrong["given"])
+        if not wrong or not wrong.get("passed_otherwise", False):
+            out.append(r.path)
+    return out, mismatched, given

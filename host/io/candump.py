@@ -15,12 +15,12 @@ import numpy.typing as npt
 from odocan.host.io.candump_line import (
     CAN_ERR_FLAG,
     ID_MASK_29,
-    MAX_TIMESTAMP_S,
     parse_candump_line,
 )
 from odocan.host.io.frames import (
     FLAG_EXTENDED,
     MAX_DLC,
+    MAX_TIMESTAMP_S,
     FrameArrays,
     LogFormatError,
     U8Array,

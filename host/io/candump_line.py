@@ -6,15 +6,11 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from odocan.host.io.frames import MAX_DLC, LogFormatError
+from odocan.host.io.frames import MAX_DLC, LogFormatError, timestamp_fault
 
 CAN_ERR_FLAG = 0x20000000  # candump: error frame marker in the ID (can/error.h)
 _CAN_ERR_BUSERROR = 0x00000080
 ID_MASK_29 = 0x1FFFFFFF
-# Beyond this a timestamp is no clock's (some 31 700 years of seconds; a candump's is Unix time, a
-# bench's from 0): one such line once leaked numpy's invalid cast of its period count and a
-# 300-digit "ms back" into the warnings, so it is a bad line, refused as '(nan)' is.
-MAX_TIMESTAMP_S = 1e12
 
 if TYPE_CHECKING:
     import can
@@ -65,20 +61,15 @@ def parse_candump_line(raw: bytes, where: str = "<line>") -> can.Message | None:
 
 
 def _parse_timestamp(text: str, where: str) -> float:
-    """``(SECONDS)`` -> float seconds."""
-    import math  # the slow path only (lines the vectorised parser does not take)
-
+    """``(SECONDS)`` -> float seconds (``timestamp_fault``: a clock's)."""
     if not (text.startswith("(") and text.endswith(")")):
         raise LogFormatError(f"{where}: missing timestamp: expected '(SECONDS)', got {text!r}")
     try:
         seconds = float(text[1:-1])
     except ValueError:
         raise LogFormatError(f"{where}: bad timestamp {text!r}") from None
-    if not math.isfinite(seconds):  # '(nan)': every duration and rate after it would be nan
-        raise LogFormatError(f"{where}: bad timestamp {text!r} (not a finite number)")
-    if abs(seconds) > MAX_TIMESTAMP_S:
-        raise LogFormatError(f"{where}: bad timestamp {text!r} (beyond {MAX_TIMESTAMP_S:g} s: "
-                             "no clock's time)")
+    if (fault := timestamp_fault(seconds)) is not None:  # '(nan)', '(1e300)'
+        raise LogFormatError(f"{where}: bad timestamp {text!r} ({fault})")
     return seconds
 
 

@@ -22,6 +22,11 @@ FLAG_REMOTE = 0x02  # remote transmission request
 FLAG_ERROR = 0x04  # error frame (can_id 0, no data)
 FLAG_FD = 0x08  # CAN FD frame (of at most 8 bytes)
 MAX_DLC = 8  # classic CAN payload; longer frames are refused
+# Beyond this a timestamp is no clock's (some 31 700 years of seconds; a candump's is Unix time, a
+# bench's from 0): one such line once leaked numpy's invalid cast of its period count and a
+# 300-digit "ms back" into the warnings, so it is a bad line, refused as '(nan)' is. Every reader
+# (``host.io.logs``: candump's own, python-can's for the other formats) refuses it.
+MAX_TIMESTAMP_S = 1e12
 
 U8Array = npt.NDArray[np.uint8]
 
@@ -38,6 +43,19 @@ def __getattr__(name: str) -> object:
 
 class LogFormatError(OdocanError):
     """A log file that cannot be read: ``LOG:LINE: what is wrong`` (one line)."""
+
+
+def timestamp_fault(seconds: float) -> str | None:
+    """What is wrong with a frame's time (s) as a log's reader reads it, in words (None: a
+    clock's time): not a finite number (every duration and rate after it would be nan), or
+    beyond ``MAX_TIMESTAMP_S`` either side. One rule for every log format."""
+    import math
+
+    if not math.isfinite(seconds):
+        return "not a finite number"
+    if abs(seconds) > MAX_TIMESTAMP_S:
+        return f"beyond {MAX_TIMESTAMP_S:g} s: no clock's time"
+    return None
 
 
 @dataclass(frozen=True)

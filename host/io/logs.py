@@ -15,10 +15,11 @@ same frames, never the whole log in memory). Both read:
   semantics (``can.io.canutils``) that names the file and line of whatever is wrong.
 * anything else python-can reads (``.asc``, ``.blf``, ``.trc``, ``.csv``, ...): ``can.LogReader``.
 
-Every problem a person can cause (a missing file, a malformed line, an empty log) is a one-line
-``LogFormatError``. One exception: a ``.log`` whose last line has no newline and is incomplete (a
-recorder killed mid-line leaves one: it does not parse, or carries fewer data bytes than the
-other frames of its ID) is read without that line, with a one-line warning that counts it.
+Every problem a person can cause (a missing file, a malformed line, an empty log, a frame whose
+time is no clock's in any format: ``frames.timestamp_fault``) is a one-line ``LogFormatError``.
+One exception: a ``.log`` whose last line has no newline and is incomplete (a recorder killed
+mid-line leaves one: it does not parse, or carries fewer data bytes than the other frames of
+its ID) is read without that line, with a one-line warning that counts it.
 """
 
 from __future__ import annotations
@@ -54,6 +55,7 @@ from odocan.host.io.frames import (
     LogFormatError,
     concat_frames,
     empty_frames,
+    timestamp_fault,
     to_message,
 )
 
@@ -290,10 +292,12 @@ def _python_can_parts(
     count = 0
     short: list[int] = []  # frames with fewer data bytes than their DLC (a line cut mid-frame)
     lines = None
+    reader: Iterable[can.Message] | None = None
     try:
         reader, lines = _reader(path)
         for msg in reader:
             count += 1
+            _check_time(path, lines, count, msg.timestamp)
             if len(msg.data) > MAX_DLC:
                 raise LogFormatError(
                     f"{path}: frame {count}: {len(msg.data)} data bytes (more than 8: CAN FD "
@@ -307,6 +311,7 @@ def _python_can_parts(
                 yield collector.arrays()
                 collector = FrameCollector()
     except LogFormatError:
+        _stop(reader)  # its file closed now, not left to the collector (a ResourceWarning)
         raise
     except ValueError as exc:  # python-can: unknown suffix, bad file contents
         raise LogFormatError(f"{path}: {_first_line(exc)}") from None
@@ -320,6 +325,25 @@ def _python_can_parts(
              f"bytes than {'their' if len(short) > 1 else 'its'} DLC (first: frame {short[0]} of "
              f"{count}; a line cut mid-frame: a recorder killed while writing?)")
     _format_warnings(path, lines, count, warn)
+
+
+def _check_time(path: Path, lines: AscLines | None, count: int, seconds: float | None) -> None:
+    """``LogFormatError`` naming frame ``count`` (an ``.asc``'s line) when its time is no
+    clock's (``timestamp_fault``: the candump parser's rule) or none (a ``.db``'s NULL, what
+    python-can's writer makes of NaN)."""
+    fault = "no timestamp" if seconds is None else timestamp_fault(seconds)
+    if fault is None:
+        return
+    where = f"{path}:{lines.line}" if lines is not None else f"{path}: frame {count}"
+    raise LogFormatError(f"{where}: {fault}" if seconds is None
+                         else f"{where}: bad timestamp {seconds!r} ({fault})")
+
+
+def _stop(reader: object) -> None:
+    """Close a python-can reader's file (``stop``), if it has one."""
+    stop = getattr(reader, "stop", None)
+    if callable(stop):
+        stop()
 
 
 def _reader(path: Path) -> tuple[Iterable[can.Message], AscLines | None]:

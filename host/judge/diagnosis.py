@@ -74,15 +74,16 @@ def integrator_said(logged: str | None, given: str) -> str | None:
 
 
 def mark_integrator(report: dict[str, Any], logged: str | None) -> str | None:
-    """``report`` FAILed (``integrator_mismatch``, ``passed`` false) when its integrator was
-    given (``integrator_source`` "argument") and differs from ``logged``, the log's
-    ODOM_STATUS's; the line said, None when nothing was marked."""
+    """``report`` FAILed (``integrator_mismatch``, ``passed`` false; its ``passed_otherwise``
+    the verdict before) when its integrator was given (``integrator_source`` "argument") and
+    differs from ``logged``, the log's ODOM_STATUS's; the line said, None when nothing was
+    marked."""
     if report.get("integrator_source") != "argument":
         return None
     said = integrator_said(logged, report["integrator"])
-    if said is not None:
+    if said is not None:  # passed_otherwise: the verdict without it (a batch counts by reason)
         report["integrator_mismatch"] = {"logged": logged, "given": report["integrator"],
-                                         "detail": said}
+                                         "detail": said, "passed_otherwise": report["passed"]}
         report["passed"] = False
     return said
 
