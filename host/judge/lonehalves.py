@@ -16,8 +16,10 @@ in a segment of the reference holding a kept sample (``budgets``), not from a re
 to the first sample after it (the re-prime's frame is the samples' choice: ``reprime_window``),
 its position within the samples' loss and twin allowances; the half not sent after a silence
 of the firmware (a stall's first pose: ``stallfirst``'s), not aliased by a resend
-(``resendalias``). Any other lone half is counted as sent and not judged (``judgedfloor``: the
-summary's judged line), never dropped unsaid. The streamed analysis reads a log with lone
+(``resendalias``). Any other lone half is judged against every frame it may name
+(``candidates``: it FAILs only if it fits none); one of whose candidates none can bound is
+counted as sent and not judged (``judgedfloor``: the summary's judged line), never dropped
+unsaid. The streamed analysis reads a log with lone
 halves whole (``stream_first``: ``NotStreamable``)."""
 
 from __future__ import annotations
