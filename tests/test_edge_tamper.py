@@ -30,6 +30,7 @@ import can
 import pytest
 
 from tests.judges_cli import raise_first_x, raise_x_10_mm
+from tests.test_live_reboot import bridge_of, monitor_of
 
 POSE_X_ID = 0x200  # ODOM_POSE_X (512)
 JUDGES = ["auto", "always", "never"]
@@ -154,6 +155,22 @@ def test_a_10_mm_lone_x_that_may_alias_fails(reordered: Path, tmp_path: Path) ->
         beyond = json.loads(report.read_text())["onboard_vs_reference"][
             "max_position_error_beyond_allowance_m"]
         assert beyond > 0.009
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "the live judges leave a lone X unjudged where a placement is due (livelone: a gap of "
+    "the log since the last sample, StallPlacer.due; the sample before it names 439, it 441): "
+    "the "
+    "+10 mm X at 6.136 s (kobuki seed 3, delay=0.3:55,dup=0.1) leaves the monitor and the "
+    "bridge OK (0 POSE WRONG, largest error 0.074 mm) where analyze FAILs it 9.92 mm by its "
+    "candidates (host.judge.candidates); live candidate judging is not built"))
+def test_the_live_judges_flag_a_10_mm_lone_x_that_may_alias(reordered: Path,
+                                                           tmp_path: Path) -> None:
+    out = tmp_path / "once.log"
+    raise_first_x(reordered, out, 100, 6.13, 6.14)
+    for judge in (monitor_of(out, "kobuki", "exact"), bridge_of(out, "kobuki", "exact")):
+        judge.tracker.wrongs.finish(judge.tracker.allowance_m)
+        assert judge.tracker.wrongs.count >= 1
 
 
 def test_the_reordered_drive_passes(reordered: Path) -> None:

@@ -198,6 +198,21 @@ def test_a_wrong_lone_first_pose_after_a_stall_on_a_lossy_bus_fails(tmp_path: Pa
         assert beyond > 0.9 * abs(lsb) * LSB_M - 1e-3  # the edit's, less the merge slack
 
 
+@pytest.mark.xfail(strict=True, reason=(
+    "the live judges leave a stall's first lone X unjudged (livelone: sent 0.22 s after the "
+    "last sample, past QUIET_S, and a placement due): kobuki seed 5, stall=4:0.2,drop=0.05, "
+    "the X at 4.201 s raised 10 m leaves the monitor and the bridge OK (0 POSE WRONG, "
+    "largest error 0.071 mm) where analyze FAILs it "
+    "9999.9 mm by its candidates (host.judge.candidates); the live judge would have to hold "
+    "the half until the sample after it to carry that one back"))
+def test_the_live_judges_flag_a_wrong_lone_first_pose_after_a_stall(tmp_path: Path) -> None:
+    stalled = _run(tmp_path / "stall_drop.log", "kobuki", 5, "stall=4:0.2,drop=0.05")
+    edited = tmp_path / "stall_drop_x.log"
+    raise_raw_once(stalled, edited, "ODOM_POSE_X", VALUE_BYTES, -100_000, 4.2005)
+    for wrongs, _ in _live_wrongs(edited, "kobuki", "exact"):
+        assert wrongs >= 1
+
+
 @pytest.mark.parametrize(("message", "at_s", "span", "lsb"), [
     ("ODOM_POSE_X", LONE_X_S, VALUE_BYTES, -100_000),  # X 10 m
     ("ODOM_POSE_Y", LONE_Y_S, VALUE_BYTES, 100),  # Y 10 mm
