@@ -78,6 +78,7 @@ class CandidateJudge:
         cycle_s = enc.cycle_s or 0.0
         speed_m_s = robot[0].max_wheel_speed_mm_s * 1e-3
         self.reach = (speed_m_s * cycle_s, 2.0 * speed_m_s / robot[0].wheelbase_m * cycle_s)
+        self._made: dict[tuple[int, int], tuple[float, float, float, float]] = {}
 
     def judge_half(self, half: Half) -> Excess | None:
         """``half``'s excess at the candidate it fits best; None when a candidate (or every
@@ -143,12 +144,22 @@ class CandidateJudge:
             a, b = min(k, c), max(k, c)
             if b - a > NEAR_FRAMES or np.any((self.jumps > a) & (self.jumps <= b)):
                 continue
-            near = Pair(0.0, 0, k, float(self.kept.x_m[j]), float(self.kept.y_m[j]),
-                        float(self.kept.heading_rad[j]))
-            x, y, heading, slack_m = carried_pose(
-                near, (self.enc.left[a:b + 1], self.enc.right[a:b + 1]), c > k, self.robot)
+            x, y, heading, slack_m = self._carried(j, c)
             best = better(best, _beyond(half, (x, y, heading), slack_m))
         return best
+
+    def _carried(self, j: int, c: int) -> tuple[float, float, float, float]:
+        """Kept sample ``j`` carried to encoder frame ``c`` (``carried_pose``), made once: a
+        frame is a candidate of several halves, and the neighbour of the frames lost beside it."""
+        key = (j, c)
+        if key not in self._made:
+            k = int(self.kept_enc[j])
+            a, b = min(k, c), max(k, c)
+            near = Pair(0.0, 0, k, float(self.kept.x_m[j]), float(self.kept.y_m[j]),
+                        float(self.kept.heading_rad[j]))
+            self._made[key] = carried_pose(
+                near, (self.enc.left[a:b + 1], self.enc.right[a:b + 1]), c > k, self.robot)
+        return self._made[key]
 
 
 def better(a: Excess | None, b: Excess | None) -> Excess | None:
