@@ -177,19 +177,40 @@ def test_a_stalls_first_pose_without_its_y_is_judged_by_the_poses_around_it(
         assert max_dpos_m <= LSB_M
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "a stall's first pose whose Y was lost on a lossy bus (kobuki seed 5, stall=4:0.2,drop=0.05,"
-    " the X at 4.201 s raised 10 m): the logger missed frames in the silence too (stallfirst:"
-    " not heard through), so neither stallfirst nor lonehalves can tell the frame it names; it"
-    " is counted as not judged (387 of 388, 99.74 %) and the log still PASSes"))
-def test_a_wrong_lone_first_pose_after_a_stall_on_a_lossy_bus_fails(tmp_path: Path) -> None:
+@pytest.mark.parametrize("lsb", [-100_000, 100])  # X 10 m, 10 mm
+def test_a_wrong_lone_first_pose_after_a_stall_on_a_lossy_bus_fails(tmp_path: Path,
+                                                                    lsb: int) -> None:
+    """A stall's first pose whose Y was lost on a lossy bus (kobuki seed 5,
+    stall=4:0.2,drop=0.05): the logger missed frames of the silence too, so neither stallfirst
+    nor the reference can tell which frame the X at 4.201 s names; it was counted not judged
+    (387 of 388) and a 10 m X PASSed. Judged against every frame it may name (``candidates``):
+    the untouched log PASSes with every pose judged, the edit FAILs by it, whole and streamed."""
     stalled = _run(tmp_path / "stall_drop.log", "kobuki", 5, "stall=4:0.2,drop=0.05")
     assert 4.201 in lone_halves(stalled)[0]
+    code, _, (judged, sent) = _analyzed(stalled, "never")
+    assert (code, judged) == (0, sent)
+    edited = tmp_path / "stall_drop_x.log"
+    raise_raw_once(stalled, edited, "ODOM_POSE_X", VALUE_BYTES, lsb, 4.2005)
+    for stream in ("never", "always"):
+        code, report, _ = _analyzed(edited, stream)
+        assert code == 1, stream
+        beyond = report["onboard_vs_reference"]["max_position_error_beyond_allowance_m"]
+        assert beyond > 0.9 * abs(lsb) * LSB_M - 1e-3  # the edit's, less the merge slack
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "the live judges leave a stall's first lone X unjudged (livelone: sent 0.22 s after the "
+    "last sample, past QUIET_S, and a placement due): kobuki seed 5, stall=4:0.2,drop=0.05, "
+    "the X at 4.201 s raised 10 m leaves the monitor and the bridge OK (0 POSE WRONG, "
+    "largest error 0.071 mm) where analyze FAILs it "
+    "9999.9 mm by its candidates (host.judge.candidates); the live judge would have to hold "
+    "the half until the sample after it to carry that one back"))
+def test_the_live_judges_flag_a_wrong_lone_first_pose_after_a_stall(tmp_path: Path) -> None:
+    stalled = _run(tmp_path / "stall_drop.log", "kobuki", 5, "stall=4:0.2,drop=0.05")
     edited = tmp_path / "stall_drop_x.log"
     raise_raw_once(stalled, edited, "ODOM_POSE_X", VALUE_BYTES, -100_000, 4.2005)
-    code, _, (judged, sent) = _analyzed(edited, "never")
-    assert judged < sent  # said, at least
-    assert code == 1
+    for wrongs, _ in _live_wrongs(edited, "kobuki", "exact"):
+        assert wrongs >= 1
 
 
 @pytest.mark.parametrize(("message", "at_s", "span", "lsb"), [

@@ -16,27 +16,33 @@ in a segment of the reference holding a kept sample (``budgets``), not from a re
 to the first sample after it (the re-prime's frame is the samples' choice: ``reprime_window``),
 its position within the samples' loss and twin allowances; the half not sent after a silence
 of the firmware (a stall's first pose: ``stallfirst``'s), not aliased by a resend
-(``resendalias``). Any other lone half is counted as sent and not judged (``judgedfloor``: the
-summary's judged line), never dropped unsaid. The streamed analysis reads a log with lone
+(``resendalias``). Any other lone half is judged against every frame it may name
+(``candidates``: it FAILs only if it fits none); one of whose candidates none can bound is
+counted as sent and not judged (``judgedfloor``: the summary's judged line), never dropped
+unsaid. The streamed analysis reads a log with lone
 halves whole (``stream_first``: ``NotStreamable``)."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
+from odocan.host.judge.candidates import CandidateJudge, Half, lone_halves_of
 from odocan.host.judge.compare import pose_errors
 from odocan.host.judge.latehalves import NEAR_PERIODS
 from odocan.host.judge.losses import Placements, loss_allowance
 from odocan.host.judge.posehalves import BAM, x_half_heading_bam, y_half_heading_bam
+from odocan.host.judge.reference import Geometry
 from odocan.host.judge.reference_path import Reference
 from odocan.host.judge.samples import (
     HEADING_LSB_RAD,
     POSITION_LSB_M,
     SILENCE_CYCLES,
+    WIRE_COUNTER_BITS,
     Encoders,
     FloatArray,
     IntArray,
@@ -54,8 +60,8 @@ class LoneVerdict:
 
     judged: int = 0
     unjudged: int = 0
-    position_m: float = 0.0  # the worst position error beyond the allowance
-    heading_rad: float = 0.0  # the worst |heading error|
+    position_m: float = -math.inf  # the worst position error beyond the allowance
+    heading_rad: float = -math.inf  # the worst |heading error|
     t_s: list[float] = field(default_factory=list)  # the bus times of the halves judged
 
     def counts(self) -> dict[str, int]:
@@ -202,21 +208,37 @@ def judge_lone(
     by[oky] = budgets(enc, ref, breaks, kept, ey[oky])
     okx &= ~np.isnan(bx)
     oky &= ~np.isnan(by)
-    verdict.unjudged = int(np.count_nonzero(~okx) + np.count_nonzero(~oky))
+    robot, integrator, losses, placed = allowed
+    by_candidates(verdict, lone_halves_of(halves, ix[~okx], iy[~oky], sent), CandidateJudge(
+        enc, kept, ref, (Geometry.of(robot), integrator,
+                         min(robot.counter_bits, WIRE_COUNTER_BITS))))
     ix, ex, tx, iy, ey, ty = ix[okx], ex[okx], tx[okx], iy[oky], ey[oky], ty[oky]
     poses = _completed(halves, ix, ex, iy, ey, ref)
     if len(poses.enc) == 0:
         return verdict
     pos, head = pose_errors(poses, ref.at(poses.enc))
-    robot, integrator, losses, placed = allowed
     beyond = pos - np.concatenate((bx[okx], by[oky]))
     beyond -= loss_allowance(enc, robot, integrator, losses, poses.enc, kept.enc, placed)
     beyond -= twin_allowance_of(enc, robot, integrator, ref, poses.enc, record=False)
-    verdict.judged = len(poses.enc)
-    verdict.position_m = float(np.max(beyond))
-    verdict.heading_rad = float(np.max(np.abs(head)))
-    verdict.t_s = np.concatenate((tx, ty)).tolist()
+    verdict.judged += len(poses.enc)
+    verdict.position_m = max(verdict.position_m, float(np.max(beyond)))
+    verdict.heading_rad = max(verdict.heading_rad, float(np.max(np.abs(head))))
+    verdict.t_s += np.concatenate((tx, ty)).tolist()
     return verdict
+
+
+def by_candidates(verdict: LoneVerdict, lone: list[Half], judge: CandidateJudge) -> None:
+    """The halves ``lone`` the reference at their matched frame cannot judge, each judged
+    against the frames it may name (``candidates``) into ``verdict``, or counted unjudged."""
+    for half in lone:
+        excess = judge.judge_half(half)
+        if excess is None:
+            verdict.unjudged += 1
+            continue
+        verdict.judged += 1
+        verdict.position_m = max(verdict.position_m, excess[0])
+        verdict.heading_rad = max(verdict.heading_rad, excess[1])
+        verdict.t_s.append(half.t_s)
 
 
 def _completed(halves: PoseHalves, ix: IntArray, ex: IntArray, iy: IntArray, ey: IntArray,

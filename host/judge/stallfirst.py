@@ -416,6 +416,19 @@ def carried_excess(pose: Pair, near: Pair, counts: tuple[np.ndarray, np.ndarray]
     tolerance): ``counts`` the wire counts (left, right) of the frames from the earlier of the
     two to the later, ``forward``: the candidate is the later (``robot``: geometry,
     integrator, wire counter bits)."""
+    x, y, heading, slack_m = carried_pose(near, counts, forward, robot)
+    if pose.lone:  # X and HEADING alone: Y and TURNS not sent
+        return (abs(pose.x_m - x) - tolerance[0] - slack_m, abs(math.remainder(
+            pose.heading_rad - heading, 2 * math.pi)) - tolerance[1] - 0.5 * HEADING_LSB_RAD)
+    return (math.hypot(pose.x_m - x, pose.y_m - y) - tolerance[0] - slack_m,
+            abs(pose.heading_rad - heading) - tolerance[1] - 0.5 * HEADING_LSB_RAD)
+
+
+def carried_pose(near: Pair, counts: tuple[np.ndarray, np.ndarray], forward: bool,
+                 robot: tuple[Geometry, str, int]) -> tuple[float, float, float, float]:
+    """The pose (x m, y m, heading rad) of neighbour ``near`` carried over the count steps
+    ``counts`` (``carried_excess``'s) and the position slack (m) it holds: the worst merge of
+    the frames between and the neighbour's own rounding."""
     geometry, integrator, bits = robot
     left, right = (np.asarray(v, dtype=np.int64) for v in counts)
     steps = OneSteps.of_deltas(wrap_delta(np.diff(left), bits), wrap_delta(np.diff(right), bits),
@@ -432,11 +445,7 @@ def carried_excess(pose: Pair, near: Pair, counts: tuple[np.ndarray, np.ndarray]
     # its rounding box and its heading's half LSB over the carried way (kobuki, a 1 s stall:
     # a correct firmware FAILed 0.00097 mm beyond without them)
     rounding_m = math.sqrt(2) * 0.5 * POSITION_LSB_M + 0.5 * HEADING_LSB_RAD * math.hypot(dx, dy)
-    if pose.lone:  # X and HEADING alone: Y and TURNS not sent
-        return (abs(pose.x_m - x) - tolerance[0] - allowed - rounding_m, abs(math.remainder(
-            pose.heading_rad - heading, 2 * math.pi)) - tolerance[1] - 0.5 * HEADING_LSB_RAD)
-    return (math.hypot(pose.x_m - x, pose.y_m - y) - tolerance[0] - allowed - rounding_m,
-            abs(pose.heading_rad - heading) - tolerance[1] - 0.5 * HEADING_LSB_RAD)
+    return x, y, heading, allowed + rounding_m
 
 
 def merged_first(parts: list[dict[str, object] | None]) -> dict[str, object]:
