@@ -78,11 +78,18 @@ class LiveAllowance:
         self.placed: tuple[int, int | None] | None = None
         self._first_spans: list[tuple[int, float]] | None = None
         self._placed_before: list[tuple[int, int]] = []  # earlier placements (``stalled_at``)
+        # the latest sample recorded: its frame, and its allowance (m) kept when its reference
+        # ended (``restart``; None: that reference still runs, ``at_m`` tells it)
+        self._latest: tuple[int, float | None] | None = None
 
-    def record(self, seq: int, error: dict[str, float], fast: bool, t_s: float) -> None:
+    def record(self, seq: int, error: dict[str, float], fast: bool, t_s: float,
+               shown: bool = True) -> None:
         """A sample at encoder frame ``seq`` (its ODOM_POSE_Y at bus time ``t_s``), ``error``
-        from the reference (``dpos_m``, ``dheading_rad``)."""
+        from the reference (``dpos_m``, ``dheading_rad``); ``shown``: it is the tracker's latest
+        (``vs_reference.latest``, ``latest_m``), not a resend, a lone half or one judged again."""
         dpos_m = error["dpos_m"]
+        if shown:
+            self._latest = (seq, None)
         if self._first_spans is not None or (self.placed and self.placed[1] is None):
             self._sampled(seq)
         self._errors.append((seq, error["dx_m"], error["dy_m"], error["dheading_rad"], t_s))
@@ -127,7 +134,7 @@ class LiveAllowance:
             if from_seq <= seq and (until is None or seq < until):
                 dx, dy = dx - shift[0], dy - shift[1]
                 self.record(seq, {"dx_m": dx, "dy_m": dy, "dpos_m": math.hypot(dx, dy),
-                                  "dheading_rad": dheading}, False, t_s)
+                                  "dheading_rad": dheading}, False, t_s, shown=False)
             else:
                 self._errors.append((seq, dx, dy, dheading, t_s))
 
@@ -183,6 +190,8 @@ class LiveAllowance:
     def restart(self, upto: int, fast: bool) -> None:
         """A new reference: the samples so far are settled, no span reaches past it."""
         self.settle(upto, fast)
+        if self._latest is not None and self._latest[1] is None:
+            self._latest = (self._latest[0], self.at_m(self._latest[0]))
         self.wrongs.close()  # an episode does not run on into another reference
         self.spans, self._placed_before = [], []
         self.placed = self._first_spans = None
@@ -200,6 +209,18 @@ class LiveAllowance:
         if not self.spans:  # the usual case (per sample settled): ``sum`` of nothing
             return 0
         return sum(a for first, a in self.spans if seq > first)
+
+    def latest_m(self) -> float:
+        """The allowance (m) of the latest sample recorded, under the reference it was judged
+        against: after a restart (``restart``: its spans dropped) the one it had when that
+        reference ended, not the new reference's (issue #11: the monitor's latest sample, of
+        the reference before an unseen restart while the new life's samples are held, was
+        judged with no allowance: POSE WRONG 1 s for 0.1985 mm within its 1.456 mm for the 26
+        frames the firmware lost, ``tests/test_ctrl_restart_captures.py``); 0 before any."""
+        if self._latest is None:
+            return 0.0
+        seq, ended_m = self._latest
+        return self.at_m(seq) if ended_m is None else ended_m
 
     def max_beyond_m(self) -> float:
         """The largest position error beyond its allowance (m) of every sample recorded."""

@@ -48,7 +48,7 @@ def record_error(tracker: PoseTracker, seq: int, pose: FramePose, ref: FramePose
     stats = tracker.vs_reference
     stats.max_dpos_m = max(stats.max_dpos_m, error["dpos_m"])
     stats.max_dheading_rad = max(stats.max_dheading_rad, abs(error["dheading_rad"]))
-    tracker.losses.record(seq, error, tracker.fast_path, t_s)
+    tracker.losses.record(seq, error, tracker.fast_path, t_s, shown=False)
 
 
 def may_alias_live(seq: int, t_s: float, tracker: PoseTracker) -> bool:

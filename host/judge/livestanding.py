@@ -32,9 +32,10 @@ if TYPE_CHECKING:
 
 def pose_wrong_why(tracker: PoseTracker) -> list[str]:
     """Why the verdict is POSE WRONG: the latest sample beyond the limit (after its loss and
-    twin allowance), else ``standing_why``; [] when neither."""
+    twin allowance, under the reference it was judged against: ``LiveAllowance.latest_m``),
+    else ``standing_why``; [] when neither."""
     error = tracker.vs_reference.latest
-    allowed_m = tracker.allowance_m()  # for frames the firmware lost, and twins
+    allowed_m = tracker.losses.latest_m()  # its own: for frames the firmware lost, and twins
     if error and pose_wrong(error["dpos_m"], error["dheading_rad"], allowed_m):
         plus = f" (allowed {allowed_m * 1e3:.4f} mm: lost frames, twins)" if allowed_m else ""
         return [f"on-board vs reference {error['dpos_m'] * 1e3:.4f} mm{plus}, "
@@ -52,7 +53,7 @@ def standing_why(tracker: PoseTracker) -> list[str]:
     latest = tracker.vs_reference.latest
     if not latest:
         return [text]
-    allowed_m = tracker.allowance_m()
+    allowed_m = tracker.losses.latest_m()
     if pose_wrong(latest["dpos_m"], latest["dheading_rad"], allowed_m):
         return [text]
     return [text, f"the latest sample ({latest['dpos_m'] * 1e3:.4f} mm, "
