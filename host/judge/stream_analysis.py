@@ -26,6 +26,7 @@ from __future__ import annotations
 import functools
 import tempfile
 from collections.abc import Callable, Iterator
+from contextlib import closing
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, BinaryIO
@@ -142,17 +143,17 @@ def analyze_file(
         facts, cuts = StreamFacts(decoder), StreamCuts(decoder)
         senders = LogSenders(db)  # two tools on a command message (#11)
         streams, ahead = PoseStreams(db), namesahead.AheadScan(decoder)  # two firmwares (#11)
-        for chunk in carried(iter_log(path, chunk_frames=chunk_frames, warn=warn), db):
-            count.frames += len(chunk)
-            spill.write(chunk)
-            accepted = e2e.feed(chunk)
-            lives.feed(chunk, accepted)
-            facts.feed(chunk, accepted)
-            cuts.feed(chunk, accepted)
-            senders.feed(chunk)
-            streams.feed(chunk)
-            ahead.feed(chunk, accepted)
-        spill.close()
+        with closing(spill):  # closed too when a bad line refuses the log mid-read
+            for chunk in carried(iter_log(path, chunk_frames=chunk_frames, warn=warn), db):
+                count.frames += len(chunk)
+                spill.write(chunk)
+                accepted = e2e.feed(chunk)
+                lives.feed(chunk, accepted)
+                facts.feed(chunk, accepted)
+                cuts.feed(chunk, accepted)
+                senders.feed(chunk)
+                streams.feed(chunk)
+                ahead.feed(chunk, accepted)
         if not e2e.exact:  # its accepted frames may not be the whole log's: nor its lives
             raise NotStreamable(UNSETTLED)
 
