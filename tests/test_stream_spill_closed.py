@@ -14,6 +14,7 @@ import pytest
 
 from odocan.host.cli.app import main
 from odocan.host.judge import stream_analysis
+from odocan.host.judge.stream_spill import FrameSpill
 
 
 def _log_with_bad_line(tmp_path: Path) -> Path:
@@ -31,9 +32,9 @@ def _log_with_bad_line(tmp_path: Path) -> Path:
 def test_a_log_refused_mid_stream_leaves_no_spill_file_open(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
         capsys: pytest.CaptureFixture[str]) -> None:
-    spills: list[stream_analysis.FrameSpill] = []
+    spills: list[FrameSpill] = []
 
-    class Recorded(stream_analysis.FrameSpill):
+    class Recorded(FrameSpill):
         def __init__(self, directory: Path) -> None:
             super().__init__(directory)
             spills.append(self)

@@ -29,7 +29,7 @@ from collections.abc import Callable, Iterator
 from contextlib import closing
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, BinaryIO
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -86,6 +86,7 @@ from odocan.host.judge.stream_primed import cut_frames, judged_from_candidates
 from odocan.host.judge.stream_refusal import UNSETTLED
 from odocan.host.judge.stream_refusal import NotStreamable as NotStreamable
 from odocan.host.judge.stream_reprime import stream_reprimes
+from odocan.host.judge.stream_spill import FrameSpill
 from odocan.host.judge.stream_stallfirst import stream_first
 from odocan.host.judge.stream_stalls import StreamBreakCounts
 from odocan.host.judge.twosenders import LogSenders
@@ -261,40 +262,6 @@ def _as_life(span: LifeSpan) -> Life:
     """A ``reboots.Life`` for ``merge`` (which reads its time and UPTIME, not its frames)."""
     return Life(np.zeros(0, dtype=np.int64), span.boot, span.t_s, span.uptime_before_s,
                 set_pose=span.set_pose, config=span.config)
-
-
-class FrameSpill:
-    """The log's frames written once, column by column, to files in ``directory`` (26 bytes a
-    frame, no text to parse again), then read back by ranges: each life's passes read its
-    own frames, not the log from its start."""
-
-    COLUMNS = (("timestamp_s", np.float64, ()), ("can_id", np.uint32, ()),
-               ("dlc", np.uint8, ()), ("data", np.uint8, (8,)), ("flags", np.uint8, ()))
-
-    def __init__(self, directory: Path) -> None:
-        self._paths = {name: directory / f"{name}.bin" for name, _, _ in self.COLUMNS}
-        self._files: dict[str, BinaryIO] = {
-            name: path.open("wb") for name, path in self._paths.items()}
-
-    def write(self, chunk: FrameArrays) -> None:
-        for name, dtype, _ in self.COLUMNS:
-            np.ascontiguousarray(getattr(chunk, name), dtype=dtype).tofile(self._files[name])
-
-    def close(self) -> None:
-        for file in self._files.values():
-            file.close()
-
-    def read(self, start: int, stop: int, chunk_frames: int) -> Iterator[FrameArrays]:
-        """The frames [start, stop), ``chunk_frames`` at a time."""
-        for lo in range(start, stop, chunk_frames):
-            n = min(chunk_frames, stop - lo)
-            columns = {}
-            for name, dtype, shape in self.COLUMNS:
-                width = int(np.prod(shape, dtype=np.int64))
-                values = np.fromfile(self._paths[name], dtype=dtype, count=n * width,
-                                     offset=lo * width * np.dtype(dtype).itemsize)
-                columns[name] = values.reshape((n, *shape))
-            yield FrameArrays(**columns)
 
 
 def _life(
