@@ -41,7 +41,7 @@ from odocan.host.judge.samples import (
     PoseHalves,
     Poses,
 )
-from odocan.host.judge.stallfirst import NEAR_FRAMES, Pair, carried_pose
+from odocan.host.judge.stallfirst import NEAR_FRAMES, Pair, better, carried_pose
 from odocan.host.protocol.busfacts import ENC_COUNTER_LAP
 
 REACH_LAPS = 2  # counter laps before the last pose sent before the half: a stall's backlog
@@ -160,14 +160,6 @@ class CandidateJudge:
             self._made[key] = carried_pose(
                 near, (self.enc.left[a:b + 1], self.enc.right[a:b + 1]), c > k, self.robot)
         return self._made[key]
-
-
-def better(a: Excess | None, b: Excess | None) -> Excess | None:
-    """The better fit of two excesses: the smaller of each one's worse part, heading weighed
-    1 mm per mrad (the tolerances' 0.1 mm and 0.096 mrad are alike)."""
-    if a is None or (b is not None and max(b) < max(a)):
-        return b
-    return a
 
 
 def _beyond(half: Half, carried: tuple[float, float, float], slack_m: float) -> Excess:
