@@ -58,6 +58,7 @@ def powerup_heard(tracker: PoseTracker, counter: int, signals: Callable[[], Any]
         _retake_named(tracker, signals(), t_s)
         tracker.powerpose.heard_x(signals(), t_s, tracker)  # the E2E check may refuse it
     tracker.powerup.on_pose(counter, signals, t_s, tracker.window.rows)
+    tracker.lives.silent.heard(t_s, signals, tracker.window.rows)  # (livesilentboot)
 
 
 def _retake_named(tracker: PoseTracker, s: Any, t_s: float) -> None:
