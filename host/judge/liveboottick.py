@@ -27,6 +27,7 @@ from collections import deque
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
+from odocan.host.judge.bootnamed import HELD_WINDOW_S
 from odocan.host.judge.livefreshboot import TWIN_S, init_restart
 from odocan.host.judge.livelatehalves import POSE_NAMES
 from odocan.host.judge.livetwins import refused_encoders
@@ -114,7 +115,7 @@ def boot_frame(tracker: PoseTracker, e2e: E2EMonitor, told: tuple[int, str, int 
         return None
     if t_s - frame[3] >= CYCLE_S:  # not the summary's tick's frame
         return None
-    if tick.status not in (REPEATED, WRONG_SEQUENCE):
+    if tick.status not in (REPEATED, WRONG_SEQUENCE) or _pose_retook(tracker, e2e, t_s):
         return None
     rows = tracker.window.rows
     step = (frame[0] - int(rows[-1][2])) & ENC_COUNTER_MASK if rows else 1
@@ -123,6 +124,19 @@ def boot_frame(tracker: PoseTracker, e2e: E2EMonitor, told: tuple[int, str, int 
     e2e.retake(tick.can_id, frame[0], frame[3])
     take((frame[0], frame[1], frame[2], frame[4]), frame[3])
     return frame
+
+
+def _pose_retook(tracker: PoseTracker, e2e: E2EMonitor, t_s: float) -> bool:
+    """Whether a power-up pose heard less than ``HELD_WINDOW_S`` before the summary heard at
+    bus time ``t_s`` retook the frame it named (heard less than a cycle before the pose: the
+    latest ``E2EMonitor.retake``), after the host's sequence refused it
+    (``livefreshboot``): the life's frame is named, the summary's is not the new firmware's
+    first (kobuki random 908, ``reboot=1.5:0.3,delay=0.1:200``: the power-up pose of 1.801 s
+    retook the COUNTER 0 held back to 1.800 s; the boot summary of 1.901 s retook the
+    on-time COUNTER 14 of 1.90 s, which the firmware refused)."""
+    pose, retaken = tracker.powerup.latest, e2e.retaken
+    return (pose is not None and retaken is not None and pose[1] is not None
+            and 0.0 <= t_s - pose[0] < HELD_WINDOW_S and 0.0 <= pose[0] - retaken[2] < CYCLE_S)
 
 
 def refused_frame(tracker: PoseTracker, can_id: int, signals: Any, t_s: float,

@@ -58,15 +58,17 @@ def powerup_heard(tracker: PoseTracker, counter: int, signals: Callable[[], Any]
         _retake_named(tracker, signals(), t_s)
         tracker.powerpose.heard_x(signals(), t_s, tracker)  # the E2E check may refuse it
     tracker.powerup.on_pose(counter, signals, t_s, tracker.window.rows)
+    tracker.lives.silent.heard(t_s, signals, tracker.window.rows)  # (livesilentboot)
 
 
 def _retake_named(tracker: PoseTracker, s: Any, t_s: float) -> None:
     """The refused frame the power-up pose ``s`` heard at ``t_s`` names, taken (docstring)."""
     tick = tracker.boot_tick
     frame, bound = tick.frame, tick.bound
-    if frame is None or bound is None or tick.status not in (REPEATED, WRONG_SEQUENCE):
+    if bound is None or not is_powerup_pose(int(s["COUNTER"]), s["X"], s["HEADING"]):
         return
-    if not is_powerup_pose(int(s["COUNTER"]), s["X"], s["HEADING"]):
+    if frame is None or tick.status not in (REPEATED, WRONG_SEQUENCE):
+        _retake_in_tick(tracker, int(s["ENC_COUNTER"]), t_s)
         return
     if int(s["ENC_COUNTER"]) != frame[0] or not 0.0 <= t_s - frame[3] < CYCLE_S:
         return
@@ -75,6 +77,33 @@ def _retake_named(tracker: PoseTracker, s: Any, t_s: float) -> None:
         return  # a twin of the latest taken: the pose names that one
     e2e, take = bound
     tick.frame = None
+    e2e.retake(tick.can_id, frame[0], frame[3])
+    take((frame[0], frame[1], frame[2], frame[4]), frame[3])
+    tracker.late.restart()  # its pose sequences start at this pose (livelatehalves)
+
+
+def _retake_in_tick(tracker: PoseTracker, enc_counter: int, t_s: float) -> None:
+    """``bootnamed.heard_named`` live: the power-up pose heard at bus time ``t_s`` names
+    COUNTER ``enc_counter``; no frame of it taken less than a cycle before the pose, the latest
+    refused one of it heard there with its CRC right (``BootTick.recent``), after the latest
+    taken of it, is the frame the new firmware primed on, though the host's sequence took a
+    frame after it: the firmware's receiver, fresh, drained it first and refused the next
+    (issue #11: kobuki random 908, ``reboot=1.5:0.3,delay=0.1:200``, primed at 1.80 s on a
+    COUNTER 0 sent at 1.60 s; the host's sequence refused it and took COUNTER 4 of 1.800 s;
+    the on-time COUNTER 0 of 1.76 s, heard in the boot, was named: 35-53 mm beyond)."""
+    rows, tick = tracker.window.rows, tracker.boot_tick
+    if not rows or tick.bound is None:
+        return
+    taken = [row for row in rows if int(row[2]) == enc_counter]
+    if taken and t_s - float(taken[-1][3]) < CYCLE_S:
+        return  # one taken in the pose's tick: the pose names it
+    after = int(taken[-1][0]) if taken else -1
+    mine = [frame for frame, seq in tick.recent if frame[0] == enc_counter and seq >= after
+            and 0.0 <= t_s - frame[3] < CYCLE_S]
+    if not mine:
+        return
+    frame = mine[-1]
+    e2e, take = tick.bound
     e2e.retake(tick.can_id, frame[0], frame[3])
     take((frame[0], frame[1], frame[2], frame[4]), frame[3])
     tracker.late.restart()  # its pose sequences start at this pose (livelatehalves)

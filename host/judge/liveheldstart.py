@@ -52,13 +52,30 @@ def held_counts(tracker: PoseTracker, tick_s: float, primed_now: bool) -> list[C
             return None
         last_s = max(h[1][6] for h in before)
         together = [h for h in before if h[1][6] >= last_s - STAMP_S]
-        first = together[fresh_last(np.array([h[1][1] for h in together], dtype=np.int64))]
+        first = _retaken(tracker, together) or together[
+            fresh_last(np.array([h[1][1] for h in together], dtype=np.int64))]
     else:
         after = [h for h in heard if h[1][6] > tick_s]
         if not after:
             return None
         first = after[0]
     return _taken_from(tracker, first)
+
+
+def _retaken(tracker: PoseTracker, together: list[Heard]) -> Heard | None:
+    """The frame of ``together`` the host's sequence retook after refusing it (its power-up
+    pose named it: ``livefreshboot``), if one: the new firmware primed on it, whatever the
+    window's order after it (the retake appended it behind the frames the host took in its tick
+    before the pose came: kobuki random 908, ``reboot=1.5:0.3,delay=0.1:200``, COUNTER 0 held
+    back to 1.800 s, retaken behind the on-time COUNTER 4 of 1.800 s, which ``fresh_last`` then
+    named: 49.8 mm beyond)."""
+    bound = tracker.boot_tick.bound
+    retaken = None if bound is None else bound[0].retaken
+    if retaken is None:
+        return None
+    mine = [h for h in together if h[1][1] == retaken[1] and h[1][6] == retaken[2]
+            and h[0] == float(h[1][0])]  # the window's (taken) copy
+    return mine[-1] if mine else None
 
 
 def _heard(tracker: PoseTracker) -> list[Heard]:

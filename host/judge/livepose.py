@@ -29,8 +29,9 @@ from odocan.sim.pose import wrap_angle
 
 RING = busfacts.ENC_COUNTER_LAP  # 16: one slot per E2E COUNTER value of WHEEL_ENCODERS
 RING_MASK = RING - 1  # 0xF: a COUNTER step mod the lap
-MARKS_KEPT = 16  # pairs ``ErrorStats.withdraw_from`` can take back: a reboot's boot window
-# (``bootticks.BOOT_WINDOW_MS``, 80 ms: 4 poses) with room to spare
+MARKS_KEPT = 128  # pairs ``ErrorStats.withdraw_from`` can take back: a reboot's boot window
+# (``bootticks.BOOT_WINDOW_MS``, 80 ms: 4 poses), and the poses of a firmware that rebooted in
+# a silence heard until its summary told it (``livesilentboot``: up to 2 s, 100 poses)
 WIRE_BITS = busfacts.ENC_WIRE_COUNTER_BITS  # WHEEL_ENCODERS carries the low 24 bits of each counter
 WIRE_MASK = (1 << WIRE_BITS) - 1
 # ``step_periods.doubted_bound_periods``: frames closer than half a period share one burst's

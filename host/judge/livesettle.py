@@ -201,7 +201,7 @@ class SettleHold:
         have their CRC broken (their stamps kept: the sequence starts at that one); without
         one, the last taken is re-made from its COUNTER and bus time."""
         context = [msg for msg, _ in self.recent]
-        taken = [k for k, (msg, ok) in enumerate(self.recent) if ok and self._is_encoder(msg)]
+        taken = self._taken_since_retake()
         page = self._last_page(context)
         first = next((k for k in reversed(taken) if page is not None and k <= page),
                      taken[-1] if taken else None)
@@ -220,6 +220,28 @@ class SettleHold:
                                        is_extended_id=False, data=data))
             context.sort(key=lambda m: m.timestamp)  # stable
         return context
+
+    def _taken_since_retake(self) -> list[int]:
+        """The places in ``recent`` of the encoder frames taken, as the sequence restarted by the
+        latest ``E2EMonitor.retake`` (a rebooted firmware primed on a frame the host's sequence
+        refused: ``livefreshboot``) judged them: that frame taken, none before it, nor the
+        frames the old sequence took in its tick before the retake told it (issue #11: kobuki
+        random 908, ``reboot=1.5:0.3,delay=0.1:200``: the new firmware primed on a COUNTER 0
+        held back to 1.800 s and refused the on-time COUNTER 4 heard just after it, which the
+        host's sequence took; a hold judged from that one took the frames the firmware
+        refused)."""
+        taken = [k for k, (msg, ok) in enumerate(self.recent) if ok and self._is_encoder(msg)]
+        retaken = self._e2e.retaken
+        if retaken is None or retaken[0] != self.can_id:
+            return taken
+        at = [k for k, (msg, ok) in enumerate(self.recent) if not ok and self._is_encoder(msg)
+              and msg.timestamp == retaken[2]
+              and msg.data[1] & busfacts.ENC_COUNTER_MASK == retaken[1]]
+        if not at:
+            return taken
+        tick_s = retaken[2] + busfacts.ENC_CYCLE_S / 2  # the frames heard in its tick
+        return [at[-1], *(k for k in taken
+                          if k > at[-1] and self.recent[k][0].timestamp >= tick_s)]
 
     def _last_page(self, context: list[can.Message]) -> int | None:
         """The place in ``context`` of its last ENC_E2E page (ODOM_STATUS), if one."""

@@ -15,6 +15,7 @@ from odocan.host.judge.livefit import LiveFit
 from odocan.host.judge.liveplacing import place_reference
 from odocan.host.judge.livepose import FramePose, Sample
 from odocan.host.judge.liveprimed import UNTOLD_PRIME, choose_primed
+from odocan.host.judge.livesilentboot import SilentBoot
 from odocan.host.judge.livewindow import Counted, window_counts
 from odocan.host.judge.pagesent import counted_from, sent_s
 from odocan.host.judge.primed import counted_start
@@ -84,6 +85,7 @@ class Lives:
         self.pending: FramePose | None = None  # the first pose, heard before the integrator
         self.backlog_counts: list[Counted] = []  # the frames since the pending pose's
         self.backlog_poses: list[FramePose] = []
+        self.silent = SilentBoot()  # the firmware's latest silence (livesilentboot)
         self.power_up_proven = False  # the first life's first page proved a power-up at 0
         self.primed_late: int | None = None  # ... or at this frame by its count, or before
         # (``powerup.primed_after``; a recorder stamping ODOM_STATUS late: ``liveprimed``)

@@ -52,6 +52,7 @@ from odocan.host.judge.livegapseen import heard_status
 from odocan.host.judge.liveheard import heard_before_live, pose_named_live
 from odocan.host.judge.liveheldpose import PoseOrder
 from odocan.host.judge.livelatestatus import StatusOrder
+from odocan.host.judge.livesilentboot import started_after_silence
 from odocan.host.judge.livestreams import LiveStreams, hear_pose_frame, pose_told_first
 from odocan.host.judge.navrestart import NAV_MESSAGE, restarted_within
 from odocan.host.judge.powerup import (
@@ -489,7 +490,10 @@ def start_new_life(tracker: PoseTracker, e2e: E2EMonitor, db: Database,
     if uptime_s == 0:
         tick_s = None if watch is None else watch.held_tick_s  # (liveheldstart)
         tracker.power_up(primed_now=state != "INIT", seq=seq, tick_s=tick_s)
+        started_after_silence(tracker, watch, uptime_s)  # unnamed: after a silence
         return "reference restarted at the power-up pose"
+    if started_after_silence(tracker, watch, uptime_s):  # rebooted in a silence
+        return "reference restarted at the power-up pose on a frame after the silence"
     tracker.adopted.owe(LATE_REBOOT.format(uptime_s=uptime_s))  # its pose adopted
     tracker.new_life()
     return "reference restarted"

@@ -119,6 +119,7 @@ class E2EMonitor:
         self._unknown = dict.fromkeys(UNKNOWN_KEYS, 0)
         self.holds: bool = False  # "held" for a frame the stamps cannot decide (docstring)
         self.retakes = 0  # ``retake``s made (a hold's verdicts after one are stale: livesettle)
+        self.retaken: tuple[int, int, float] | None = None  # the latest: CAN id, COUNTER, s
         self._held_s: float | None = None  # the bus time of the frame held last
         cycle_s = min((c.cycle_s for c in self._configs.values()
                        if c.min_periods == 0 and c.cycle_s), default=0.01)
@@ -276,6 +277,7 @@ class E2EMonitor:
         state.last_valid_s = state.last_ok_s = timestamp_s
         live.last = counter
         self.retakes += 1
+        self.retaken = (can_id, counter, timestamp_s)
 
     def count_frame_kind(self, *, error: bool = False, remote: bool = False) -> None:
         """Count an error or remote frame (they are never checked)."""
