@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING, Any, ParamSpec, Protocol, TypeVar, cast
 
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.namesahead import AheadScan, mark, report_of
-from odocan.host.judge.samples import AnalysisError
+from odocan.host.judge.samples import AnalysisError, require_messages
 from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.protocol.decode import BulkDecoder
 from odocan.host.protocol.e2e import check_frames
@@ -45,7 +45,9 @@ def checked(analyze: Callable[P, R]) -> Callable[P, R]:
         frames = args[0]
         assert isinstance(frames, FrameArrays)
         db = cast("DatabaseSpec", kwargs.get("db") or default_plan())
-        scan = AheadScan(BulkDecoder(db))
+        decoder = BulkDecoder(db)
+        require_messages(decoder)  # analyze's own words for a DBC without them, said first
+        scan = AheadScan(decoder)
         scan.feed(frames, check_frames(frames, db)[1])
         try:
             result = analyze(*args, **kwargs)

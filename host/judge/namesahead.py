@@ -148,7 +148,7 @@ def names_ahead(enc: Rows, poses: Rows, cycle_s: float, period_s: float = POSE_P
                & poses.ok)
     frame = latest + step
     decided = ~forward | (frame < n)
-    at = np.minimum(frame, n - 1)
+    at = np.clip(frame, 0, n - 1)  # only judged rows read it: in bounds for every row
     enc_runs = run_lengths(enc, cycle_s)
     own_runs = run_lengths(poses, period_s)
     repeat = np.zeros(m, dtype=bool)
