@@ -66,6 +66,7 @@ from odocan.host.judge.liveconfig import SAME_TICK_S, ConfigFollower, follow_con
 from odocan.host.judge.livedistance import LiveDistance
 from odocan.host.judge.livegapseen import heard_encoder
 from odocan.host.judge.livekept import KeptWatch
+from odocan.host.judge.livepace import LivePace
 from odocan.host.judge.liverobot import (
     DEFAULT,
     GIVEN,
@@ -83,6 +84,7 @@ from odocan.host.judge.messagestats import MessageStats
 from odocan.host.judge.monitorauth import AUTH_COUNTS as AUTH_COUNTS  # re-exported (its API)
 from odocan.host.judge.monitorauth import AuthWatch
 from odocan.host.judge.monitorvalues import (
+    count_unknown_id,
     error_names,
     messages_snapshot,
     node_ages,
@@ -122,6 +124,7 @@ class BusMonitor:
         self.db = db if db is not None else database()
         self.bitrate = bitrate  # bit/s, for bus_load's fraction (None: bits/s only)
         self.load = LoadWindow()
+        self.pace = LivePace(self.db)  # a sped-up replay's bus time to the drive's (livepace)
         self._by_key = {frame_key(m.frame_id, m.is_extended_frame): m for m in self.db.messages}
         self.e2e = E2EMonitor(self.db)
         self.e2e.holds = True  # frames the stamps cannot decide wait for the evidence
@@ -161,9 +164,13 @@ class BusMonitor:
         self.replayed: Callable[[can.Message], None] = lambda _msg: None  # each held, judged
 
     def feed(self, msg: can.Message, now_s: float | None = None) -> None:
-        """One frame heard on the bus (``now_s``: local monotonic time, default now); held while
-        an encoder frame's verdict waits for the firmware's evidence (``livesettle``)."""
-        now_s = time.monotonic() if now_s is None else now_s
+        """One frame heard on the bus (``now_s``: local monotonic time, default now), stamped
+        on the drive's clock (a sped-up replay's: ``livepace``); held while an encoder frame's
+        verdict waits for the firmware's evidence (``livesettle``)."""
+        self._take(self.pace.stamped(msg), time.monotonic() if now_s is None else now_s)
+
+    def _take(self, msg: can.Message, now_s: float) -> None:
+        """``feed`` of a frame on the drive's clock (the held frames given back come here)."""
         if self.robot_wait is not None:  # no --robot: held for the PROFILE page (liverobot)
             if self.robot_wait.hold((msg, now_s), msg.timestamp, msg.arbitration_id,
                                     bytes(msg.data), msg.is_extended_id, now_s):
@@ -172,7 +179,7 @@ class BusMonitor:
         if self.settle.held:
             self.settle.held.append((msg, now_s))
             if self.settle.due(msg.timestamp):  # (or its evidence is in: liveearly)
-                self.settle.release(self._feed, self.feed)
+                self.settle.release(self._feed, self._take)
             return
         self._feed(msg, now_s, None)
 
@@ -186,7 +193,7 @@ class BusMonitor:
         then given to ``replayed`` (live Foxglove publishes what the model made of it)."""
         wait, self.robot_wait = self.robot_wait, None
         for msg, now_s in decide(self, wait) if wait is not None else ():
-            self.feed(msg, now_s)
+            self._take(msg, now_s)
             self.replayed(msg)
 
     def _feed(self, msg: can.Message, now_s: float, verdict: bool | None) -> None:
@@ -218,7 +225,7 @@ class BusMonitor:
         self.frames_total += 1
         self.load.add(msg)
         if message is None:
-            self._count_unknown_id(msg.arbitration_id)
+            count_unknown_id(self.unknown_ids, msg.arbitration_id, MAX_UNKNOWN_IDS)
             return
         if len(data) != message.length:
             return  # counted by E2EMonitor as wrong_dlc
@@ -238,24 +245,12 @@ class BusMonitor:
         self.ahead.heard(message.name, timestamp_s, data, status in ACCEPTED)
         crc_right = status in ACCEPTED or status in CRC_RIGHT_REFUSED
         if crc_right and message.frame_id in self.senders.watches:
-            self._watch_senders(message.frame_id, data, timestamp_s)
+            self.senders.told(self.events, message.frame_id, data, timestamp_s)
         if status in ACCEPTED:
             self._use(message, stats, data)
         elif crc_right:  # an encoder frame: a twin, a gap's, a boot's; a pose: sent
             refused_named(self.tracker, message.frame_id, message.name, lambda: message.decode(
                 data, decode_choices=False), timestamp_s, status)
-
-    def _watch_senders(self, can_id: int, data: bytes, t_s: float) -> None:
-        """A CRC-right command frame: a second sender's signature is a ``two senders`` event
-        (``host.judge.twosenders``)."""
-        detail = self.senders.heard(can_id, data, t_s)
-        if detail is not None:
-            self.events.append({"t_s": t_s, "kind": "two senders", "detail": detail})
-
-    def _count_unknown_id(self, can_id: int) -> None:
-        key = f"0x{can_id:03X}"
-        if key in self.unknown_ids or len(self.unknown_ids) < MAX_UNKNOWN_IDS:
-            self.unknown_ids[key] += 1
 
     def _use(self, message: Message, stats: MessageStats, data: bytes) -> None:
         """Decode an accepted frame, keep its values and follow the firmware."""
@@ -479,6 +474,7 @@ class BusMonitor:
             "unknown": {**e2e[UNKNOWN], "ids": dict(self.unknown_ids),
                         "undecodable": self.undecodable},
             "auth": dict(self.auth),
+            "pace": self.pace.as_dict(),
         }
 
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections import Counter
 from typing import TYPE_CHECKING, Any
 
 from cantools.database.can import Database, Message
@@ -35,6 +36,13 @@ def node_ages(db: Database, messages: dict[str, MessageStats], now_s: float
     for node in nodes.values():
         node["stale"] = node["age_s"] > node["timeout_s"]
     return nodes
+
+
+def count_unknown_id(ids: Counter[str], can_id: int, most: int) -> None:
+    """Count a frame of an identifier the DBC does not know (at most ``most`` distinct)."""
+    key = f"0x{can_id:03X}"
+    if key in ids or len(ids) < most:
+        ids[key] += 1
 
 
 def page_of(message: Message, data: bytes) -> str | None:

@@ -30,6 +30,7 @@ The bridge, which does not hear its own frames back, tells it differently
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import MutableSequence
 from typing import TYPE_CHECKING, Any, Final
 
 import numpy as np
@@ -115,6 +116,14 @@ class CommandSenders:
         """A CRC-right frame of a watched message (``SenderWatch.heard``); None for others."""
         watch = self.watches.get(can_id)
         return None if watch is None else watch.heard(data, t_s)
+
+    def told(self, events: MutableSequence[dict[str, Any]], can_id: int, data: bytes,
+             t_s: float) -> None:
+        """``heard``, a second sender's signature appended to ``events`` as a ``two senders``
+        event (the monitor's)."""
+        detail = self.heard(can_id, data, t_s)
+        if detail is not None:
+            events.append({"t_s": t_s, "kind": "two senders", "detail": detail})
 
 
 class LogSenders:
