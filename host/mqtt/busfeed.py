@@ -11,7 +11,8 @@ the kernel dropped 469 of a 20 s drive at the rig's 360 frames/s (Linux's defaul
 256 udp_multicast frames), said nowhere. Here the bus is read by ``host.io.busreader.BusReader``
 (the socket's receive buffer widened, the kernel's drops counted, a queue of
 ``JUDGE_QUEUE_FRAMES`` that counts what it must skip); the task ``can-feed`` moves its frames to
-the bridge's queue in batches of up to ``max_batch``, waiting for room rather than dropping, and
+the bridge's queue in batches of up to ``max_batch`` (each frame on the drive's clock: a
+sped-up replay's, ``host.judge.livepace``), waiting for room rather than dropping, and
 sleeps while the reader has nothing (woken by the reader's ``notify``, then ``COALESCE_S`` more,
 so a burst of frames costs the loop one wake-up, not one each: woken per frame, the bridge took
 ~14 % more CPU than main's reader on a 20 s replay at 360 frames/s, ~2 % with it).
@@ -37,6 +38,7 @@ from typing import TYPE_CHECKING, Any
 import can
 
 from odocan.host.io.busreader import JUDGE_QUEUE_FRAMES, BusReader
+from odocan.host.judge.livepace import LivePace
 
 if TYPE_CHECKING:
     from odocan.host.mqtt.bridge import Batch, Bridge
@@ -86,6 +88,8 @@ class BusFeed:
         self._task: asyncio.Task[None] | None = None
         self._lost_said = 0  # frames lost here as of the latest ``lost_here`` event
         self.last_t_s = 0.0  # bus timestamp of the latest frame fed (the events' ``t_s``)
+        # a sped-up replay's frames on the drive's clock, as the monitor judges them (livepace)
+        self.pace = LivePace(bridge.robots[robot_index].telemetry.db)
 
     @property
     def errors(self) -> int:
@@ -132,6 +136,7 @@ class BusFeed:
         index, reader = self.robot_index, self.reader
         batch: Batch = []
         while len(batch) < self.max_batch and (msg := reader.get(0)) is not None:
+            msg = self.pace.stamped(msg)
             batch.append((index, msg))
             self.last_t_s = msg.timestamp
         return batch
