@@ -11,21 +11,21 @@ after it for a counter restart the firmware never made, and blamed a correct fir
 
 ``LivePace`` measures the bus's pace from WHEEL_ENCODERS itself, the motor controller's cadence:
 the intervals between CRC-right frames one COUNTER step apart (no frame lost between them). It
-decides on the first ``PACE_INTERVALS``, their mean with those over ``SILENCE_PERIODS`` mean
-periods left out (a silence of 17, 33, ... periods steps the COUNTER by one too). A pace within
-``LIVE_BAND`` of the cycle is a live bus (no sender's clock is that far off; its times are kept
-as they are, for good); outside it, every frame is stamped on the drive's clock,
-``t' = t'_0 + (t - t_0) x pace``, the map kept continuous as the pace narrows to the mean of
-every one-step interval heard (from ``NARROWED_AFTER`` on, none left out: a receiver that reads
-in bursts stamps one-step intervals of up to 56 periods at ``--speed 20``, and leaving the long
-ones out ran the pace away to 54). The judges then see the drive as it was recorded and say what
-they would say at ``--speed 1``. The
-frames heard before the pace is measured (``PACE_INTERVALS`` encoder periods, 0.64 s of a
-drive) keep their bus times."""
+decides on the first ``PACE_INTERVALS``: their mean, and their mean with those over
+``SILENCE_PERIODS`` mean periods left out (a silence of 17, 33, ... periods steps the COUNTER by
+one too); a bus is live unless both lie outside ``LIVE_BAND`` (no sender's clock is that far
+off). A live bus's times are kept as they are, for good. On another, every frame is stamped on
+the drive's clock, ``t' = t'_0 + (t - t_0) x pace``, the pace the plain mean's (a receiver that
+reads in bursts stamps one-step intervals of 0 and of up to 56 periods at ``--speed 20``: left
+out, they ran the pace away to 54), narrowed to the mean of every one-step interval heard from
+``NARROWED_AFTER`` on, the map kept continuous. The judges then see the drive as it was
+recorded and say what they would say at ``--speed 1``. The frames heard before the pace is
+measured (``PACE_INTERVALS`` encoder periods, 0.64 s of a drive) keep their bus times."""
 
 from __future__ import annotations
 
 import copy
+import math
 from dataclasses import dataclass
 
 import can
@@ -109,14 +109,19 @@ class LivePace:
             self._repace(t_s, ENC_CYCLE_S * self._count / self._sum_s)
 
     def _decide(self, t_s: float) -> None:
-        """The pace from the intervals measured: a live bus's 1.0 within ``LIVE_BAND``."""
-        period_s = _mean_period_s(self._intervals)
-        pace = ENC_CYCLE_S / period_s if period_s > 0 else 1.0
-        self.facts.decided_at_s, self._intervals = t_s, []
-        if LIVE_BAND[0] <= pace <= LIVE_BAND[1]:
+        """The pace from the intervals measured: a live bus's 1.0 unless both their mean and
+        their mean without silences (``_mean_period_s``) lie outside ``LIVE_BAND`` (a live bus
+        with a silence stepping the COUNTER by one stays live; a replay heard in bursts has
+        no interval left but its bursts' gaps and zeros). The pace is then their plain mean's,
+        which a receiver's bursts do not bias."""
+        self.facts.decided_at_s = t_s
+        paces = [_pace_of(sum(self._intervals) / len(self._intervals)),
+                 _pace_of(_mean_period_s(self._intervals))]
+        self._intervals = []
+        if any(LIVE_BAND[0] <= pace <= LIVE_BAND[1] for pace in paces):
             self.facts.pace = 1.0
             return
-        self._repace(t_s, pace)
+        self._repace(t_s, paces[0])
 
     def _repace(self, t_s: float, pace: float) -> None:
         """From bus time ``t_s`` on, the drive's clock runs ``pace`` times the bus's (the map
@@ -124,6 +129,15 @@ class LivePace:
         origin_t, origin_drive = self._origin
         self._origin = (t_s, origin_drive + (t_s - origin_t) * self.pace)
         self.facts.pace = pace
+
+    def said(self, who: str) -> str | None:
+        """A line for the watch's end when the drive's clock was not the bus's (else None)."""
+        pace = self.facts.pace
+        if pace is None or pace == 1.0:
+            return None
+        return (f"{who}: the bus ran {pace:.3g}x the encoders' {ENC_CYCLE_S * 1e3:g} ms cycle "
+                f"(a replay at --speed {pace:.2g}?): judged on the drive's clock, bus time "
+                f"x {pace:.4g}")
 
     def as_dict(self) -> dict[str, float | None]:
         """The pace for the snapshot (None while measuring)."""
@@ -138,3 +152,8 @@ def _mean_period_s(intervals_s: list[float]) -> float:
         kept = [i for i in intervals_s if i <= SILENCE_PERIODS * period_s]
         period_s = sum(kept) / len(kept) if kept else period_s
     return period_s
+
+
+def _pace_of(period_s: float) -> float:
+    """The pace of a bus whose encoder frames come ``period_s`` apart (a zero: infinite)."""
+    return ENC_CYCLE_S / period_s if period_s > 0 else math.inf

@@ -191,6 +191,8 @@ def _do_monitor(args: argparse.Namespace) -> int:
         raise failure
     if said := model.robot.said("odocan monitor"):  # the PROFILE page chose the robot
         print(said, file=sys.stderr)
+    if said := model.pace.said("monitor"):  # a sped-up replay (host.judge.livepace)
+        print(said, file=sys.stderr)
     failed = _say_verdict(args, model, model.robot.profile, time.monotonic() - started_s)
     return 1 if failed and code == 0 else code
 
