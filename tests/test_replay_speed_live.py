@@ -123,3 +123,26 @@ def test_plus_10_mm_still_fails_at_speed_4(drive: Path, tmp_path: Path,
     for judge in judged(tampered, 4.0)[:2]:
         assert judge.tracker.wrongs.count > 0, from_s
         assert judge.tracker.max_beyond_allowance_m > BEYOND_M, from_s
+
+
+RECEIVED_20X = Path(__file__).parent / "files" / "replay_speed20_received.blf"
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "a replay at --speed 20 heard by udp_multicast (the trial's kobuki 7 busoff=10:0.5 drive, "
+    "its first 700 encoder frames as `odocan monitor --log` recorded them, before the bus-off): "
+    "the receiver stamps the frames in bursts, one-step intervals of 0.02 to 15 ms (up to 30 "
+    "drive periods, beyond the COUNTER's lap of 16, COUNTER contiguous), so the judge reads "
+    "silences the drive never had; the monitor model, the pace right (20.26), latches 2 wrong "
+    "samples, 0.102 mm at encoder frame 518 and 0.115 mm at 610 (limit 0.1 mm; 1x: 0.0695 mm "
+    "at most); which rule turns the read silences into those samples is not traced: the stamps "
+    "cannot tell the drive's timing at this pace, so the monitor should say so (UNVERIFIED) "
+    "rather than FAIL"))
+def test_a_replay_heard_in_bursts_at_speed_20_passes() -> None:
+    monitor = BusMonitor(load(ROBOT))
+    with can.LogReader(str(RECEIVED_20X)) as reader:
+        for msg in reader:
+            monitor.feed(msg, now_s=msg.timestamp)
+    monitor.release_held()
+    assert monitor.pace.pace == pytest.approx(20.0, rel=0.02)
+    assert monitor.tracker.wrongs.count == 0, monitor.tracker.max_beyond_allowance_m
