@@ -26,7 +26,7 @@ import pytest
 
 from odocan.host.cli.app import main
 from odocan.host.judge.gapfill import LateFrames
-from tests.judges_cli import fails_by_position, raise_x_10_mm
+from tests.judges_cli import fails_by_position, live_judges, raise_x_10_mm
 
 GLITCHED = 241  # the frame (0-based) whose stamp is replaced: a WHEEL_ENCODERS frame mid-log
 MEMORY_BOUND_B = 200_000_000  # a generous bound: the clean drive peaks at a few tens of MB
@@ -189,3 +189,44 @@ def test_a_10_mm_pose_still_fails_beside_a_glitched_stamp(
     frames = list(can.LogReader(str(tampered)))
     glitched = _glitched(frames, tmp_path / "glitched.log", jump_s)
     assert fails_by_position(glitched, tmp_path) == []
+
+
+@pytest.mark.parametrize("jump_s", [1e8, -1000.0])
+def test_the_live_judges_keep_their_memory_by_frames(
+    drive: tuple[Path, list[can.Message]], jump_s: float, tmp_path: Path,
+) -> None:
+    """The monitor and the bridge fed the glitched log, then the paused one (1e8 s): their
+    memory stays the frames' (``livefill`` answers from the frames held, as ``gapfill``)."""
+    _, frames = drive
+    paused = _write([m if k < GLITCHED else _restamped(m, m.timestamp + 1e8)
+                     for k, m in enumerate(frames)], tmp_path / "paused.csv")
+    for path in (_glitched(frames, tmp_path / "glitch.csv", jump_s), paused):
+        tracemalloc.start()
+        try:
+            live_judges("kobuki", path)
+            peak_b = tracemalloc.get_traced_memory()[1]
+        finally:
+            tracemalloc.stop()
+        assert peak_b < 50_000_000, (path, peak_b)
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "the live judges take a glitched stamp as heard: the monitor and the bridge, fed the "
+    "drive with one encoder frame 1000 s (or 1e8 s) ahead of its neighbours, say DISTANCE "
+    "WRONG ('ODOM_TWIST DISTANCE off the reference's path length by 1.621 mm beyond its "
+    "tolerance' on trial40's a.csv) where analyze, its reader setting the frame aside "
+    "(host.io.stampglitch), PASSes. Live, setting it aside needs a one-frame gate at "
+    "BusMonitor.feed and RobotTelemetry.feed_fields (hold a frame more than 1 s off the one "
+    "before until the next: StampGlitches' rule frame by frame, flushed at the watch's end); "
+    "both modules are at the 500-line limit: not built this pass"))
+@pytest.mark.parametrize("jump_s", [1000.0])
+def test_the_live_judges_set_a_glitched_stamp_aside(
+    drive: tuple[Path, list[can.Message]], jump_s: float, tmp_path: Path,
+) -> None:
+    _, frames = drive
+    clean = live_judges("kobuki", _write(frames, tmp_path / "clean.csv"))
+    glitched = live_judges("kobuki", _glitched(frames, tmp_path / "glitch.csv", jump_s))
+    for before, after in zip(clean, glitched, strict=True):
+        assert before.distance.verdict() == []
+        assert after.distance.verdict() == [], after.distance.verdict()
+        assert after.tracker.wrongs.count == 0
