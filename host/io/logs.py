@@ -17,6 +17,8 @@ same frames, never the whole log in memory). Both read:
 
 Every problem a person can cause (a missing file, a malformed line, an empty log, a frame whose
 time is no clock's in any format: ``frames.timestamp_fault``) is a one-line ``LogFormatError``.
+A frame stamped far off both its neighbours (``host.io.stampglitch``) is set aside with a
+warning.
 One exception: a ``.log`` whose last line has no newline and is incomplete (a recorder killed
 mid-line leaves one: it does not parse, or carries fewer data bytes than the other frames of
 its ID) is read without that line, with a one-line warning that counts it.
@@ -58,6 +60,7 @@ from odocan.host.io.frames import (
     timestamp_fault,
     to_message,
 )
+from odocan.host.io.stampglitch import StampGlitches
 
 if TYPE_CHECKING:
     import can
@@ -120,6 +123,9 @@ def read_log(path: str | Path, *, warn: Callable[[str], None] = warn_on_stderr) 
         frames = _read_with_python_can(path, warn)
     if len(frames) == 0:
         raise LogFormatError(f"{path}: empty log (not a single CAN frame)")
+    glitches = StampGlitches()
+    frames = glitches.whole(frames)
+    glitches.report(path, warn)
     order = TimeOrder()
     order.feed(frames)
     order.report(path, warn)
@@ -223,12 +229,13 @@ def iter_log(
     require_log_file(path)
     parts = _candump_file_parts(path, warn) if path.suffix.lower() == ".log" else (
         _python_can_parts(path, chunk_frames, warn))
-    order = TimeOrder()
-    for chunk in _rechunk(parts, chunk_frames):
+    order, glitches = TimeOrder(), StampGlitches()
+    for chunk in _rechunk(glitches.through(parts), chunk_frames):
         order.feed(chunk)
         yield chunk
     if order.frames == 0:
         raise LogFormatError(f"{path}: empty log (not a single CAN frame)")
+    glitches.report(path, warn)
     order.report(path, warn)
 
 

@@ -107,18 +107,42 @@ class LateFrames:
     def fill(self, seq_before: int, periods: int) -> list[Counts] | None:
         """The counts of the frames a gap of ``periods`` after sender frame ``seq_before``
         lacks, when the log holds every one of them (refused); else None."""
-        found = [self.counts.get(s) for s in range(seq_before + 1, seq_before + periods)]
-        return None if any(c is None for c in found) else found  # type: ignore[return-value]
+        return filled(self.counts, seq_before, periods)
 
     def known(self, seq_before: int, periods: int) -> list[tuple[int, Counts]] | None:
         """The frames of a gap of ``periods`` after sender frame ``seq_before`` the log holds
         (refused), as (periods after the frame before the gap, counts), those it lacks left out;
         None when two frames of one number disagreed (``gapreceived``)."""
-        found = [(k, self.counts[seq_before + k]) for k in range(1, periods)
-                 if seq_before + k in self.counts]
-        if any(c is None for _, c in found):
-            return None
-        return found  # type: ignore[return-value]
+        return held(self.counts, seq_before, periods)
+
+
+def _numbers_in(counts: dict[int, Counts | None], first: int, end: int) -> list[int]:
+    """The numbers in [first, end) that ``counts`` holds, in order: by the shorter of the range
+    and the dict (a gap's periods come from its stamps, unbounded: a recorder paused a day, a
+    stamp glitched; the dict holds frames of the log)."""
+    if end - first <= len(counts):
+        return [s for s in range(first, end) if s in counts]
+    return sorted(s for s in counts if first <= s < end)
+
+
+def filled(counts: dict[int, Counts | None], seq_before: int, periods: int
+           ) -> list[Counts] | None:
+    """``LateFrames.fill`` over ``counts`` (the live judge's too, ``livefill``): None at once
+    when the gap lacks more frames than ``counts`` holds."""
+    if periods - 1 > len(counts):
+        return None
+    found = [counts.get(s) for s in range(seq_before + 1, seq_before + periods)]
+    return None if any(c is None for c in found) else found  # type: ignore[return-value]
+
+
+def held(counts: dict[int, Counts | None], seq_before: int, periods: int
+         ) -> list[tuple[int, Counts]] | None:
+    """``LateFrames.known`` over ``counts`` (the live judge's too, ``livefill``)."""
+    found = [(s - seq_before, counts[s])
+             for s in _numbers_in(counts, seq_before + 1, seq_before + periods)]
+    if any(c is None for _, c in found):
+        return None
+    return found  # type: ignore[return-value]
 
 
 def late_seq(counter: IntArray, sent_s: np.ndarray, anchor: Anchors, cycle_s: float) -> IntArray:

@@ -52,6 +52,7 @@ class LiveAhead:
         self.cycle_s = (db.get_message_by_name(ENCODERS).cycle_time or 10) / 1000.0
         self.found: list[Ahead] = []
         self.count = 0
+        self.origin_s: float | None = None  # the times said count from here (the first frame)
         self._enc = _Run()
         self._enc_n = 0  # encoder frames heard (the next one's number)
         self._latest: tuple[int, float, int] | None = None  # latest accepted: number, t, COUNTER
@@ -67,6 +68,7 @@ class LiveAhead:
 
     def heard(self, name: str, t_s: float, data: bytes, ok: bool) -> None:
         """One frame of ``name`` (of its length; ``ok``: E2E accepted)."""
+        self.origin_s = t_s if self.origin_s is None else self.origin_s
         counter = data[1] & ENC_COUNTER_MASK
         if name == ENCODERS:
             self._encoder(t_s, counter, ok)
@@ -105,11 +107,12 @@ class LiveAhead:
 
     def why(self) -> list[str]:
         """The live verdict's reason ([] when none was found)."""
-        return [str(report_of(self.found, self.count)["detail"])] if self.count else []
+        return [str(report_of(self.found, self.count, self.origin_s or 0.0)["detail"])] \
+            if self.count else []
 
     def as_dict(self) -> dict[str, Any] | None:
         """``namesahead.report_of`` (None when none was found)."""
-        return report_of(self.found, self.count) if self.count else None
+        return report_of(self.found, self.count, self.origin_s or 0.0) if self.count else None
 
 
 def _field(db: Any, name: str) -> Callable[[bytes], int]:

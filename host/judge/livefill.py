@@ -23,6 +23,8 @@ from odocan.host.judge.gapfill import (
     COUNTER_MODULO,
     MAX_LATE_PERIODS,
     Counts,
+    filled,
+    held,
 )
 from odocan.host.judge.livewindow import CYCLE_S
 
@@ -77,14 +79,9 @@ class LiveFill:
         are no longer all kept (a frame left out must be one never heard)."""
         if seq_before + 1 < self._kept_from:
             return None
-        found = [(k, self._counts[seq_before + k]) for k in range(1, periods)
-                 if seq_before + k in self._counts]
-        if any(c is None for _, c in found):
-            return None
-        return found  # type: ignore[return-value]
+        return held(self._counts, seq_before, periods)
 
     def fill(self, seq_before: int, periods: int) -> list[Counts] | None:
         """The counts of the frames a gap of ``periods`` after sender number ``seq_before``
         lacks, when every one was heard refused; else None."""
-        found = [self._counts.get(s) for s in range(seq_before + 1, seq_before + periods)]
-        return None if any(c is None for c in found) else found  # type: ignore[return-value]
+        return filled(self._counts, seq_before, periods)

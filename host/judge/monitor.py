@@ -206,7 +206,7 @@ class BusMonitor:
         data, self._now_s = bytes(msg.data), now_s
         timestamp_s = self._bus_time_s = msg.timestamp
         if self.tracker.wrongs.origin_s is None:  # the verdict's times count from here
-            self.tracker.wrongs.origin_s = timestamp_s
+            self.tracker.wrongs.origin_s = self.ahead.origin_s = timestamp_s
         message = self._by_key.get(frame_key(msg.arbitration_id, msg.is_extended_id))
         if message is not None and self.settle.unheard(msg, verdict):  # heard once, in bus
             heard_encoder(self.tracker, message, data)  # order: livegapseen, gapchecked's count

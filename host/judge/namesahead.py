@@ -170,20 +170,23 @@ class Ahead:
     enc_counter: int
     sent_s: float
 
-    def text(self) -> str:
-        return (f"{self.message} at {self.t_s:.6f} s names WHEEL_ENCODERS COUNTER "
-                f"{self.enc_counter}, not sent until {self.sent_s:.6f} s")
+    def text(self, origin_s: float = 0.0) -> str:
+        """In words, the times counted from ``origin_s`` (the live judges': the drive's first
+        frame, as their other lines; a live stamp is the epoch's)."""
+        return (f"{self.message} at {self.t_s - origin_s:.6f} s names WHEEL_ENCODERS COUNTER "
+                f"{self.enc_counter}, not sent until {self.sent_s - origin_s:.6f} s")
 
 
-def report_of(found: list[Ahead], count: int) -> dict[str, Any]:
-    """The report's ``names_ahead``: ``frames`` (how many), ``first`` and ``detail``."""
+def report_of(found: list[Ahead], count: int, origin_s: float = 0.0) -> dict[str, Any]:
+    """The report's ``names_ahead``: ``frames`` (how many), ``first`` (the log's times) and
+    ``detail`` (its times counted from ``origin_s``)."""
     first = found[0]
     more = f" (and {count - 1} more pose frames)" if count > 1 else ""
     return {"frames": count, "first": {"message": first.message, "t_s": first.t_s,
                                        "enc_counter": first.enc_counter,
                                        "sent_s": first.sent_s},
-            "detail": f"{first.text()}{more}: the firmware names an encoder frame before it "
-                      "was sent"}
+            "detail": f"{first.text(origin_s)}{more}: the firmware names an encoder frame "
+                      "before it was sent"}
 
 
 def mark(report: dict[str, Any], scan: AheadScan) -> dict[str, Any]:
