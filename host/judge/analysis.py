@@ -396,7 +396,7 @@ def _analyze_life(
     vs_ref["max_position_error_beyond_allowance_m"] = float(
         np.max(pos_err - allowance - twin_allowed))
     (lone := judge_lone(halves, onboard, enc, ref_all, stalls, pose_sent_s, (
-        robot, integrator, losses, placed), left_out.lone_rows)).fold(vs_ref)  # lonehalves
+        robot, integrator, losses, placed), left_out.lone_rows, seen)).fold(vs_ref)  # lonehalves
     fold_power_up(vs_ref, power_up_errors(frames, decoder, enc, ref_all, onboard.enc, start_pose))
     passed = bool(
         vs_ref["max_position_error_beyond_allowance_m"] <= tolerance.position_m

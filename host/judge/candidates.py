@@ -9,9 +9,13 @@ frame of its ENC_COUNTER (``resendalias``; kobuki seed 3, ``delay=0.3:55,dup=0.1
 6.136 s), one in a segment of the reference without a kept sample. Such a half still names
 one frame of a few: the frames whose sender sequence number has its ENC_COUNTER, from a counter
 lap before the frame it is matched to (or ``REACH_LAPS`` laps before the last pose frame sent
-before it: a stall's backlog) to the last encoder frame heard when it was sent. It is judged
-against each (``judge_half``): it PASSes if it fits one, FAILs if it fits none, and stays
-unjudged only if one of them cannot be bounded (it may name that one).
+before it: a stall's backlog), but none before the frame a pose sent before it named
+(``lonefloor``: the firmware takes frames in sequence), to the last encoder frame heard when it
+was sent; not a frame the log lacks that the firmware's pages prove it missed too (``_missed``:
+pmir figure8 seed 10, ``burst=0.05:10``, a lost frame a lap before the one a lone Y names, its
+neighbours 3 periods off, fitted that Y raised 10 mm by pmir's 40 mm reach a period). It is
+judged against each (``judge_half``): it PASSes if it fits one, FAILs if it fits none, and
+stays unjudged only if one of them cannot be bounded (it may name that one).
 
 The pose at a candidate frame the log holds is a kept sample's (the firmware's own, judged by
 the reference in turn) carried over the count steps to it (``stallfirst.carried_pose``: the
@@ -30,6 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from odocan.host.judge.gapseen import NOTHING, Seen
 from odocan.host.judge.reference import Geometry
 from odocan.host.judge.reference_path import Reference
 from odocan.host.judge.samples import (
@@ -59,14 +64,15 @@ class Half:
     value_m: float  # X or Y
     heading_rad: float  # X: HEADING (0 .. 2 pi); Y: TURNS * 2 pi (the turn's start)
     prev_sent_s: float  # the last pose frame sent before it (t_s: none)
+    floor: int = -1  # the latest frame a pose sent before it named (``lonefloor``; -1: none)
 
 
 class CandidateJudge:
     """Judges lone halves against their candidate frames (module docstring)."""
 
     def __init__(self, enc: Encoders, kept: Poses, ref: Reference,
-                 robot: tuple[Geometry, str, int]) -> None:
-        self.enc, self.ref, self.robot = enc, ref, robot
+                 robot: tuple[Geometry, str, int], seen: Seen = NOTHING) -> None:
+        self.enc, self.ref, self.robot, self.seen = enc, ref, robot, seen
         order = np.argsort(kept.enc, kind="stable")
         self.kept_enc = kept.enc[order]
         self.kept = Poses(kept.enc[order], kept.x_m[order], kept.y_m[order],
@@ -106,12 +112,23 @@ class CandidateJudge:
         hi = int(np.searchsorted(enc.timestamp_s, half.t_s, side="right")) - 1
         s_lo = min(int(seq[half.matched]) - lap, int(seq[min(lo, len(seq) - 1)]))
         s_hi = max(int(seq[half.matched]), int(seq[max(hi, 0)]))
+        if half.floor >= 0:  # no frame before one a pose sent before it named (lonefloor)
+            s_lo = max(s_lo, int(seq[half.floor]))
         s_lo = max(s_lo, int(seq[self.ref.start]))
         s_hi = min(s_hi, int(seq[self.end - 1]))
         # the COUNTER of a sequence number, from the matched frame's (seq unwraps it)
         first = s_lo + (half.named - int(enc.counter[half.matched]) + int(
             seq[half.matched]) - s_lo) % lap
-        return list(range(first, s_hi + 1, lap))
+        return [s for s in range(first, s_hi + 1, lap) if not self._missed(s)]
+
+    def _missed(self, s: int) -> bool:
+        """Whether the firmware's pages prove it took no frame of sequence number ``s``: one
+        the log lacks, in a gap it missed whole or over which it took exactly the log's frames
+        (``gapseen.Seen.gap_missed``): a frame it never took is no frame it names."""
+        k = int(np.searchsorted(self.enc.seq, s))
+        if k >= len(self.enc.seq) or int(self.enc.seq[k]) == s:
+            return False
+        return self.seen.gap_missed(k, frozenset(self.ref.counter_restarts))
 
     def _at_seq(self, half: Half, s: int) -> Excess | None:
         """``half``'s excess at the frame of sequence number ``s`` (module docstring)."""

@@ -33,7 +33,9 @@ import numpy.typing as npt
 
 from odocan.host.judge.candidates import CandidateJudge, Half, lone_halves_of
 from odocan.host.judge.compare import pose_errors
+from odocan.host.judge.gapseen import NOTHING, Seen
 from odocan.host.judge.latehalves import NEAR_PERIODS
+from odocan.host.judge.lonefloor import with_floors
 from odocan.host.judge.losses import Placements, loss_allowance
 from odocan.host.judge.posehalves import BAM, x_half_heading_bam, y_half_heading_bam
 from odocan.host.judge.reference import Geometry
@@ -170,12 +172,13 @@ def judge_lone(
     halves: PoseHalves, kept: Poses, enc: Encoders, ref: Reference,
     breaks: IntArray, pose_sent_s: FloatArray | None,
     allowed: tuple[RobotProfile, str, list[tuple[int, int, int]], Placements],
-    first_rows: set[int] | None = None,
+    first_rows: set[int] | None = None, seen: Seen = NOTHING,
 ) -> LoneVerdict:
     """Judge every lone half (module docstring) against ``ref`` (``kept``: the samples
     judged, ``breaks``: the stalls' encoder frames); ``allowed``: robot, integrator, the firmware's
     loss spans and the placements, for the samples' loss and twin allowances at its frames;
-    ``first_rows``: the ODOM_POSE_X halves ``stallfirst`` judged (a stall's first pose): its."""
+    ``first_rows``: the ODOM_POSE_X halves ``stallfirst`` judged (a stall's first pose): its;
+    ``seen``: what the firmware's pages prove it took (``gapseen``), for the candidates."""
     verdict = LoneVerdict()
     paired = np.intersect1d(halves.ex[halves.ex >= 0], halves.ey[halves.ey >= 0])
     ix, iy = lone_frames(halves, paired)
@@ -209,9 +212,11 @@ def judge_lone(
     okx &= ~np.isnan(bx)
     oky &= ~np.isnan(by)
     robot, integrator, losses, placed = allowed
-    by_candidates(verdict, lone_halves_of(halves, ix[~okx], iy[~oky], sent), CandidateJudge(
+    lone = with_floors(lone_halves_of(halves, ix[~okx], iy[~oky], sent), halves, ix[~okx],
+                       iy[~oky], kept.enc)
+    by_candidates(verdict, lone, CandidateJudge(
         enc, kept, ref, (Geometry.of(robot), integrator,
-                         min(robot.counter_bits, WIRE_COUNTER_BITS))))
+                         min(robot.counter_bits, WIRE_COUNTER_BITS)), seen))
     ix, ex, tx, iy, ey, ty = ix[okx], ex[okx], tx[okx], iy[oky], ey[oky], ty[oky]
     poses = _completed(halves, ix, ex, iy, ey, ref)
     if len(poses.enc) == 0:
