@@ -1,20 +1,22 @@
 """A lone pose half on a lossy bus judged against the frames it may name (issue #11: a PASS must
 never hide a wrong pose; ``host.judge.candidates``).
 
-pmir random seed 8, 16 s, ``drop=0.2,stall=5:3``: the ODOM_POSE_Y at 9.781 s lost its
-ODOM_POSE_X, and the log lost encoder frames on both sides of the one it names (seq 977), so
-the reference there is a segment without a kept sample and the half goes to its candidates.
-Raised 10 mm it PASSed whole and streamed (30 mm FAILed): besides 977 (9.9 mm beyond), its
-candidates held the frame of its ENC_COUNTER a lap before (seq 961), which the log lacks,
-bounded by its neighbours less pmir's 4 m/s reach of a period (40 mm): -10.4 mm, a fit. The
-firmware had named seq 975 in the pose it sent just before (the kept sample whose Y, COUNTER
-one less, was heard at 9.761 s): it takes encoder frames in sequence, so this half names 975
-or later (``host.judge.lonefloor``). pmir figure8 seed 10, ``burst=0.05:10,stall=4:0.2,
-stall=8:0.05``: the lone Y at 5.981 s and 10.631 s fitted a frame a lap before the one they
-name, lost in a burst with its neighbours 3 and 19 periods off: raised 10 mm, 99 mm and 20 mm
-inside the reach; the firmware's ODOM_STATUS pages prove it missed those gaps whole, so it
-names no frame of them (``candidates._missed``). Lone halves are told apart here with cantools
-(``test_lone_halves.lone_halves``); the log is edited with cantools' CRC (``tests/log_edit.py``)."""
+pmir random seed 8, 16 s, ``drop=0.2,stall=5:3``: the ODOM_POSE_Y at 9.781 s lost its ODOM_POSE_X,
+and the log lost encoder frames on both sides of the one it names (seq 977), so the reference there
+is a segment without a kept sample and the half goes to its candidates. Raised 10 mm it PASSed whole
+and streamed (30 mm FAILed): besides 977 (9.9 mm beyond), its candidates held the frame of its
+ENC_COUNTER a lap before (seq 961), which the log lacks, bounded by its neighbours less pmir's 4 m/s
+reach of a period (40 mm): -10.4 mm, a fit. The firmware had named seq 975 in the pose it sent just
+before (the kept sample whose Y, COUNTER one less, was heard at 9.761 s). A floor from that pose
+(the firmware takes frames in sequence) was built and dropped: a bus that holds a pose frame back
+300 ms (kobuki figure8 seed 673, ``delay=0.3:55``) cannot be told from one in order, and a correct
+firmware FAILed 60 mm; the half FAILs without it (the candidates the pages prove missed are none).
+pmir figure8 seed 10, ``burst=0.05:10,stall=4:0.2, stall=8:0.05``: the lone Y at 5.981 s and 10.631
+s fitted a frame a lap before the one they name, lost in a burst with its neighbours 3 and 19
+periods off: raised 10 mm, 99 mm and 20 mm inside the reach; the firmware's ODOM_STATUS pages prove
+it missed those gaps whole, so it names no frame of them (``candidates._missed``). Lone halves are
+told apart here with cantools (``test_lone_halves.lone_halves``); the log is edited with cantools'
+CRC (``tests/log_edit.py``)."""
 
 from __future__ import annotations
 

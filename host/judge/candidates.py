@@ -1,31 +1,29 @@
 """A lone pose half judged against every encoder frame it may name (issue #11: a PASS must never
 hide a wrong pose).
 
-``lonehalves`` judges a lone half against the reference at the frame its ENC_COUNTER is matched
-to; where that frame is not sure it left the half unjudged, and a pose of any value PASSed: the
-first pose after a stall on a lossy bus (kobuki seed 5, ``stall=4:0.2,drop=0.05``: the logger
-missed frames of the silence too, the X at 4.201 s raised 10 m), a lone X that may alias a later
-frame of its ENC_COUNTER (``resendalias``; kobuki seed 3, ``delay=0.3:55,dup=0.1``, +10 mm at
-6.136 s), one in a segment of the reference without a kept sample. Such a half still names
-one frame of a few: the frames whose sender sequence number has its ENC_COUNTER, from a counter
-lap before the frame it is matched to (or ``REACH_LAPS`` laps before the last pose frame sent
-before it: a stall's backlog), but none before the frame a pose sent before it named
-(``lonefloor``: the firmware takes frames in sequence), to the last encoder frame heard when it
-was sent; not a frame the log lacks that the firmware's pages prove it missed too (``_missed``:
-pmir figure8 seed 10, ``burst=0.05:10``, a lost frame a lap before the one a lone Y names, its
-neighbours 3 periods off, fitted that Y raised 10 mm by pmir's 40 mm reach a period). It is
-judged against each (``judge_half``): it PASSes if it fits one, FAILs if it fits none, and
-stays unjudged only if one of them cannot be bounded (it may name that one).
+``lonehalves`` judges a lone half against the reference at the frame its ENC_COUNTER is matched to;
+where that frame is not sure it left the half unjudged, and a pose of any value PASSed: the first
+pose after a stall on a lossy bus (kobuki seed 5, ``stall=4:0.2,drop=0.05``: the logger missed
+frames of the silence too, the X at 4.201 s raised 10 m), a lone X that may alias a later frame of
+its ENC_COUNTER (``resendalias``; kobuki seed 3, ``delay=0.3:55,dup=0.1``, +10 mm at 6.136 s), one
+in a segment of the reference without a kept sample. Such a half still names one frame of a few: the
+frames whose sender sequence number has its ENC_COUNTER, from a counter lap before the frame it is
+matched to (or ``REACH_LAPS`` laps before the last pose frame sent before it: a stall's backlog), to
+the last encoder frame heard when it was sent; not a frame the log lacks that the firmware's pages
+prove it missed too (``_missed``: pmir figure8 seed 10, ``burst=0.05:10``, a lost frame a lap before
+the one a lone Y names, its neighbours 3 periods off, fitted that Y raised 10 mm by pmir's 40 mm
+reach a period). It is judged against each (``judge_half``): it PASSes if it fits one, FAILs if it
+fits none, and stays unjudged only if one of them cannot be bounded (it may name that one).
 
-The pose at a candidate frame the log holds is a kept sample's (the firmware's own, judged by
-the reference in turn) carried over the count steps to it (``stallfirst.carried_pose``: the
-counts are absolute; its slack the worst merge of the frames between and the sample's
-rounding), from the nearest kept sample on either side within ``NEAR_FRAMES`` frames, not
-across a counter restart or a re-prime (the firmware's pose jumps there); the better side
-counts. A candidate the log lacks (lost, or refused by the host's E2E: the firmware may have
-taken it) lies between the nearest frames the log holds on either side, and within the
-plausibility bound's reach of each (the robot profile's maximum wheel speed over the periods
-between: position and heading): it is bounded by theirs less that reach."""
+The pose at a candidate frame the log holds is a kept sample's (the firmware's own, judged by the
+reference in turn) carried over the count steps to it (``stallfirst.carried_pose``: the counts are
+absolute; its slack the worst merge of the frames between and the sample's rounding), from the
+nearest kept sample on either side within ``NEAR_FRAMES`` frames, not across a counter restart or a
+re-prime (the firmware's pose jumps there); the better side counts. A candidate the log lacks (lost,
+or refused by the host's E2E: the firmware may have taken it) lies between the nearest frames the
+log holds on either side, and within the plausibility bound's reach of each (the robot profile's
+maximum wheel speed over the periods between: position and heading): it is bounded by theirs less
+that reach."""
 
 from __future__ import annotations
 
@@ -64,7 +62,6 @@ class Half:
     value_m: float  # X or Y
     heading_rad: float  # X: HEADING (0 .. 2 pi); Y: TURNS * 2 pi (the turn's start)
     prev_sent_s: float  # the last pose frame sent before it (t_s: none)
-    floor: int = -1  # the latest frame a pose sent before it named (``lonefloor``; -1: none)
 
 
 class CandidateJudge:
@@ -112,8 +109,6 @@ class CandidateJudge:
         hi = int(np.searchsorted(enc.timestamp_s, half.t_s, side="right")) - 1
         s_lo = min(int(seq[half.matched]) - lap, int(seq[min(lo, len(seq) - 1)]))
         s_hi = max(int(seq[half.matched]), int(seq[max(hi, 0)]))
-        if half.floor >= 0:  # no frame before one a pose sent before it named (lonefloor)
-            s_lo = max(s_lo, int(seq[half.floor]))
         s_lo = max(s_lo, int(seq[self.ref.start]))
         s_hi = min(s_hi, int(seq[self.end - 1]))
         # the COUNTER of a sequence number, from the matched frame's (seq unwraps it)

@@ -35,7 +35,6 @@ from odocan.host.judge.candidates import CandidateJudge, Half, lone_halves_of
 from odocan.host.judge.compare import pose_errors
 from odocan.host.judge.gapseen import NOTHING, Seen
 from odocan.host.judge.latehalves import NEAR_PERIODS
-from odocan.host.judge.lonefloor import with_floors
 from odocan.host.judge.losses import Placements, loss_allowance
 from odocan.host.judge.posehalves import BAM, x_half_heading_bam, y_half_heading_bam
 from odocan.host.judge.reference import Geometry
@@ -212,9 +211,7 @@ def judge_lone(
     okx &= ~np.isnan(bx)
     oky &= ~np.isnan(by)
     robot, integrator, losses, placed = allowed
-    lone = with_floors(lone_halves_of(halves, ix[~okx], iy[~oky], sent), halves, ix[~okx],
-                       iy[~oky], kept.enc)
-    by_candidates(verdict, lone, CandidateJudge(
+    by_candidates(verdict, lone_halves_of(halves, ix[~okx], iy[~oky], sent), CandidateJudge(
         enc, kept, ref, (Geometry.of(robot), integrator,
                          min(robot.counter_bits, WIRE_COUNTER_BITS)), seen))
     ix, ex, tx, iy, ey, ty = ix[okx], ex[okx], tx[okx], iy[oky], ey[oky], ty[oky]
