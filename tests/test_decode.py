@@ -307,8 +307,9 @@ def test_candump_parser_equal_length_lines_of_two_layouts(tmp_path: Path) -> Non
     layouts interleaved (the second layout's rows are copied out for the next template)."""
     lines = []
     for k in range(300):
-        if k % 7 == 3:  # same length as the others, the fields elsewhere
-            lines.append(f"(1{k:03d}.000) vcan0 1{k % 100:02X}#00112233445566{k % 256:02X} R")
+        if k % 7 == 3:  # same length as the others, the fields elsewhere (the stamp in order:
+            # one far off both neighbours is set aside, ``stampglitch``)
+            lines.append(f"({k:04d}.000) vcan0 1{k % 100:02X}#00112233445566{k % 256:02X} R")
         else:
             lines.append(f"({k:04d}.123456) can1 2{k % 100:02X}#{k % 256:02X}112233445566 T")
     assert len({len(line) for line in lines}) == 1
