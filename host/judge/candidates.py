@@ -70,6 +70,7 @@ class CandidateJudge:
     def __init__(self, enc: Encoders, kept: Poses, ref: Reference,
                  robot: tuple[Geometry, str, int], seen: Seen = NOTHING) -> None:
         self.enc, self.ref, self.robot, self.seen = enc, ref, robot, seen
+        self._restarts = frozenset(ref.counter_restarts)  # for ``_missed``
         order = np.argsort(kept.enc, kind="stable")
         self.kept_enc = kept.enc[order]
         self.kept = Poses(kept.enc[order], kept.x_m[order], kept.y_m[order],
@@ -123,7 +124,7 @@ class CandidateJudge:
         k = int(np.searchsorted(self.enc.seq, s))
         if k >= len(self.enc.seq) or int(self.enc.seq[k]) == s:
             return False
-        return self.seen.gap_missed(k, frozenset(self.ref.counter_restarts))
+        return self.seen.gap_missed(k, self._restarts)
 
     def _at_seq(self, half: Half, s: int) -> Excess | None:
         """``half``'s excess at the frame of sequence number ``s`` (module docstring)."""

@@ -42,7 +42,7 @@ def _odocan(*args: str) -> subprocess.CompletedProcess[str]:
 
 @pytest.fixture(scope="module")
 def lossy(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    path = tmp_path_factory.mktemp("lonefloor") / "d8.log"
+    path = tmp_path_factory.mktemp("lonemissed") / "d8.log"
     done = _odocan("run", "--robot", "pmir", "--scenario", "random", "--seed", "8",
                    "--duration", "16", "--faults", "drop=0.2,stall=5:3", "--log", str(path))
     assert path.exists(), done.stderr
@@ -51,7 +51,7 @@ def lossy(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 @pytest.fixture(scope="module")
 def burst(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    path = tmp_path_factory.mktemp("lonefloor") / "d10.log"
+    path = tmp_path_factory.mktemp("lonemissed") / "d10.log"
     done = _odocan("run", "--robot", "pmir", "--scenario", "figure8", "--seed", "10",
                    "--duration", "14", "--faults", "burst=0.05:10,stall=4:0.2,stall=8:0.05",
                    "--log", str(path))
