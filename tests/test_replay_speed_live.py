@@ -29,10 +29,11 @@ from pathlib import Path
 import can
 import pytest
 
-from odocan.host.judge.livepace import LivePace
+from odocan.host.judge.livepace import PACE_INTERVALS, LivePace
 from odocan.host.judge.monitor import BusMonitor
 from odocan.host.judge.reference import Geometry
 from odocan.host.mqtt.telemetry import RobotTelemetry
+from odocan.host.protocol.busfacts import ENC_CYCLE_S
 from odocan.sim.contract import database
 from odocan.sim.robot import load
 from tests.judges_cli import POSE_X, TEN_MM_LSB, both_analyses, correct_drive
@@ -108,7 +109,11 @@ def test_a_replay_at_speed_n_passes_as_at_speed_1(drive: Path, speed: float) -> 
     assert monitor.tracker.vs_reference.samples >= 0.99 * at_1, speed  # (10x: one less)
     for measured in (monitor.pace.pace, pace.pace):
         assert measured == pytest.approx(speed, rel=1e-3)
-    assert monitor.snapshot(now_s=0.0)["pace"]["pace"] == monitor.pace.pace
+    said = monitor.snapshot(now_s=0.0)["pace"]
+    assert said["pace"] == monitor.pace.pace
+    # decided after PACE_INTERVALS one-step intervals from the first frame, in bus seconds
+    assert said["decided_after_s"] == pytest.approx(PACE_INTERVALS * ENC_CYCLE_S / speed,
+                                                    rel=0.1), speed
 
 
 TAMPERS = ("first after the bus-off", 7.0)  # +10 mm on ODOM_POSE_X from then on

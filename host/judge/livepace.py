@@ -47,7 +47,7 @@ class PaceFacts:
     """What the pace decided: None while measuring, 1.0 for a live bus, else the factor."""
 
     pace: float | None = None
-    decided_at_s: float | None = None  # the bus time (as heard) of the decision
+    decided_after_s: float | None = None  # bus seconds from the first encoder frame heard
 
 
 class LivePace:
@@ -61,6 +61,7 @@ class LivePace:
         self._data_ids = None if config is None else config.data_ids
         self.facts = PaceFacts(pace=1.0 if self._data_ids is None else None)
         self._last: tuple[float, int] | None = None  # (bus time, COUNTER) of the last CRC-right
+        self._first_s: float | None = None  # the bus time the first CRC-right one was heard
         self._intervals: list[float] = []
         self._origin = (0.0, 0.0)  # (bus time as heard, drive time) the map counts from
         self._sum_s, self._count = 0.0, 0  # the one-step intervals the pace is narrowed by
@@ -97,6 +98,8 @@ class LivePace:
         counter = data[1] & ENC_COUNTER_MASK
         if crc8h2f_p02_one(data, self._data_ids[counter]) != data[0]:
             return
+        if self._first_s is None:
+            self._first_s = t_s
         last, self._last = self._last, (t_s, counter)
         if last is None or (counter - last[1]) & ENC_COUNTER_MASK != 1 or t_s < last[0]:
             return
@@ -114,7 +117,7 @@ class LivePace:
         with a silence stepping the COUNTER by one stays live; a replay heard in bursts has
         no interval left but its bursts' gaps and zeros). The pace is then their plain mean's,
         which a receiver's bursts do not bias."""
-        self.facts.decided_at_s = t_s
+        self.facts.decided_after_s = t_s - (self._first_s or t_s)
         paces = [_pace_of(sum(self._intervals) / len(self._intervals)),
                  _pace_of(_mean_period_s(self._intervals))]
         self._intervals = []
@@ -141,7 +144,7 @@ class LivePace:
 
     def as_dict(self) -> dict[str, float | None]:
         """The pace for the snapshot (None while measuring)."""
-        return {"pace": self.facts.pace, "decided_at_s": self.facts.decided_at_s}
+        return {"pace": self.facts.pace, "decided_after_s": self.facts.decided_after_s}
 
 
 def _mean_period_s(intervals_s: list[float]) -> float:
