@@ -8,10 +8,10 @@ firmware's first pose (ENC_COUNTER 2) is on the encoder frame 53 of the capture 
 reference there: 0.02 mm, 0.05 mrad off), 16 encoder frames before the newest frame with that
 counter (73), which the judges take: 79.31 mm, 78.49 mrad off. The firmware was that far behind
 (FRAME_TOTALS: 18 frames overflowed its mailbox next); its next poses name the newest frames.
-A 4-bit ENC_COUNTER cannot name a frame 16 or more behind: the judges need another cue (the
-firmware's pace, its next poses) before they blame it. The process test now starts the sim
-once the firmware is heard (0 of 8 runs said POSE WRONG since); the judges still FAIL the
-capture.
+A 4-bit ENC_COUNTER cannot name a frame 16 or more behind: the pose's own values tell the lap
+(``host.judge.lapfirst``: X, Y, heading and the twist's DISTANCE all fit the older lap, not the
+newest; live ``livelapfirst``: its HEADING picks it, each value judged there). The process test
+now starts the sim once the firmware is heard (0 of 8 runs said POSE WRONG since).
 
 ``restart_live_two_lsb.blf``: after the restart (the firmware's FRAME_TOTALS: 26 frames lost,
 overflowed), ``analyze`` passes (0.29 mm within its 1.681 mm allowance for the frames the
@@ -75,26 +75,44 @@ def test_a_first_pose_fitting_the_older_lap_but_in_part_still_fails(
     leaves the plain name (the newest frame), and both ``analyze`` FAIL by the position."""
     tampered = tmp_path / "tampered.blf"
     times = raise_raw_once(LAGGED, tampered, message, span, lsb, 0.0)
-    assert len(times) == 1 and times[0] < FIRST_POSE_BEFORE_S, times
+    assert len(times) == 1, times
+    assert times[0] < FIRST_POSE_BEFORE_S, times
     assert fails_by_position(tampered, tmp_path) == []
+    assert ("DISTANCE WRONG" if message == "ODOM_TWIST" else "POSE WRONG") in live_states(
+        tampered)  # live, each value judged at the lap the HEADING picks (livelapfirst)
+    _, bridge = live_judges("pmir", tampered)
+    assert bool(bridge.tracker.wrongs.standing_text()) is (message != "ODOM_TWIST")
+
+
+def test_a_first_pose_whose_heading_fits_no_older_lap_still_fails(tmp_path: Path) -> None:
+    """Its HEADING 3 LSBs off (the older lap's X, Y and DISTANCE kept): no lap picked, the
+    plain name stands, every judge FAILs it by the position (79.6 mm off the newest frame)."""
+    tampered = tmp_path / "tampered.blf"
+    assert len(raise_raw_once(LAGGED, tampered, "ODOM_POSE_X", (6, 2), 3, 0.0)) == 1
+    assert fails_by_position(tampered, tmp_path) == []
+    assert "POSE WRONG" in live_states(tampered)
+    _, bridge = live_judges("pmir", tampered)
+    assert bridge.tracker.wrongs.standing_text()
 
 
 @pytest.mark.parametrize("from_s", [0.0, 1.0])  # from the lagged first pose on, after it
-def test_x_10_mm_off_fails_both_analyses_on_the_lagged_first_pose(
+def test_x_10_mm_off_fails_every_judge_on_the_lagged_first_pose(
         from_s: float, tmp_path: Path) -> None:
     tampered = tmp_path / "tampered.blf"
     assert x_10_mm_off_fails(LAGGED, tampered, from_s, 50) == []
+    assert "POSE WRONG" in live_states(tampered)
+    _, bridge = live_judges("pmir", tampered)
+    assert bridge.tracker.wrongs.standing_text()
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "the live judges still pair the first pose (ENC_COUNTER 2) with frame 73, the newest of its "
-    "counter: the monitor and the bridge latch POSE WRONG, 79.60 mm, 78.49 mrad off (78.95 mm "
-    "beyond); the pose fits frame 53, a lap before, within 0.04 mm, 0.05 mrad (lapfirst's rule "
-    "has no live side yet)"))
 def test_the_live_judges_pass_a_firmware_16_frames_behind_at_its_first_pose() -> None:
+    """Before: the monitor and the bridge latched POSE WRONG at 0.64 s, 79.60 mm, 78.49 mrad
+    off (78.95 mm beyond); the first pose's HEADING picks frame 53 (``livelapfirst``), its Y
+    half and twist follow, each judged there."""
     assert "POSE WRONG" not in live_states(LAGGED)
     _, bridge = live_judges("pmir", LAGGED)
     assert not bridge.tracker.wrongs.standing_text()
+    assert bridge.tracker.max_beyond_allowance_m <= POSITION_LSB_M
 
 
 def test_the_whole_log_passes_the_restart_with_lost_frames() -> None:

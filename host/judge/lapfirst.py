@@ -149,9 +149,11 @@ def lap_named(frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: Bul
     one = (np.array([named], dtype=np.int64), np.array([cands[found]], dtype=np.int64),
            px["ENC_COUNTER"][i:i + 1].astype(np.int64),
            px["timestamp_s"][i:i + 1].astype(np.float64))
-    renamed = one if enc.renamed is None else tuple(
-        np.concatenate((a, b)) for a, b in zip(enc.renamed, one, strict=True))
-    enc = replace(enc, renamed=renamed)  # type: ignore[arg-type]
+    if enc.renamed is not None:  # a flood's renames first (``floodnames``)
+        was = enc.renamed
+        one = (np.concatenate((was[0], one[0])), np.concatenate((was[1], one[1])),
+               np.concatenate((was[2], one[2])), np.concatenate((was[3], one[3])))
+    enc = replace(enc, renamed=one)
     return enc, pose_halves(frames, accepted, decoder, enc)
 
 
