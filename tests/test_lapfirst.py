@@ -4,10 +4,20 @@ in part is not excused)."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
-from odocan.host.judge.lapfirst import Said, lap_candidates, older_lap
+from odocan.host.io.logs import read_log
+from odocan.host.judge.lapfirst import Said, lagged, lap_candidates, older_lap
 from odocan.host.judge.samples import HEADING_LSB_RAD, POSITION_LSB_M
+from odocan.host.protocol.dbcplan import default_plan
+from odocan.host.protocol.decode import BulkDecoder
+from odocan.host.protocol.e2e import check_frames
+from odocan.sim.robot import load
+from tests.log_edit import raise_raw_once
+
+FILES = Path(__file__).resolve().parent / "files"
 
 NEWEST = Said(0.1833, 0.0081, 0.1251, 0.183)
 OLDER = Said(0.1032, 0.0013, 0.0472, 0.103)
@@ -38,3 +48,22 @@ def test_the_candidates_go_back_by_laps_to_the_life_s_first_frame() -> None:
     assert lap_candidates(seq, 6) == [6, 3, 0]  # seq 35, 19, 3 (the life's first)
     assert lap_candidates(seq[1:], 5) == [5, 2]  # seq 35, 19 (3: before the life's first)
     assert lap_candidates(seq, 0) == [0]
+
+
+def test_the_stream_reads_whole_a_life_whose_first_pose_may_lag(tmp_path: Path) -> None:
+    """``lagged``: the streamed judge's gate (``stream_first``): the capture's first pose fits
+    frame 53 by heading and DISTANCE (the streamed judge reads it whole, ``lapfirst.REFUSAL``);
+    the other capture's, and the capture's with its first HEADING 3 LSBs off, do not."""
+    assert _lagged(FILES / "restart_lagged_first_pose.blf")
+    assert not _lagged(FILES / "restart_live_two_lsb.blf")
+    tampered = tmp_path / "tampered.blf"
+    raise_raw_once(FILES / "restart_lagged_first_pose.blf", tampered, "ODOM_POSE_X", (6, 2), 3,
+                   0.0)
+    assert not _lagged(tampered)
+
+
+def _lagged(path: Path) -> bool:
+    frames = read_log(path)
+    db = default_plan()
+    _, accepted = check_frames(frames, db)
+    return lagged(frames, accepted, BulkDecoder(db), load("pmir"))

@@ -45,6 +45,7 @@ from odocan.host.judge.samples import (
     Encoders,
     PoseHalves,
     accepted_rows,
+    encoder_frames,
     flood_named,
     pose_halves,
 )
@@ -55,6 +56,8 @@ from odocan.sim.robot import RobotProfile
 MATCH_LSB = 2.0  # wire LSBs: the pose's truncation, the firmware's integer steps, a margin
 DISTANCE_LSB_M = 1e-3  # ODOM_TWIST DISTANCE: 1 mm per LSB
 Start = tuple[float, float, float]  # the life's pose at its first encoder frame
+REFUSAL = ("the life's first pose fits a frame a COUNTER lap before the newest of its "
+           "ENC_COUNTER (lapfirst)")
 
 
 class Said(NamedTuple):
@@ -194,3 +197,24 @@ def _same_tick(t_s: npt.NDArray[np.float64], counters: npt.NDArray[np.int64], at
         near &= also
     rows = np.flatnonzero(near)
     return int(rows[0]) if len(rows) else None
+
+
+def lagged(frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder,
+           robot: RobotProfile) -> bool:
+    """Whether the first pose of a life (``frames``: its first frames, up to that pose's tick)
+    may be taken to an older lap (``lap_named``): its heading and DISTANCE, which no integrator
+    changes, fit an older lap from (0, 0, 0) and not the newest. The streamed judge reads such a
+    life whole (``stream_first``: it names a pose by the plain rule alone)."""
+    enc = encoder_frames(frames, accepted, decoder)
+    if not len(enc.seq):
+        return False
+    enc, halves = flood_named(frames, accepted, decoder, enc, of_robot(robot))
+    first = _first_pose(frames, accepted, decoder, enc, halves)
+    if first is None or first[1].distance_m is None:
+        return False
+    i, said = first
+    cands = lap_candidates(enc.seq, int(halves.ex[i]))
+    if len(cands) < 2:
+        return False
+    refs = reference_at(enc, cands, (0.0, 0.0, 0.0), robot, "exact")
+    return older_lap(said, [r._replace(x_m=said.x_m, y_m=said.y_m) for r in refs]) is not None
