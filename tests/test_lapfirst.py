@@ -7,15 +7,31 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pytest
 
-from odocan.host.io.logs import read_log
-from odocan.host.judge.lapfirst import Said, lagged, lap_candidates, older_lap
-from odocan.host.judge.samples import HEADING_LSB_RAD, POSITION_LSB_M
+from odocan.host.io.logs import FrameArrays, read_log
+from odocan.host.judge.lapfirst import (
+    Said,
+    at_start,
+    lagged,
+    lap_candidates,
+    lap_named,
+    older_lap,
+)
+from odocan.host.judge.samples import (
+    HEADING_LSB_RAD,
+    POSITION_LSB_M,
+    Encoders,
+    PoseHalves,
+    encoder_frames,
+)
 from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.protocol.decode import BulkDecoder
 from odocan.host.protocol.e2e import check_frames
 from odocan.sim.robot import load
 from tests.log_edit import raise_raw_once
+from tests.test_reprime_apply import drive
+from tests.test_staged_reboot import _written
 
 FILES = Path(__file__).resolve().parent / "files"
 
@@ -67,3 +83,39 @@ def _lagged(path: Path) -> bool:
     db = default_plan()
     _, accepted = check_frames(frames, db)
     return lagged(frames, accepted, BulkDecoder(db), load("pmir"))
+
+
+@pytest.mark.parametrize("scenario", ["spin", "square"])
+def test_a_backlog_pose_after_a_stall_is_left_to_the_stall_rules(
+        scenario: str, tmp_path: Path) -> None:
+    """The re-prime sweeps' life (pmir reset at 0.1 s, halted 4 s): the firmware's first pose,
+    sent at 4.12 s, is its FIFO's backlog pose of the life's first frames, 25 laps before the
+    newest of its ENC_COUNTER, and fits it; before, ``lap_named`` moved it there on top of the
+    stall rules' own placement and FAILed the correct firmware (12.6 mrad on the spin, 2.7 mm
+    on the square). After a stall the name stands (``after_stall``); the capture, which did not
+    stall, is still moved. The life as the whole log's judge cuts it: from the reset's summary
+    (0.101 s, the firmware's last word before its stall) to the APPLY (4.131 s)."""
+    messages = [m for m in drive(scenario, 400, 3) if 0.1005 <= m.timestamp < 4.131]
+    frames = read_log(_written(tuple(messages), tmp_path / "life.log"))
+    enc, _ = _lap_named(frames)
+    assert enc.renamed is None
+    enc, _ = _lap_named(read_log(FILES / "restart_lagged_first_pose.blf"))
+    assert enc.renamed is not None
+
+
+def test_a_pose_at_the_life_s_start_is_no_evidence_of_a_lap() -> None:
+    """A firmware that primed late on the very frame its first pose names says the life's start
+    (``stall=0:1``: (0, 0, 0), DISTANCE 0); near a start at rest an older lap fits it too. The
+    plain name stands (``at_start``), the streamed judge no longer refuses that log."""
+    assert at_start(Said(0.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+    assert at_start(Said(0.5, -1.2, 0.7, 0.001), (0.5, -1.2, 0.7))
+    assert not at_start(OLDER, (0.0, 0.0, 0.0))
+    assert not at_start(Said(0.0, 0.0, 0.0, 0.003), (0.0, 0.0, 0.0))  # it moved 3 mm
+
+
+def _lap_named(frames: FrameArrays) -> tuple[Encoders, PoseHalves]:
+    db = default_plan()
+    decoder = BulkDecoder(db)
+    _, accepted = check_frames(frames, db)
+    return lap_named(frames, accepted, decoder, encoder_frames(frames, accepted, decoder),
+                     (load("pmir"), "exact", None))

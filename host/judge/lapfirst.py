@@ -19,6 +19,20 @@ older candidate's and not of the newest's (``older_lap``); else the plain name s
 standing still: the newest). The Y half and the twist then follow the X half's rename
 (``floodnames.follow``, through ``Encoders.renamed``).
 
+Not after a stall before that pose (``stalls.first_after_stall``: the firmware talked, then
+fell silent while the frames went on, its first pose drawn from the FIFO's backlog): that life
+is the stall rules' (``after_stalls`` leaves the pose out and places the reference again at the
+frame it primed on, ``stallreprime`` re-primes it), which judge it soundly; moving its name as
+well re-placed the reference twice and FAILed correct firmwares (the re-prime sweeps: 12.6 mrad
+on the spin, 2.7 mm on the square: the backlog pose of the life's first frame, 25 laps back).
+
+Nor when the pose is the life's start itself (X, Y, heading, DISTANCE 0: ``at_start``): a
+firmware that primed late, on the very frame its name means (a power-up stall the MCU never ran
+through, ``stall=0:1``), says that too, and near a start at rest an older lap fits it as well;
+the plain name stands (``powerup``'s rules judge a late prime). Measured: the streamed judge
+refused ``test_faults_mcu``'s late power-up (its heading 0 and DISTANCE fit frame 4, from
+(0, 0, 0) at frame 0, the newest frame 100 off by 327 mm of DISTANCE).
+
 Why a wrong firmware gains nothing: a pose 10 mm off fits no candidate and keeps its newest
 name (a FAIL, as before); a pose excused by an older lap is right there in all four quantities
 (two positions, the heading, the path length), each to a couple of LSBs: what a correct firmware
@@ -49,6 +63,7 @@ from odocan.host.judge.samples import (
     flood_named,
     pose_halves,
 )
+from odocan.host.judge.stalls import first_after_stall, signs_of_life
 from odocan.host.protocol.busfacts import ENC_COUNTER_LAP
 from odocan.host.protocol.decode import BulkDecoder
 from odocan.sim.robot import RobotProfile
@@ -140,6 +155,9 @@ def lap_named(frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: Bul
     i, said = first
     if said.distance_m is None:
         return enc, halves  # the tick's twist unheard: not told whole, the plain name stands
+    if after_stall(frames, accepted, decoder, enc, float(halves.px["timestamp_s"][i])) or (
+            at_start(said, start or (0.0, 0.0, 0.0))):
+        return enc, halves  # the stall rules', or a late prime's (module docstring)
     named = int(halves.ex[i])
     cands = lap_candidates(enc.seq, named)
     if len(cands) < 2:
@@ -158,6 +176,21 @@ def lap_named(frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: Bul
                np.concatenate((was[2], one[2])), np.concatenate((was[3], one[3])))
     enc = replace(enc, renamed=one)
     return enc, pose_halves(frames, accepted, decoder, enc)
+
+
+def at_start(said: Said, start: Start) -> bool:
+    """Whether ``said`` is the life's start itself (its X, Y, heading; DISTANCE 0): what a
+    firmware that primed on the frame its name means says too (module docstring)."""
+    return fits(said, Said(start[0], start[1], start[2], 0.0))
+
+
+def after_stall(frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder,
+                enc: Encoders, sent_s: float) -> bool:
+    """Whether the pose sent at ``sent_s`` came after a stall (``stalls.first_after_stall``
+    on the firmware's signs of life: its ODOM_STATUS and pose halves)."""
+    pose_sent_s, alive_s = signs_of_life(frames, accepted, decoder)
+    alive = np.sort(np.concatenate((alive_s, pose_sent_s)))
+    return first_after_stall(sent_s, enc, alive) is not None
 
 
 def _first_pose(frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDecoder,
@@ -213,6 +246,9 @@ def lagged(frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDe
     if first is None or first[1].distance_m is None:
         return False
     i, said = first
+    if after_stall(frames, accepted, decoder, enc, float(halves.px["timestamp_s"][i])) or (
+            at_start(said, (0.0, 0.0, 0.0))):
+        return False  # the stall rules', or a late prime's (module docstring): streamed too
     cands = lap_candidates(enc.seq, int(halves.ex[i]))
     if len(cands) < 2:
         return False

@@ -75,10 +75,10 @@ class LiveFloodNames:
         if step > 0 or last[0] + step not in self._kept:
             return
         if self.anchor is None and (lap := first_lap(self._kept, last[0] + step, heading_raw,
-                                                     geometry)) is not None:  # livelapfirst
+                                                     geometry)) is not None and (
+                self._kept[last[0]][0] - lap[1] < ENC_WINDOW):  # livelapfirst
             self.anchor = (lap[0], heading_raw)
             self.renamed = (self._kept[last[0] + step][0], lap[1], enc_counter, t_s)
-            self.beyond += self._kept[last[0]][0] - lap[1] >= ENC_WINDOW  # (``beyond_why``)
             return
         cands = self._candidates(last[0] + step)
         if len(cands) == 1:

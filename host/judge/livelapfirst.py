@@ -10,7 +10,13 @@ COUNTER and each a lap before it back to the first frame heard, only when exactl
 within ``floodnames.MATCH_LSB`` and that one is not the newest. Every frame of that tick (its Y
 half, the twist) follows (``LiveFloodNames.follow``), and each value is judged against the
 reference at the frame picked: a pose whose heading fits an older lap by chance (5 values of
-65536 per candidate) but whose X, Y or DISTANCE do not FAILs there, as at the newest."""
+65536 per candidate) but whose X, Y or DISTANCE do not FAILs there, as at the newest.
+
+Not to a frame beyond the live window (``ENC_WINDOW`` frames before the latest: its reference
+no longer kept, ``LiveFloodNames.pose_x``): a first pose that far behind came after a stall (5 s
+of frames the firmware did not answer), which the live stall rules judge (``livereprime``);
+moved there it went unjudged and a correct firmware's PASS became UNJUDGED
+(``tests/test_stall_beyond_window.py`` power-up 6 s, 10 s; ``test_reprime_count_live.py``)."""
 
 from __future__ import annotations
 
