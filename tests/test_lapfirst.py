@@ -52,9 +52,15 @@ def test_the_plain_name_when_one_value_does_not_fit() -> None:
         assert older_lap(said, [NEWEST, OLDER]) is None, said
 
 
-def test_the_newest_when_it_fits_too_and_none_when_two_older_do() -> None:
+def test_the_newest_when_it_fits_too_and_one_of_two_older_that_are_one_pose() -> None:
+    """The newest fitting: judged there. Two older ones fitting that are one pose (the robot
+    stood still between them): the newer of them, never the newest frame, which FAILs it (the
+    candidates rule); two that differ (DISTANCE 3 LSBs apart, both within 2 of the pose): untold."""
     assert older_lap(OLDER, [OLDER, OLDER]) is None  # standing still: the newest
-    assert older_lap(OLDER, [NEWEST, OLDER, OLDER]) is None  # which older one: untold
+    assert older_lap(OLDER, [NEWEST, OLDER, OLDER]) == 1
+    assert older_lap(OLDER, [NEWEST, OLDER, OLDER._replace(x_m=0.1032 + POSITION_LSB_M)]) == 1
+    apart = [NEWEST, OLDER._replace(distance_m=0.1015), OLDER._replace(distance_m=0.1045)]
+    assert older_lap(OLDER._replace(distance_m=0.103), apart) is None
     assert older_lap(NEWEST, [NEWEST, OLDER]) is None
 
 

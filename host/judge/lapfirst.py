@@ -14,9 +14,13 @@ start does: its pose at its first encoder frame, (0, 0, 0) or the set-pose's): t
 pose naming ``n`` may mean are ``n`` and each a COUNTER lap before it, back to the life's first
 frame (``lap_candidates``). The pose at each is the start carried over the counts
 (``reference.integrate``): the candidate is taken when the pose's X and Y halves, its heading
-and the same tick's ODOM_TWIST DISTANCE all lie within ``MATCH_LSB`` wire LSBs of exactly one
-older candidate's and not of the newest's (``older_lap``); else the plain name stands (ties,
-standing still: the newest). The Y half and the twist then follow the X half's rename
+and the same tick's ODOM_TWIST DISTANCE all lie within ``MATCH_LSB`` wire LSBs of an older
+candidate's and not of the newest's (``older_lap``); else the plain name stands (the newest
+fits too: it is judged there and passes). Several older ones fitting are one pose (DISTANCE,
+the path length, grows with any motion: they fit each other only when the robot stood still
+between them): the newest of them, as the candidates rule (``candidates``) judges a pose at any
+frame it fits, never at the newest frame that FAILs it; older ones that differ: untold, the
+plain name. The Y half and the twist then follow the X half's rename
 (``floodnames.follow``, through ``Encoders.renamed``).
 
 Not after a stall before that pose (``stalls.first_after_stall``: the firmware talked, then
@@ -114,11 +118,14 @@ def fits(said: Said, ref: Said) -> bool:
 
 def older_lap(said: Said, at_candidates: list[Said]) -> int | None:
     """The position in ``at_candidates`` (the reference at ``lap_candidates``, newest first) of
-    the one older lap ``said`` fits when the newest does not; None else (module docstring)."""
+    the older lap ``said`` fits when the newest does not (the newest of several that are one
+    pose); None else (module docstring)."""
     if not at_candidates or fits(said, at_candidates[0]):
         return None
     hits = [k for k, ref in enumerate(at_candidates) if k and fits(said, ref)]
-    return hits[0] if len(hits) == 1 else None
+    if not hits or not all(fits(at_candidates[k], at_candidates[hits[0]]) for k in hits[1:]):
+        return None
+    return hits[0]
 
 
 def reference_at(enc: Encoders, frames_at: list[int], start: Start, robot: RobotProfile,
