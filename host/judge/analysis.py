@@ -107,7 +107,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from odocan.host.io.logs import FrameArrays
-from odocan.host.judge import acrosscut, aheadcheck, cutreprime, floodnames, gapskips, reportfacts
+from odocan.host.judge import acrosscut, aheadcheck, cutreprime, gapskips, reportfacts
 from odocan.host.judge.compare import (
     check_twist,
     error_summary,
@@ -124,6 +124,7 @@ from odocan.host.judge.gapseen import Seen, seen_in_log
 from odocan.host.judge.holepages import page_numbered
 from odocan.host.judge.judgedfloor import floored
 from odocan.host.judge.keptmark import mark_kept
+from odocan.host.judge.lapfirst import lap_named
 from odocan.host.judge.lonehalves import judge_lone, unmatched_sent
 from odocan.host.judge.losses import (
     firmware_losses,
@@ -155,7 +156,6 @@ from odocan.host.judge.samples import (
     AnalysisError,
     Encoders,
     encoder_frames,
-    flood_named,
     onboard_samples,
     pick_integrator,
     require_messages,
@@ -333,7 +333,7 @@ def _analyze_life(
     e2e, accepted = check_frames(frames, db)
     integrator, source = pick_integrator(frames, accepted, decoder, integrator)
     enc = page_numbered(frames, decoder, encoder_frames(frames, accepted, decoder))
-    enc, halves = flood_named(frames, accepted, decoder, enc, floodnames.of_robot(robot))
+    enc, halves = lap_named(frames, accepted, decoder, enc, (robot, integrator, start_pose))
     onboard, unmatched, sent_s = onboard_samples(frames, accepted, decoder, enc, halves)
     onboard, sent_s = acrosscut.without_first(onboard, sent_s) if backlog else (onboard, sent_s)
     pose_sent_s, alive_s = signs_of_life(frames, accepted, decoder)  # poses: CRC right too

@@ -18,6 +18,7 @@ import math
 from collections import deque
 
 from odocan.host.judge.floodnames import HALF_LAP, pick
+from odocan.host.judge.livelapfirst import first_lap
 from odocan.host.judge.livewindow import ENC_WINDOW
 from odocan.host.judge.reference import Geometry
 from odocan.host.protocol import busfacts
@@ -72,6 +73,12 @@ class LiveFloodNames:
             return
         step = ((enc_counter - last[1] + HALF_LAP) & ENC_COUNTER_MASK) - HALF_LAP
         if step > 0 or last[0] + step not in self._kept:
+            return
+        if self.anchor is None and (lap := first_lap(self._kept, last[0] + step, heading_raw,
+                                                     geometry)) is not None and (
+                self._kept[last[0]][0] - lap[1] < ENC_WINDOW):  # livelapfirst
+            self.anchor = (lap[0], heading_raw)
+            self.renamed = (self._kept[last[0] + step][0], lap[1], enc_counter, t_s)
             return
         cands = self._candidates(last[0] + step)
         if len(cands) == 1:

@@ -12,10 +12,13 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from odocan.host.io.frames import concat_frames
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.earlytwins import EarlyTwinScan
 from odocan.host.judge.gapfill import crc_holds
 from odocan.host.judge.gapseen import PageEvidence
+from odocan.host.judge.lapfirst import REFUSAL as LAPPED
+from odocan.host.judge.lapfirst import lagged
 from odocan.host.judge.samples import (
     REQUIRED,
     AnalysisError,
@@ -34,6 +37,7 @@ from odocan.host.judge.stream_refusal import UNSETTLED, NotStreamable
 from odocan.host.judge.stream_stalls import StreamStalls
 from odocan.host.judge.stream_truth import StreamTruth
 from odocan.host.judge.stream_twist import StreamTwist
+from odocan.host.protocol.busfacts import ENC_COUNTER_LAP
 from odocan.host.protocol.decode import BulkDecoder
 from odocan.sim.robot import RobotProfile
 
@@ -76,7 +80,7 @@ class FirstPass:
     """Pass 1 over a life (``stream_analysis``'s module docstring)."""
 
     def __init__(self, db: DatabaseSpec, robot: RobotProfile) -> None:
-        self.decoder = BulkDecoder(db)
+        self.decoder, self.robot = BulkDecoder(db), robot
         self.e2e = StreamE2E(db)
         self.numbering = StreamEncoders(self.decoder)
         self.poses = StreamPoses(self.decoder)
@@ -193,6 +197,7 @@ class FirstPass:
             raise NotStreamable("the log's status times go back against its encoder frames")
         if not self.e2e.exact:  # verdicts the whole life's evidence settles (stream_e2e)
             raise NotStreamable(UNSETTLED)
+        self._refuse_lapped()
         if self.queued:  # samples._queued pairs them by a median over the whole life
             raise NotStreamable("frames let out in a burst after a busy bus (queued pairing)")
         if self.before_first.stalled:  # the whole log's after_stalls leaves its first pose out
@@ -203,6 +208,16 @@ class FirstPass:
             raise NotStreamable("a pose half whose partner was lost (a lone half)")
         if self.late.found:  # the stream names it where heard (stream_late)
             raise NotStreamable(LATE)
+
+    def _refuse_lapped(self) -> None:
+        """``NotStreamable`` when the life's first pose may name a frame a COUNTER lap before
+        the newest of its ENC_COUNTER (``lapfirst.lagged``): the whole log's judge tells it."""
+        if len(self.head.enc) and int(self.head.enc[0]) < ENC_COUNTER_LAP:
+            return  # its first sample's frame has no lap before it in the life
+        if self.prefix.complete and lagged(concat_frames([c for c, _ in self.prefix.chunks]),
+                                           np.concatenate([a for _, a in self.prefix.chunks]),
+                                           self.decoder, self.robot):
+            raise NotStreamable(LAPPED)
 
     @property
     def breaks(self) -> np.ndarray:
