@@ -122,6 +122,34 @@ class AheadJudge(CandidateJudge):
 
     refused: Refused | None = None
 
+    def judge_half(self, half: Half) -> Excess | None:
+        """``CandidateJudge.judge_half``, and the refused frames of its COUNTER heard after
+        the frame it is matched to (the last accepted one heard by it, give or take the
+        stamping jitter) judged too: the firmware may have taken one the host's E2E refused
+        (module docstring); one that cannot be bounded leaves the half unjudged."""
+        found = super().judge_half(half)
+        after = self._refused_after(half)
+        if not after:
+            return found
+        if found is None and self._candidates(half):
+            return None  # a candidate of the log's accepted frames cannot be bounded
+        for i in after:
+            there = self._at_refused(half, half.matched + 1, i)
+            if there is None:
+                return None
+            found = better(found, there)
+        return found
+
+    def _refused_after(self, half: Half) -> list[int]:
+        """The refused frames of ``half``'s COUNTER heard after its matched frame and at most
+        the stamping jitter after it."""
+        r = self.refused
+        if r is None:
+            return []
+        t_matched = float(self.enc.timestamp_s[half.matched])
+        return np.flatnonzero((r.counter == half.named) & (r.t_s > t_matched)
+                              & (r.t_s <= half.t_s + STAMPING_S + STAMP_S)).tolist()
+
     def _at_seq(self, half: Half, s: int) -> Excess | None:
         seq, t = self.enc.seq, self.enc.timestamp_s
         k = int(np.searchsorted(seq, s))
