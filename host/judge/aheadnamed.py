@@ -23,11 +23,20 @@ unjudged. A correct firmware's frame is among its candidates, so it is never bla
 A candidate the host's E2E refused (a delay fault's reordering: kobuki random seed 9,
 ``delay=0.2:12``, refused most frames near the end, and the firmware's E2E the same ones: its
 poses held one name) bounded only by its accepted neighbours less the robot's reach over the
-periods between (14 mm on kobuki) fitted the last pose raised 10 mm. The log holds that frame
-with its CRC right (``refusedenc``): where its accepted neighbours lie at most
-``NEIGHBOUR_SPAN`` frames apart (no other frame of its COUNTER between them), a refused frame
-of its COUNTER heard between them (give or take a period) whose counts lie between theirs is
-that frame; the pose is judged at it by its own counts (``AheadJudge``). Several: the best."""
+periods between (14 mm on kobuki) fitted the last pose raised 10 mm, though the robot stood
+still. The log holds such frames with their CRC right (``refusedenc``). Where one of the half's
+COUNTER was heard between the accepted neighbours (give or take a period; at most
+``NEIGHBOUR_SPAN`` frames apart), the firmware's pose at the candidate is its pose at the
+neighbour before, moved at most by the wheels' whole way (``_moved``: over the accepted frames
+of ``STILL_FRAMES`` sender steps before it and to the neighbour after, and to that refused
+frame's counts: the frames the firmware took there are not known, the counts are absolute);
+the half is judged there less that way where it is shorter than the reach (``AheadJudge``). A
+refused frame of its COUNTER heard after the frame it is matched to (the firmware's E2E may
+have taken what the host's refused) is a candidate too, judged alike. A refused frame's own
+counts alone are no bound: under a heavy reordering (kobuki seed 703, ``delay=0.5:100``: two
+streams 100 ms apart interleaved) one of the COUNTER between the neighbours may be a lap off,
+and the host's accepted frames are not the path the firmware integrated: a correct Y judged at
+such a frame's counts lay 0.31 mm off."""
 
 from __future__ import annotations
 
@@ -37,7 +46,7 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import STAMPING_S
-from odocan.host.judge.candidates import CandidateJudge, Excess, Half, _beyond
+from odocan.host.judge.candidates import CandidateJudge, Excess, Half
 from odocan.host.judge.namesahead import HALF_LAP, STAMP_S
 from odocan.host.judge.reference import wrap_delta
 from odocan.host.judge.refusedenc import Refused
@@ -50,10 +59,11 @@ from odocan.host.judge.samples import (
     PoseHalves,
     named_targets,
 )
-from odocan.host.judge.stallfirst import NEAR_FRAMES, Pair, better, carried_pose
+from odocan.host.judge.stallfirst import better
 from odocan.host.protocol.busfacts import ENC_COUNTER_MASK
 
 NEIGHBOUR_SPAN = HALF_LAP  # accepted neighbours this many frames apart at most: one COUNTER each
+STILL_FRAMES = 2 * 16  # sender steps before the neighbour whose way is counted: two laps
 
 
 def forward_rows(enc: Encoders, rows: dict[str, np.ndarray], named: IntArray) -> IntArray:
@@ -117,28 +127,25 @@ def judge_ahead(halves: PoseHalves, enc: Encoders, sent_s: FloatArray, judge: Ah
 
 
 class AheadJudge(CandidateJudge):
-    """``CandidateJudge`` that judges a candidate the host's E2E refused at its own counts
-    where the log holds it (module docstring)."""
+    """``CandidateJudge`` that judges a candidate the host's E2E refused where the robot stood
+    still at the neighbour before it, without the reach (module docstring)."""
 
     refused: Refused | None = None
 
     def judge_half(self, half: Half) -> Excess | None:
         """``CandidateJudge.judge_half``, and the refused frames of its COUNTER heard after
-        the frame it is matched to (the last accepted one heard by it, give or take the
-        stamping jitter) judged too: the firmware may have taken one the host's E2E refused
-        (module docstring); one that cannot be bounded leaves the half unjudged."""
+        the frame it is matched to, at most the stamping jitter after it, judged too (module
+        docstring); one that cannot be bounded leaves the half unjudged."""
         found = super().judge_half(half)
         after = self._refused_after(half)
         if not after:
             return found
         if found is None and self._candidates(half):
             return None  # a candidate of the log's accepted frames cannot be bounded
-        for i in after:
-            there = self._at_refused(half, half.matched + 1, i)
-            if there is None:
-                return None
-            found = better(found, there)
-        return found
+        there = self._at_frame(half, half.matched)
+        if there is None:
+            return None
+        return better(found, _less(there, self._moved(half.matched, half.matched, after)))
 
     def _refused_after(self, half: Half) -> list[int]:
         """The refused frames of ``half``'s COUNTER heard after its matched frame and at most
@@ -153,50 +160,39 @@ class AheadJudge(CandidateJudge):
     def _at_seq(self, half: Half, s: int) -> Excess | None:
         seq, t = self.enc.seq, self.enc.timestamp_s
         k = int(np.searchsorted(seq, s))
+        plain = super()._at_seq(half, s)
         if (self.refused is None or self.enc.cycle_s is None or not 0 < k < len(seq)
                 or int(seq[k]) == s or int(seq[k] - seq[k - 1]) > NEIGHBOUR_SPAN):
-            return super()._at_seq(half, s)
+            return plain
         r, cycle_s = self.refused, self.enc.cycle_s
         near = np.flatnonzero((r.counter == s & ENC_COUNTER_MASK)
                               & (r.t_s >= t[k - 1] - cycle_s) & (r.t_s <= t[k] + cycle_s))
-        best: Excess | None = None
-        for i in near.tolist():
-            if self._between(k, int(r.left[i]), int(r.right[i])):
-                best = better(best, self._at_refused(half, k, i))
-        return best if best is not None else super()._at_seq(half, s)
+        there = self._at_frame(half, k - 1)
+        if len(near) == 0 or there is None or plain is None:
+            return plain
+        moved = self._moved(k - 1, k, near.tolist())
+        return plain if moved[0] >= self.reach[0] else max(plain, _less(there, moved))
 
-    def _between(self, k: int, left: int, right: int) -> bool:
-        """Whether counts (``left``, ``right``) lie between those of accepted frames k-1 and
-        k, per wheel (wrapping)."""
-        bits = self.robot[2]
-        for counts, own in ((self.enc.left, left), (self.enc.right, right)):
-            to_own = int(wrap_delta(own - int(counts[k - 1]), bits))
-            to_next = int(wrap_delta(int(counts[k]) - int(counts[k - 1]), bits))
-            if not min(0, to_next) <= to_own <= max(0, to_next):
-                return False
-        return True
-
-    def _at_refused(self, half: Half, k: int, i: int) -> Excess | None:
-        """``half``'s excess at refused frame ``i`` (between accepted frames k-1 and k):
-        carried from the nearest kept sample on either side to its counts."""
+    def _moved(self, before: int, after: int, refused: list[int]) -> Excess:
+        """How far (m, rad) the robot may have moved from where it was at accepted frame
+        ``before``, as the firmware may have integrated it: its wheels' whole way over the
+        accepted frames of the ``STILL_FRAMES`` sender steps up to ``before`` and to ``after``,
+        and from ``before`` to each of the ``refused`` frames (module docstring)."""
         assert self.refused is not None
-        own = (np.array([self.refused.left[i]]), np.array([self.refused.right[i]]))
-        j = int(np.searchsorted(self.kept_enc, k - 1, side="right"))
-        best: Excess | None = None
-        for jj, c in ((j - 1, k - 1), (j, k)):  # a sample at or before k-1; at or after k
-            if not 0 <= jj < len(self.kept_enc):
-                continue
-            kept = int(self.kept_enc[jj])
-            a, b = min(kept, c), max(kept, c)
-            if b - a > NEAR_FRAMES or np.any((self.jumps > a) & (self.jumps <= b)):
-                continue
-            forward = jj == j - 1
-            left, right = self.enc.left[a:b + 1], self.enc.right[a:b + 1]
-            counts = ((np.concatenate((left, own[0])), np.concatenate((right, own[1])))
-                      if forward else
-                      (np.concatenate((own[0], left)), np.concatenate((own[1], right))))
-            pair = Pair(0.0, 0, kept, float(self.kept.x_m[jj]), float(self.kept.y_m[jj]),
-                        float(self.kept.heading_rad[jj]))
-            x, y, heading, slack_m = carried_pose(pair, counts, forward, self.robot)
-            best = better(best, _beyond(half, (x, y, heading), slack_m))
-        return best
+        geometry, bits = self.robot[0], self.robot[2]
+        lo = int(np.searchsorted(self.enc.seq, int(self.enc.seq[before]) - STILL_FRAMES))
+        way = 0.0
+        for counts, theirs, per in ((self.enc.left, self.refused.left,
+                                     geometry.m_per_count_left),
+                                    (self.enc.right, self.refused.right,
+                                     geometry.m_per_count_right)):
+            run = np.concatenate((counts[lo:before + 1], counts[after:after + 1]))
+            steps = np.abs(wrap_delta(np.diff(run), bits)).sum()
+            jumps = np.abs(wrap_delta(theirs[refused] - counts[before], bits)).sum()
+            way += float(steps + jumps) * per
+        return 0.5 * way, way / geometry.wheelbase_m
+
+
+def _less(excess: Excess, by: Excess) -> Excess:
+    """``excess`` less ``by`` (position m, heading rad)."""
+    return excess[0] - by[0], excess[1] - by[1]
