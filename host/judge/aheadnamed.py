@@ -3,8 +3,9 @@ against the frames they may name (issue #11: a PASS must never hide a wrong pose
 
 ``samples.match_encoder`` resolves a pose frame's ENC_COUNTER -8..+7 from the latest accepted
 encoder frame before it and leaves the pose out when the frame resolved comes later in the log
-or never: such a pose named a frame not sent yet. ``namesahead`` FAILs it only where the host
-heard that frame and the 16 before it at their cadence and the pose's sender was on time: a
+or never, or when that latest frame is half a counter lap old (the frames since refused): such
+a pose named a frame not sent yet, or one the host refused. ``namesahead`` FAILs it only where
+the host heard that frame and the 16 before it at their cadence and the pose's sender was on time: a
 delayed encoder frame before it (a delay fault) or the drive's end turned the rule off, and a
 pose 10 mm off PASSed unjudged (outside trial: pmir figure8 seed 2, ``reboot=5,delay=0.1:7``,
 the pair at 6.001 s named the frame sent at 6.010 s, X +10 mm; kobuki figure8 seed 5 and random
