@@ -199,8 +199,11 @@ class FirstPass:
             raise NotStreamable("the firmware stalled before its first pose")
         if self.resent_kept:  # judged whole (host.judge.resent), as the sample is out already
             raise NotStreamable("a resent pose differs from the first naming its encoder frame")
-        if self.poses.lone:  # judged on what it carries, by the whole log's judge (lonehalves)
-            raise NotStreamable("a pose half whose partner was lost (a lone half)")
+        if self.poses.lone or self.poses.ahead:  # judged by the whole log's judge: on what it
+            # carries (lonehalves), at the frames it may name (aheadnamed)
+            raise NotStreamable("a pose half whose partner was lost (a lone half)"
+                                if self.poses.lone else
+                                "a pose naming an encoder frame after those heard before it")
         if self.late.found:  # the stream names it where heard (stream_late)
             raise NotStreamable(LATE)
 
