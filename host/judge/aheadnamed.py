@@ -61,7 +61,7 @@ from odocan.host.judge.samples import (
     named_targets,
 )
 from odocan.host.judge.stallfirst import better
-from odocan.host.protocol.busfacts import ENC_COUNTER_MASK
+from odocan.host.protocol.busfacts import ENC_COUNTER_LAP, ENC_COUNTER_MASK
 
 NEIGHBOUR_SPAN = HALF_LAP  # accepted neighbours this many frames apart at most: one COUNTER each
 STILL_FRAMES = 2 * 16  # sender steps before the neighbour whose way is counted: two laps
@@ -147,6 +147,21 @@ class AheadJudge(CandidateJudge):
         if there is None:
             return None
         return better(found, _less(there, self._moved(half.matched, half.matched, after)))
+
+    def _candidates(self, half: Half) -> list[int]:
+        """``CandidateJudge._candidates``, and the frame of ``half``'s COUNTER the log lacks
+        between its matched frame and the next one heard: the sender sent it before that next
+        one, maybe before the pose, and the host alone may have lost it (a recorder's loss, a
+        stamp set aside by ``stampglitch``): a correct firmware's pose names it."""
+        seqs = super()._candidates(half)
+        seq, m = self.enc.seq, half.matched
+        if not seqs or m + 1 >= min(len(seq), self.end):
+            return seqs
+        lap = ENC_COUNTER_LAP
+        lost = int(seq[m]) + 1 + (half.named - int(self.enc.counter[m]) - 1) % lap
+        if lost < int(seq[m + 1]) and lost not in seqs and not self._missed(lost):
+            seqs.append(lost)
+        return seqs
 
     def _refused_after(self, half: Half) -> list[int]:
         """The refused frames of ``half``'s COUNTER heard after its matched frame and at most
