@@ -54,6 +54,7 @@ from odocan.host.judge.refusedenc import Refused
 from odocan.host.judge.samples import (
     HEADING_LSB_RAD,
     POSITION_LSB_M,
+    SILENCE_CYCLES,
     Encoders,
     FloatArray,
     IntArray,
@@ -65,28 +66,58 @@ from odocan.host.protocol.busfacts import ENC_COUNTER_LAP, ENC_COUNTER_MASK
 
 NEIGHBOUR_SPAN = HALF_LAP  # accepted neighbours this many frames apart at most: one COUNTER each
 STILL_FRAMES = 2 * 16  # sender steps before the neighbour whose way is counted: two laps
+LAP_CYCLES = ENC_COUNTER_LAP - 0.5  # a silence of the encoder frames this long: a COUNTER lap
 
 
 def forward_rows(enc: Encoders, rows: dict[str, np.ndarray], named: IntArray) -> IntArray:
-    """Positions in ``rows`` (one pose message's accepted frames, ``named``: the encoder frame
-    each names, -1: none) of the frames ``forward`` finds."""
+    """Positions in ``rows`` (one pose message's accepted frames of one life, ``named``: the
+    encoder frame each names, -1: none) of the frames ``forward`` finds."""
     return np.flatnonzero(forward(enc, rows["index"].astype(np.int64),
                                   rows["ENC_COUNTER"].astype(np.int64),
-                                  rows["timestamp_s"].astype(np.float64), named))
+                                  rows["timestamp_s"].astype(np.float64), named, None))
 
 
 def forward(enc: Encoders, index: IntArray, enc_counter: IntArray, t_s: FloatArray,
-            named: IntArray) -> npt.NDArray[np.bool_]:
+            named: IntArray, prev_t_s: float | None) -> npt.NDArray[np.bool_]:
     """Per pose frame (bus position ``index``, ENC_COUNTER ``enc_counter``, stamp ``t_s``,
     ``named``: the encoder frame it names, -1: none): left unmatched while its ENC_COUNTER
     resolves ahead of the latest accepted encoder frame before it, or while it has none less
     than half a counter lap older (the host's E2E refused the frames since, as a firmware
-    holding one frame does). ``enc``: the accepted encoder frames (the stream's known ones)."""
+    holding one frame does); not after a silence (``silent``). ``enc``: the accepted encoder
+    frames (the stream's known ones); ``prev_t_s``: the stamp of the kind's frame before the
+    first (None: the life's first)."""
     if len(enc.index) == 0 or len(named) == 0:
         return np.zeros(len(named), dtype=bool)
     has, target = named_targets(enc, index, enc_counter, t_s)
     latest = np.maximum(np.searchsorted(enc.index, index) - 1, 0)
-    out: npt.NDArray[np.bool_] = (named < 0) & (~has | (target > enc.seq[latest]))
+    out: npt.NDArray[np.bool_] = ((named < 0) & (~has | (target > enc.seq[latest]))
+                                  & ~silent(enc, index, t_s, prev_t_s))
+    return out
+
+
+def silent(enc: Encoders, index: IntArray, t_s: FloatArray, prev_t_s: float | None
+           ) -> npt.NDArray[np.bool_]:
+    """Per pose frame: whether a silence leaves its name to other rules, as ``samples`` left
+    it. Its sender silent ``SILENCE_CYCLES`` encoder cycles before it (or the life's first
+    pose): a stall's first pose names a frame of its backlog, a lap or more back (a 13-tick
+    pmir stall: the pose at 5.131 s named the frame of 5.00 s), which ``stallfirst`` (or the
+    reboot rules) judges. Or the accepted encoder frames silent a COUNTER lap (``LAP_CYCLES``)
+    or more just before it (since the latest, or between the latest and the one before it):
+    the frames of its COUNTER the firmware may have taken there, one a lap, the log cannot
+    tell apart (a recorder gap of the encoder frames: kobuki 16k-period gaps, every pose in
+    the gap judged at the frames before it FAILed a correct firmware; a controller silent 2 s
+    then restarted, the pose 1 ms after its first frame named the last before the silence)."""
+    cycle_s = enc.cycle_s
+    if cycle_s is None:
+        return np.zeros(len(index), dtype=bool)
+    before = np.r_[np.inf if prev_t_s is None else prev_t_s, t_s[:-1]]
+    quiet = (t_s - before >= (SILENCE_CYCLES - 0.5) * cycle_s) | ~np.isfinite(before)
+    latest = np.searchsorted(enc.index, index) - 1
+    t_enc = enc.timestamp_s
+    t_latest = np.where(latest >= 0, t_enc[np.maximum(latest, 0)], -np.inf)
+    t_before = np.where(latest >= 1, t_enc[np.maximum(latest - 1, 0)], -np.inf)
+    lap_s = LAP_CYCLES * cycle_s
+    out: npt.NDArray[np.bool_] = quiet | (t_s - t_latest >= lap_s) | (t_latest - t_before >= lap_s)
     return out
 
 

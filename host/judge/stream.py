@@ -279,6 +279,7 @@ class StreamPoses:
         self._pending[name] = halves.take(np.arange(len(halves.index)) >= cut)
         g, seq = g[:cut], seq[:cut]
         cycle_s = contract_cycle_s(self.decoder, "WHEEL_ENCODERS")
+        prev_t_s = self._last_row[name][2] if name in self._last_row else None
         if self.causal and cycle_s is not None and len(halves.index):
             g, seq = self._held(name, halves, g, seq, cycle_s)
             newest = known["seq"][np.maximum(latest[:cut], 0)]  # samples.lapped_out
@@ -287,7 +288,7 @@ class StreamPoses:
         if self.causal and cycle_s is not None:
             self.ahead += int(np.count_nonzero(forward(
                 known_encoders(known, cycle_s), halves.index[:cut], halves.enc_counter[:cut],
-                halves.timestamp_s[:cut], g)))
+                halves.timestamp_s[:cut], g, prev_t_s)))
         self._keep_first(name, halves, g, seq, known)
         if cut == len(halves.index):
             return float(top - 8) if not final else np.inf
