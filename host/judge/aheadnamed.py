@@ -19,7 +19,9 @@ its COUNTER it may have taken, from a counter lap before the latest frame heard 
 firmware held on one frame) to the last frame heard at most the recorder's stamping jitter
 (``logs.STAMPING_S``) after it (a recorder may write a pose line before its encoder line). It
 PASSes if it fits one, FAILs if it fits none; where a candidate cannot be bounded it is counted
-unjudged. A correct firmware's frame is among its candidates, so it is never blamed.
+unjudged. A correct firmware's frame is among its candidates, so it is never blamed. A pose
+after a silence (``silent``: of its sender, a stall's backlog; of the accepted encoder frames a
+COUNTER lap long, frames its COUNTER cannot tell apart) is left to the rules main judged it by.
 
 A candidate the host's E2E refused (a delay fault's reordering: kobuki random seed 9,
 ``delay=0.2:12``, refused most frames near the end, and the firmware's E2E the same ones: its
