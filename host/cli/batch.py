@@ -126,7 +126,7 @@ def analyze_one(path: str, job: Job) -> LogResult:
                 streamed = analyze_file(log, with_bus_speed(profile, running), job.integrator,
                                         tolerance=tolerance, db=db, warn=lambda message: None,
                                         count=count, whole_on_config=db is None,
-                                        config_pages=pages)
+                                        config_pages=pages, whole_on_ahead=False)
                 if pages is not None:  # the pages read from the stream's spill
                     running = pages.running(running)
                     later = pages.mismatches(streamed["integrator"])

@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from odocan.host.judge.aheadnamed import AheadJudge, judge_ahead
 from odocan.host.judge.candidates import CandidateJudge, Half, lone_halves_of
 from odocan.host.judge.compare import pose_errors
 from odocan.host.judge.gapseen import NOTHING, Seen
@@ -64,12 +65,17 @@ class LoneVerdict:
     position_m: float = -math.inf  # the worst position error beyond the allowance
     heading_rad: float = -math.inf  # the worst |heading error|
     t_s: list[float] = field(default_factory=list)  # the bus times of the halves judged
+    ahead: tuple[int, int] = (0, 0)  # halves naming ahead (``aheadnamed``): judged, unjudged
 
     def counts(self) -> dict[str, int]:
         """The report's ``samples`` entries (none when there is no lone half)."""
-        if not self.judged and not self.unjudged:
-            return {}
-        return {"lone_halves_judged": self.judged, "lone_halves_unjudged": self.unjudged}
+        out = {}
+        if self.judged > self.ahead[0] or self.unjudged > self.ahead[1]:
+            out = {"lone_halves_judged": self.judged - self.ahead[0],
+                   "lone_halves_unjudged": self.unjudged - self.ahead[1]}
+        if any(self.ahead):
+            out |= {"names_ahead_judged": self.ahead[0], "names_ahead_unjudged": self.ahead[1]}
+        return out
 
     def fold(self, vs_ref: dict[str, Any]) -> None:
         """Put the lone halves' worst errors into the report's ``onboard_vs_reference``."""
@@ -183,11 +189,15 @@ def judge_lone(
     ix, iy = lone_frames(halves, paired)
     if first_rows:
         ix = ix[~np.isin(ix, sorted(first_rows))]
-    if not len(ix) and not len(iy):
-        return verdict
     sent = np.sort(np.concatenate((np.asarray(halves.px["timestamp_s"], dtype=np.float64),
                                    np.asarray(halves.py["timestamp_s"], dtype=np.float64),
                                    np.zeros(0) if pose_sent_s is None else pose_sent_s)))
+    robot, integrator, losses, placed = allowed
+    judged_as = (Geometry.of(robot), integrator, min(robot.counter_bits, WIRE_COUNTER_BITS))
+    candidates = CandidateJudge(enc, kept, ref, judged_as, seen)
+    by_ahead(verdict, judge_ahead(halves, enc, sent, AheadJudge(enc, kept, ref, judged_as)))
+    if not len(ix) and not len(iy):
+        return verdict
     end = ref.start + len(ref.x_m)
 
     def judgeable(named: IntArray, t_s: FloatArray, alias: npt.NDArray[np.bool_] | None,
@@ -210,10 +220,7 @@ def judge_lone(
     by[oky] = budgets(enc, ref, breaks, kept, ey[oky])
     okx &= ~np.isnan(bx)
     oky &= ~np.isnan(by)
-    robot, integrator, losses, placed = allowed
-    by_candidates(verdict, lone_halves_of(halves, ix[~okx], iy[~oky], sent), CandidateJudge(
-        enc, kept, ref, (Geometry.of(robot), integrator,
-                         min(robot.counter_bits, WIRE_COUNTER_BITS)), seen))
+    by_candidates(verdict, lone_halves_of(halves, ix[~okx], iy[~oky], sent), candidates)
     ix, ex, tx, iy, ey, ty = ix[okx], ex[okx], tx[okx], iy[oky], ey[oky], ty[oky]
     poses = _completed(halves, ix, ex, iy, ey, ref)
     if len(poses.enc) == 0:
@@ -241,6 +248,20 @@ def by_candidates(verdict: LoneVerdict, lone: list[Half], judge: CandidateJudge)
         verdict.position_m = max(verdict.position_m, excess[0])
         verdict.heading_rad = max(verdict.heading_rad, excess[1])
         verdict.t_s.append(half.t_s)
+
+
+def by_ahead(verdict: LoneVerdict, found: tuple[list[tuple[float, float, float]], int]
+             ) -> None:
+    """``aheadnamed.judge_ahead``'s ``found`` (halves judged: time, position and heading
+    beyond; how many unjudged) into ``verdict``, counted apart (``ahead``)."""
+    judged, unjudged = found
+    verdict.ahead = (len(judged), unjudged)
+    verdict.judged += len(judged)
+    verdict.unjudged += unjudged
+    for t_s, position_m, heading_rad in judged:
+        verdict.position_m = max(verdict.position_m, position_m)
+        verdict.heading_rad = max(verdict.heading_rad, heading_rad)
+        verdict.t_s.append(t_s)
 
 
 def _completed(halves: PoseHalves, ix: IntArray, ex: IntArray, iy: IntArray, ey: IntArray,

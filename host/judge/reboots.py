@@ -264,7 +264,8 @@ def mark_two_sources(report: dict[str, Any], t_s: float, frames_not_judged: int,
 _SUMMED_SAMPLES = ("onboard", "truth", "truth_compared", "unmatched_poses", "encoder_frames",
                    "reference_restarts", "implausible_encoder_frames", "stall_first_judged",
                    "stall_first_unjudged", "stall_first_unmatched", "lone_halves_judged",
-                   "lone_halves_unjudged", "unmatched_sent")
+                   "lone_halves_unjudged", "unmatched_sent", "names_ahead_judged",
+                   "names_ahead_unjudged")
 _TIME_SERIES = ("t_s", "truth_t_s", "gap_start_t_s", "gap_end_t_s", "restart_t_s")
 
 

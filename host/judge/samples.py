@@ -18,6 +18,7 @@ from odocan.host.judge.latehalves import Half, halves_together
 from odocan.host.judge.latenames import sent_places
 from odocan.host.judge.queuednames import queued_names
 from odocan.host.judge.reference import INTEGRATORS, Geometry
+from odocan.host.judge.refusedenc import Refused, refused_encoders
 from odocan.host.judge.resendalias import may_alias
 from odocan.host.judge.senderseq import QUEUED_GAP_CYCLES as QUEUED_GAP_CYCLES
 from odocan.host.judge.senderseq import pose_skips
@@ -367,6 +368,7 @@ class PoseHalves:
     ey: IntArray
     ax: npt.NDArray[np.bool_] | None = None  # per half: may name another frame (resendalias)
     ay: npt.NDArray[np.bool_] | None = None
+    refused: Refused | None = None  # the encoder frames E2E refused, CRC right (aheadnamed)
 
 
 def pose_halves(
@@ -382,7 +384,8 @@ def pose_halves(
     ex = match_encoder(enc, x.place, x.enc_counter, x.sent_s, x.counter)
     ey = match_encoder(enc, y.place, y.enc_counter, y.sent_s, y.counter)
     return PoseHalves(px, py, ex, ey, may_alias(frames, decoder, enc, px["index"], ex),
-                      may_alias(frames, decoder, enc, py["index"], ey))
+                      may_alias(frames, decoder, enc, py["index"], ey),
+                      refused_encoders(frames, accepted, decoder))
 
 
 def _late_half(frames: FrameArrays, decoder: BulkDecoder, name: str,

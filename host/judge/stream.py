@@ -60,6 +60,7 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
+from odocan.host.judge.aheadnamed import forward
 from odocan.host.judge.reference import Geometry, SpeedBound
 from odocan.host.judge.reference_path import firmware_steps
 from odocan.host.judge.refusednames import refused_frames
@@ -191,6 +192,7 @@ class StreamPoses:
     decoder: BulkDecoder
     unmatched: int = 0  # pose frames naming no accepted encoder frame of the log
     lone: int = 0  # halves given out without their partner (host.judge.lonehalves: judged whole)
+    ahead: int = 0  # frames naming ahead of every one heard (host.judge.aheadnamed: judged whole)
     _offset: int = 0
     _enc_count: int = 0
     _recent: dict[str, np.ndarray] = field(default_factory=dict)  # g, index, counter, seq, t
@@ -277,11 +279,16 @@ class StreamPoses:
         self._pending[name] = halves.take(np.arange(len(halves.index)) >= cut)
         g, seq = g[:cut], seq[:cut]
         cycle_s = contract_cycle_s(self.decoder, "WHEEL_ENCODERS")
+        prev_t_s = self._last_row[name][2] if name in self._last_row else None
         if self.causal and cycle_s is not None and len(halves.index):
             g, seq = self._held(name, halves, g, seq, cycle_s)
             newest = known["seq"][np.maximum(latest[:cut], 0)]  # samples.lapped_out
             g = np.where((g >= 0) & (latest[:cut] >= 0) & (newest - seq >= LAP), -1, g)
         self.unmatched += int(np.count_nonzero(g < 0))
+        if self.causal and cycle_s is not None:
+            self.ahead += int(np.count_nonzero(forward(
+                known_encoders(known, cycle_s), halves.index[:cut], halves.enc_counter[:cut],
+                halves.timestamp_s[:cut], g, prev_t_s)))
         self._keep_first(name, halves, g, seq, known)
         if cut == len(halves.index):
             return float(top - 8) if not final else np.inf

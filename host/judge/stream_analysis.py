@@ -34,9 +34,9 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from odocan.host.io.frames import concat_frames
-from odocan.host.io.logs import CHUNK_FRAMES, FrameArrays, iter_log, warn_on_stderr
+from odocan.host.io.logs import CHUNK_FRAMES, FrameArrays, iter_log, read_log, warn_on_stderr
 from odocan.host.judge import acrosscut, namesahead, stallrestart
-from odocan.host.judge.analysis import Tolerance
+from odocan.host.judge.analysis import Tolerance, analyze
 from odocan.host.judge.breaks import placed_offsets
 from odocan.host.judge.configs import ConfigPages, in_force
 from odocan.host.judge.distance import DistanceJudge
@@ -83,7 +83,7 @@ from odocan.host.judge.stream_losses import SpanDrops
 from odocan.host.judge.stream_place import PlacedChunk, reference_errors, segment_offsets
 from odocan.host.judge.stream_place import start_pose as place_start
 from odocan.host.judge.stream_primed import cut_frames, judged_from_candidates
-from odocan.host.judge.stream_refusal import UNSETTLED
+from odocan.host.judge.stream_refusal import UNSETTLED, NamesAhead
 from odocan.host.judge.stream_refusal import NotStreamable as NotStreamable
 from odocan.host.judge.stream_reprime import stream_reprimes
 from odocan.host.judge.stream_spill import FrameSpill
@@ -126,6 +126,7 @@ def analyze_file(
     count: FrameCount | None = None,
     whole_on_config: bool = False,
     config_pages: ConfigPages | None = None,
+    whole_on_ahead: bool = True,
 ) -> dict[str, Any]:
     """``analyze(read_log(path), ...).report``, the log read ``chunk_frames`` at a time
     (``warn``: where ``iter_log`` says it skipped a partial last line; ``count``, when given:
@@ -133,7 +134,11 @@ def analyze_file(
     ``NotStreamable`` when a config was applied (the CLI's PROFILE-page checks, which read
     the whole log: ``configs.running_before_configs``, ``later_mismatches``), unless
     ``config_pages`` reads them from the frames spilled (the robot then judged with its bound
-    before the first config's APPLY, as the whole log's path)."""
+    before the first config's APPLY, as the whole log's path). ``whole_on_ahead``: a life with
+    a pose naming an encoder frame after those heard before it (``aheadnamed``: judged at the
+    frames it may name, around it in the whole log) gives the whole log's report, the log read
+    whole as the CLI reads a log the stream refused (no config applied); False: ``NamesAhead``
+    (the CLI says so under ``--stream always`` and reads it whole itself)."""
     db = db if db is not None else default_plan()
     count = count if count is not None else FrameCount()
     decoder = BulkDecoder(db)
@@ -172,10 +177,17 @@ def analyze_file(
             robot = config_pages.read(applied, lambda lo, hi: spill.read(lo, hi, chunk_frames),
                                       count.frames)
         spans = cut_spans(firmware, cuts.set_poses(firmware), applied)
-        report = _analyze_lives(
-            spans, facts, frames_of, robot, integrator, tolerance=tolerance, db=db,
-            scenario=scenario, seed=seed, wall_seconds=wall_seconds,
-            max_wheel_speed_mm_s=max_wheel_speed_mm_s)
+        try:
+            report = _analyze_lives(
+                spans, facts, frames_of, robot, integrator, tolerance=tolerance, db=db,
+                scenario=scenario, seed=seed, wall_seconds=wall_seconds,
+                max_wheel_speed_mm_s=max_wheel_speed_mm_s)
+        except NamesAhead:
+            if not whole_on_ahead or applied:
+                raise
+            return analyze(read_log(path, warn=warn), robot, integrator, tolerance=tolerance,
+                           db=db, scenario=scenario, seed=seed, wall_seconds=wall_seconds,
+                           max_wheel_speed_mm_s=max_wheel_speed_mm_s).report
         if len(spans) != len(firmware):  # a set-pose is no reboot: one latch per firmware
             report.update(latched_per_firmware(firmware, frames_of, db))
         report["events"] = [*report.get("events", []), *senders.events]

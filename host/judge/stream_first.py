@@ -33,7 +33,7 @@ from odocan.host.judge.stream_late import REFUSAL as LATE
 from odocan.host.judge.stream_late import StreamLate
 from odocan.host.judge.stream_losses import StreamLosses
 from odocan.host.judge.stream_primed import PowerUpPrefix
-from odocan.host.judge.stream_refusal import UNSETTLED, NotStreamable
+from odocan.host.judge.stream_refusal import AHEAD, UNSETTLED, NamesAhead, NotStreamable
 from odocan.host.judge.stream_stalls import StreamStalls
 from odocan.host.judge.stream_truth import StreamTruth
 from odocan.host.judge.stream_twist import StreamTwist
@@ -204,8 +204,10 @@ class FirstPass:
             raise NotStreamable("the firmware stalled before its first pose")
         if self.resent_kept:  # judged whole (host.judge.resent), as the sample is out already
             raise NotStreamable("a resent pose differs from the first naming its encoder frame")
-        if self.poses.lone:  # judged on what it carries, by the whole log's judge (lonehalves)
-            raise NotStreamable("a pose half whose partner was lost (a lone half)")
+        if self.poses.lone or self.poses.ahead:  # judged by the whole log's judge: on what it
+            # carries (lonehalves), at the frames it may name (aheadnamed)
+            raise (NotStreamable("a pose half whose partner was lost (a lone half)")
+                   if self.poses.lone else NamesAhead(AHEAD))
         if self.late.found:  # the stream names it where heard (stream_late)
             raise NotStreamable(LATE)
 

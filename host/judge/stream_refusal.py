@@ -19,3 +19,11 @@ class NotStreamable(OdocanError):
 UNSETTLED = ("a starved or jittered recorder's stamps: encoder frames settled from the poses "
              "and pages after them, beyond the evidence horizon the stream carries "
              "(stream_carry.MAX_CARRY_S)")
+
+
+class NamesAhead(NotStreamable):
+    """A pose names an encoder frame after those heard before it (``aheadnamed``): judged at
+    the frames it may name, which the whole log's judge reads around it."""
+
+
+AHEAD = "a pose naming an encoder frame after those heard before it"

@@ -282,7 +282,7 @@ def _streamed(
         report = analyze_file(args.log, profile, args.integrator, tolerance=args.tolerance,
                               db=db, chunk_frames=args.chunk_frames or CHUNK_FRAMES,
                               warn=warnings.append, whole_on_config=db is None,
-                              config_pages=pages if db is None else None)
+                              config_pages=pages if db is None else None, whole_on_ahead=False)
     except AnalysisError:
         return None
     except NotStreamable as refusal:
