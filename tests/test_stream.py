@@ -36,20 +36,23 @@ CHUNKS = [1, 2, 7, 64, 1 << 20]
 
 
 @cache
-def awkward_lines() -> tuple[str, ...]:
+def awkward_lines(spoiled: int = 205, reordered: tuple[int, ...] = (150, 152, 161),
+                  ) -> tuple[str, ...]:
     """A drive with a firmware reboot (frame 300), a counter restart (frame 500), a gap of 20
     encoder frames (620..639: the COUNTER wraps inside it), a repeated frame, a frame with a bad
-    CRC, two frames swapped, and poses logged before the encoder frame they name."""
+    CRC (line ``spoiled``: 205 an encoder frame, whose pose then names a frame the host refused,
+    216 an ODOM_STATUS frame), two frames swapped, and poses logged before the encoder frame
+    they name (the groups ``reordered``)."""
     profile = load("pmir")
     d_left, d_right = wandering_drive(profile, 800, 0.004, seed=3)
     synth = synthesize(profile, "rk2", d_left, d_right, reboot_at=300,
                        counter_jumps={500: 20_000})
-    for k in (150, 152, 161):  # the poses (and status) logged before the frame they name
+    for k in reordered:  # the poses (and status) logged before the frame they name
         synth.groups[k] = synth.groups[k][1:] + synth.groups[k][:1]
     lines = list(synth.lines(0, 620)) + list(synth.lines(640))
     lines.insert(101, lines[100])  # repeated
-    bad = lines[205]
-    lines[205] = bad[: bad.index("#") + 1] + ("00" if bad[bad.index("#") + 1 : bad.index("#") + 3]
+    bad = lines[spoiled]
+    lines[spoiled] = bad[: bad.index("#") + 1] + ("00" if bad[bad.index("#") + 1 : bad.index("#") + 3]
                                               != "00" else "11") + bad[bad.index("#") + 3 :]
     lines[410], lines[411] = lines[411], lines[410]  # out of order
     return tuple(lines)
