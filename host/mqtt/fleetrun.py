@@ -149,8 +149,6 @@ async def run_fleet(
                 hold_s=HOLD_S),  # each robot's frames judged in one go (framehold)
                 gate=ReleaseGate())  # no slice just before a tick
             watch_halts(fleet, [robot.telemetry for robot in bridge.robots])
-            for robot in bridge.robots:  # the simulator stamps its frames, its DataFrames reach
-                robot.telemetry.stamps = None  # the plans round the stamp gate (livestampgate)
             if trace is not None:
                 _trace_bridge(trace, bridge)
             stop = asyncio.Event()
