@@ -210,23 +210,31 @@ def test_the_live_judges_keep_their_memory_by_frames(
         assert peak_b < 50_000_000, (path, peak_b)
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "the live judges take a glitched stamp as heard: the monitor and the bridge, fed the "
-    "drive with one encoder frame 1000 s (or 1e8 s) ahead of its neighbours, say DISTANCE "
-    "WRONG ('ODOM_TWIST DISTANCE off the reference's path length by 1.621 mm beyond its "
-    "tolerance' on trial40's a.csv) where analyze, its reader setting the frame aside "
-    "(host.io.stampglitch), PASSes. Live, setting it aside needs a one-frame gate at "
-    "BusMonitor.feed and RobotTelemetry.feed_fields (hold a frame more than 1 s off the one "
-    "before until the next: StampGlitches' rule frame by frame, flushed at the watch's end); "
-    "both modules are at the 500-line limit: not built this pass"))
-@pytest.mark.parametrize("jump_s", [1000.0])
+@pytest.mark.parametrize("jump_s", [1000.0, 1e8, -1000.0])
 def test_the_live_judges_set_a_glitched_stamp_aside(
     drive: tuple[Path, list[can.Message]], jump_s: float, tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
 ) -> None:
+    """The monitor and the bridge set the glitched frame aside as ``analyze`` does
+    (``host.judge.livestampgate``): the drive's verdict (1000 s ahead said DISTANCE WRONG,
+    1.621 mm beyond its tolerance, before), one ``stamp_glitch`` event whose detail is the
+    reader's warning, the frame counted lost."""
     _, frames = drive
     clean = live_judges("kobuki", _write(frames, tmp_path / "clean.csv"))
-    glitched = live_judges("kobuki", _glitched(frames, tmp_path / "glitch.csv", jump_s))
-    for k in range(2):  # the monitor, the bridge
+    path = _glitched(frames, tmp_path / "glitch.csv", jump_s)
+    glitched = live_judges("kobuki", path)
+    assert main(["analyze", str(path)]) == 0
+    warned = [line for line in capsys.readouterr().err.splitlines() if "set aside" in line]
+    assert len(warned) == 1, warned
+    monitor_events = glitched[0].health(now_s=frames[-1].timestamp)["events"]
+    bridge_events = glitched[1].status()[1]["events"]
+    for k, events in enumerate((monitor_events, bridge_events)):  # the monitor, the bridge
         assert clean[k].distance.verdict() == []
         assert glitched[k].distance.verdict() == [], glitched[k].distance.verdict()
         assert glitched[k].tracker.wrongs.count == 0
+        told = [e for e in events if e["kind"] == "stamp_glitch"]
+        assert len(told) == 1, events
+        assert told[0]["count"] == 1, told
+        assert warned[0].endswith(f"{path}: {told[0]['detail']}"), (warned, told)
+        assert glitched[k].e2e.counts()["WHEEL_ENCODERS"]["lost"] == (
+            clean[k].e2e.counts()["WHEEL_ENCODERS"]["lost"] + 1)

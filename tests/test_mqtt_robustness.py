@@ -175,7 +175,9 @@ def _published(bridge: Bridge) -> Iterator[list[tuple[str, dict[str, Any]]]]:
 def test_10e5_random_frames_are_each_counted_and_the_poses_still_come() -> None:
     rng = random.Random(13)
     fuzz = [random_message(rng, k * 1e-4) for k in range(N_FUZZ)]
-    fuzz.insert(N_FUZZ // 2, _status_with_unknown_page())
+    status = _status_with_unknown_page()  # stamped among its neighbours: a frame stamped 0 s
+    status.timestamp = N_FUZZ // 2 * 1e-4  # amid 5 s is a glitched stamp, set aside unjudged
+    fuzz.insert(N_FUZZ // 2, status)  # (host.judge.livestampgate, as analyze's readers)
     with can.Bus(interface="virtual", channel=f"fuzz-can-{time.monotonic_ns()}") as bus:
         bridge = _bridge(bus)
         got = next(_published(bridge))

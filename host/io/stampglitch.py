@@ -12,6 +12,7 @@ monotonic: the frames after it follow the jump, they do not come back). Its time
 (its place in the log says only "between its neighbours"), and the judges read times; so it is
 set aside, not re-stamped: the judges see a frame lost, a gap of the log they bound as any.
 One warning names the log, the frame (its number among the log's frames) and its stamp.
+The rule is ``host.io.stamprule``'s, the live judges' too (``host.judge.livestampgate``).
 
 At most ``MAX_SET_ASIDE`` frames (the first): a log with more such frames is no glitch but two
 clocks interleaved (merged logs) or a shuffle, left as recorded (``TimeOrder`` says so).
@@ -27,9 +28,8 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.frames import FrameArrays, concat_frames
+from odocan.host.io.stamprule import MAX_SET_ASIDE, lone, set_aside_text
 
-JUMP_S = 1.0  # off both neighbours by more than this: 100 encoder periods, 6 COUNTER laps
-MAX_SET_ASIDE = 16  # frames set aside at most (module docstring)
 FloatArray = npt.NDArray[np.float64]
 
 
@@ -42,10 +42,7 @@ def lone_stamps(times_s: FloatArray, before_s: float, after_s: float) -> npt.NDA
     prev_s = np.concatenate(([before_s], times_s[:-1]))
     next_s = np.concatenate((times_s[1:], [after_s]))
     with np.errstate(invalid="ignore"):
-        ahead = (times_s - prev_s > JUMP_S) & (times_s - next_s > JUMP_S)
-        behind = (prev_s - times_s > JUMP_S) & (next_s - times_s > JUMP_S)
-        in_order = next_s >= prev_s - JUMP_S  # (False where either is nan)
-    return np.flatnonzero((ahead | behind) & in_order)
+        return np.flatnonzero(lone(prev_s, times_s, next_s))  # (stamprule: the live gate's)
 
 
 class StampGlitches:
@@ -108,9 +105,4 @@ class StampGlitches:
         """One warning when any frame was set aside."""
         if self.first is None:
             return
-        number, t_s, prev_s, next_s = self.first
-        many = "s" if self.count > 1 else ""
-        warn(f"{path}: set aside {self.count} frame{many} stamped far off both neighbours "
-             f"(first: frame {number}, {t_s:.6f} s, between {prev_s:.6f} and {next_s:.6f} s; "
-             f"more than {JUMP_S:g} s off both while they are in order: a glitched stamp, no "
-             "reorder nor pause): not judged, counted lost")
+        warn(f"{path}: {set_aside_text(self.count, *self.first)}")

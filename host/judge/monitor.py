@@ -78,6 +78,7 @@ from odocan.host.judge.liverobot import (
 from odocan.host.judge.livesetpose import SetPoseFollower, apply_set_pose, set_pose_event
 from odocan.host.judge.livesettle import SettleHold
 from odocan.host.judge.livestallfirst import first_after_of
+from odocan.host.judge.livestampgate import StampGate
 from odocan.host.judge.livetwins import CRC_RIGHT_REFUSED
 from odocan.host.judge.livetwist import LiveTwist
 from odocan.host.judge.messagestats import MessageStats
@@ -146,6 +147,7 @@ class BusMonitor:
         self.started_monotonic_s = time.monotonic()
         self.sources = SourceWatch(first=self.tracker.first)
         self.events = self.tracker.restarts.events = deque[dict[str, Any]](maxlen=MAX_EVENTS)
+        self.stamps = StampGate[tuple[can.Message, float]](self.events)  # (livestampgate)
         self.latch = StatusLatch()  # the firmware's states and ERROR_MASK bits, latched
         self.set_pose = SetPoseFollower()  # ODOM_SET_POSE staged and applied (its ACKs)
         self.kept = KeptWatch()  # what an APPLY kept: analyze's check, live (livekept)
@@ -166,8 +168,11 @@ class BusMonitor:
     def feed(self, msg: can.Message, now_s: float | None = None) -> None:
         """One frame heard on the bus (``now_s``: local monotonic time, default now), stamped
         on the drive's clock (a sped-up replay's: ``livepace``); held while an encoder frame's
-        verdict waits for the firmware's evidence (``livesettle``)."""
-        self._take(self.pace.stamped(msg), time.monotonic() if now_s is None else now_s)
+        verdict waits for the firmware's evidence (``livesettle``); one stamped more than 1 s
+        off the frame before held to its next, set aside if a glitched stamp (livestampgate)."""
+        now_s = time.monotonic() if now_s is None else now_s
+        for held, held_now_s in self.stamps.through(msg.timestamp, (msg, now_s)):
+            self._take(self.pace.stamped(held), held_now_s)
 
     def _take(self, msg: can.Message, now_s: float) -> None:
         """``feed`` of a frame on the drive's clock (the held frames given back come here)."""
@@ -184,7 +189,9 @@ class BusMonitor:
         self._feed(msg, now_s, None)
 
     def release_held(self) -> None:
-        """The watch ends: the frames held are judged now (``liverobot``, ``livesettle``)."""
+        """The watch ends: the frames held are judged now (livestampgate, liverobot, livesettle)."""
+        for held, now_s in self.stamps.flush():  # (none or one)
+            self._take(self.pace.stamped(held), now_s)
         self._judge_waited()
         self.settle.release(self._feed)
 
@@ -271,20 +278,16 @@ class BusMonitor:
             except (KeyError, TypeError, ValueError):  # a --dbc without the signals it needs
                 self.undecodable += 1
 
-    def _on_pose_request(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
-        """ODOM_SET_POSE and ODOM_CONFIG: staged and applied as the firmware acknowledges them
-        (``host.judge.livesetpose``, ``host.judge.liveconfig``)."""
+    def _on_command(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
+        """ODOM_SET_POSE or ODOM_CONFIG: its ODOM_AUTH may follow; staged and applied as the
+        firmware acknowledges it (``host.judge.livesetpose``, ``host.judge.liveconfig``)."""
+        self.secoc.command("ODOM_SET_POSE" if "FIELD" in shown else "ODOM_CONFIG")
         if "FIELD" in shown:
             field = str(shown["FIELD"])
             self.set_pose.on_frame(int(s["COUNTER"]), field, s.get(field), self.tracker.enc_seq)
             return
         param = str(shown.get("PARAM"))
         self.config.on_frame(int(s["COUNTER"]), param, s.get(param))
-
-    def _on_command(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
-        """ODOM_SET_POSE or ODOM_CONFIG: its ODOM_AUTH may follow, and APPLY restarts."""
-        self.secoc.command("ODOM_SET_POSE" if "FIELD" in shown else "ODOM_CONFIG")
-        self._on_pose_request(s, shown)
 
     def _on_nav_goal(self, s: dict[str, Any], shown: dict[str, Any]) -> None:
         self.secoc.command("NAV_GOAL")

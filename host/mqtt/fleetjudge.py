@@ -104,8 +104,12 @@ def _judged(entry: dict[str, Any]) -> str:
 
 def watch_halts(fleet: Fleet, telemetry: list[RobotTelemetry]) -> None:
     """Each robot's telemetry judges its samples between the loop's halts
-    (``host.mqtt.haltstretch``; nothing to do until the loop halts the boards)."""
+    (``host.mqtt.haltstretch``; nothing to do until the loop halts the boards), and takes its
+    frames ungated by their stamps (``livestampgate``): the simulator stamps them, and its
+    ``DataFrame``s reach the plans round ``feed``, so a gate would see its ``Message``s alone
+    and could hold one behind the frames after it."""
     for i, robot in enumerate(telemetry):
+        robot.stamps = None
         robot.stretches = HaltStretches(robot.tracker, fleet.halt_ticks, fleet.offset_ticks(i),
                                         fleet.halt_gaps)
 

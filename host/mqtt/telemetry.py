@@ -64,6 +64,7 @@ from odocan.host.judge.livefreshboot import powerup_heard
 from odocan.host.judge.livegapseen import heard_status
 from odocan.host.judge.livepose import FramePose, difference, pose_dict
 from odocan.host.judge.liverobot import DEFAULT, GIVEN, LiveRobot, PageWait
+from odocan.host.judge.livestampgate import StampGate, judged
 from odocan.host.judge.livestreams import hear_pose_frame
 from odocan.host.judge.livetwins import CRC_RIGHT_REFUSED
 from odocan.host.judge.livetwist import LiveTwist
@@ -81,6 +82,7 @@ from odocan.host.mqtt.liveplan import Plan, plans
 from odocan.host.mqtt.liveprofile import ProfileStatus, judge_waited, late_robot_page, wait_page
 from odocan.host.mqtt.liveroutes import Route, routes, takes
 from odocan.host.mqtt.lsbround import POSE_FIELDS, TRUTH_FIELDS, LsbRounding
+from odocan.host.mqtt.statusparts import adopted_sections, unknown_key
 from odocan.host.mqtt.topics import stamp, status_payload
 from odocan.host.protocol.busfacts import ENC_COUNTER_MASK as MASK
 from odocan.host.protocol.e2e import e2e_messages
@@ -169,6 +171,7 @@ class RobotTelemetry(CommandFollowing):
         self.latch = StatusLatch()  # the firmware's states and ERROR_MASK bits, latched
         # ... set-poses and the counter restarts the reference follows (its ``RestartLog``)
         self.events = self.tracker.restarts.events = deque[dict[str, Any]](maxlen=STATUS_EVENTS)
+        self.stamps: StampGate[can.Message] | None = StampGate(self.events)  # livestampgate
         self._init_commands()  # set-poses, configs, the ACKs awaited (host.mqtt.livecommands)
         self.reboots = 0
         self.stretches: HaltStretches | None = None  # an overloaded fleet's (host.mqtt.overload)
@@ -183,7 +186,15 @@ class RobotTelemetry(CommandFollowing):
 
     # --- frames ---
     def feed(self, msg: can.Message) -> list[Publication]:
-        """One frame of this robot's bus; returns the publications it makes due."""
+        """One frame of this robot's bus; returns the publications it makes due (one stamped
+        more than 1 s off the one before held to its next, set aside if a glitched stamp:
+        ``livestampgate``; ``stamps`` None: none held, the lockstep fleet's simulated clock)."""
+        stamps = self.stamps
+        if stamps is None or stamps.passes(msg.timestamp):
+            return self._heard(msg)
+        return judged(stamps.take(msg.timestamp, msg), self._heard)
+
+    def _heard(self, msg: can.Message) -> list[Publication]:
         if msg.is_error_frame or msg.is_remote_frame:
             self.e2e.count_frame_kind(error=msg.is_error_frame, remote=msg.is_remote_frame)
             return []
@@ -232,17 +243,20 @@ class RobotTelemetry(CommandFollowing):
         if status in CRC_RIGHT_REFUSED and route is not None:  # a twin? a pose sent? (liveboottick)
             refused_named(tracker, can_id, route.name, lambda: route.signals(data), t_s, status)
         message = self._by_id.get(can_id)
-        self.rejected[message.name if message else self._unknown_key(can_id)] += 1
+        self.rejected[message.name if message else unknown_key(  # (statusparts)
+            self._unknown_ids, can_id, MAX_UNKNOWN_IDS)] += 1
         return self._samples() if tracker.settled else []
 
     def end_watch(self) -> list[Publication]:
-        """The watch ends (the bridge stops, the fleet's report): the frames a hold kept judged
-        (``livehold``), then what the live judges still wait with (``host.judge.watchend``);
-        the publications the frames held make. Once: a second call judges nothing again."""
+        """The watch ends (the bridge stops, the fleet's report): the frame the stamp gate held
+        (livestampgate), the frames a hold kept (``livehold``) judged, then what the live judges
+        still wait with (``host.judge.watchend``); the publications the frames held make. Once:
+        a second call judges nothing again."""
         if self._ended:
             return []
         self._ended = True
-        published = judge_waited(self) + self.hold.release(ends=True)
+        held = self.stamps.flush() if self.stamps is not None else []  # (livestampgate)
+        published = judged(held, self._heard) + judge_waited(self) + self.hold.release(ends=True)
         end_watch(self.tracker, self.distance)
         return published
 
@@ -312,15 +326,6 @@ class RobotTelemetry(CommandFollowing):
         if lost is not None:
             self.events.append({"t_s": t_s, "kind": "config", "detail": lost})
             self.profile.forget()  # its next PROFILE page is judged against the build's robot
-
-    def _unknown_key(self, can_id: int) -> str:
-        """``0x...`` for the first ``MAX_UNKNOWN_IDS`` foreign IDs, then ``other``: a bus of
-        random IDs must not grow ``rejected`` (and the ``rates`` payload) without bound."""
-        key = hex(can_id)
-        if key in self._unknown_ids or len(self._unknown_ids) < MAX_UNKNOWN_IDS:
-            self._unknown_ids.add(key)
-            return key
-        return "other"
 
     @takes("COUNTER", "LEFT_COUNT", "RIGHT_COUNT", "CTRL_UPTIME", advances=True)
     def _on_encoders(self, s: tuple[Any, ...], t_s: float) -> list[Publication]:
@@ -480,15 +485,9 @@ class RobotTelemetry(CommandFollowing):
             latched_errors=self.latch.latched_names(), events=list(self.events),
             pose_wrongs=self.tracker.wrongs.as_dict(), frames_total=sum(self.frames.values()),
             distance=self.distance.as_dict(), twist=self.twist.as_dict(),
-            profile=self.profile.section, robot_profile=self.robot.as_dict(), **self._adopted(),
+            profile=self.profile.section, robot_profile=self.robot.as_dict(), **adopted_sections(
+                self.tracker.adopted, self.ahead),
         ))
-
-    def _adopted(self) -> dict[str, Any]:
-        """``reference_adopted`` while the reference starts at the firmware's pose (liveadopted),
-        ``names_ahead`` once a pose named a frame not yet sent (``liveahead``); else nothing."""
-        adopted, ahead = self.tracker.adopted.as_dict(), self.ahead.as_dict()
-        return {**({"reference_adopted": adopted} if adopted else {}),
-                **({"names_ahead": ahead} if ahead else {})}
 
 
 def _handlers() -> dict[str, Any]:
