@@ -52,8 +52,8 @@ def awkward_lines(spoiled: int = 205, reordered: tuple[int, ...] = (150, 152, 16
     lines = list(synth.lines(0, 620)) + list(synth.lines(640))
     lines.insert(101, lines[100])  # repeated
     bad = lines[spoiled]
-    lines[spoiled] = bad[: bad.index("#") + 1] + ("00" if bad[bad.index("#") + 1 : bad.index("#") + 3]
-                                              != "00" else "11") + bad[bad.index("#") + 3 :]
+    at = bad.index("#") + 1  # the CRC byte's two hex digits
+    lines[spoiled] = bad[:at] + ("00" if bad[at : at + 2] != "00" else "11") + bad[at + 2 :]
     lines[410], lines[411] = lines[411], lines[410]  # out of order
     return tuple(lines)
 

@@ -67,8 +67,8 @@ def run_lines(which: str) -> tuple[str, ...]:
 
 def log_of(tmp_path: Path, which: str) -> Path:
     path = tmp_path / f"{which}.log"
-    if which == "awkward":  # its bad CRC on a status frame and no pose logged before the
-        # frame it names: no pose names a frame ahead (those logs are read whole: test_ahead_silence)
+    if which == "awkward":  # its bad CRC on a status frame, no pose logged before the frame
+        # it names: no pose names a frame ahead (such logs are read whole: test_ahead_silence)
         path.write_text("".join(awkward_lines(spoiled=SPOILED_STATUS, reordered=())))
         return path
     if which in ("lossy", "babble"):
