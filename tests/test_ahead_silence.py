@@ -72,3 +72,15 @@ def test_a_pose_named_ahead_gives_the_whole_logs_report(tmp_path: Path) -> None:
     whole = analyze(read_log(path), PMIR, "rk2").report
     assert whole["samples"]["names_ahead_judged"] >= 1
     assert json.dumps(analyze_file(path, PMIR, "rk2", chunk_frames=64)) == json.dumps(whole)
+
+
+def test_a_log_read_whole_after_the_stream_warns_once(tmp_path: Path) -> None:
+    """The awkward log cut mid-line (what a killed recorder leaves): the stream's read and the
+    whole log's read after it skip the same partial line; the caller is told once."""
+    path = tmp_path / "cut.log"
+    lines = awkward_lines()
+    path.write_text("".join(lines[:-1]) + lines[-1][:11])
+    warned: list[str] = []
+    report = analyze_file(path, PMIR, "rk2", chunk_frames=64, warn=warned.append)
+    assert report["samples"]["names_ahead_judged"] >= 1  # (read whole: a pose named ahead)
+    assert len(warned) == 1, warned

@@ -185,8 +185,9 @@ def analyze_file(
         except NamesAhead:
             if not whole_on_ahead or applied:
                 raise
-            return analyze(read_log(path, warn=warn), robot, integrator, tolerance=tolerance,
-                           db=db, scenario=scenario, seed=seed, wall_seconds=wall_seconds,
+            return analyze(read_log(path, warn=_said_already), robot, integrator,
+                           tolerance=tolerance, db=db, scenario=scenario, seed=seed,
+                           wall_seconds=wall_seconds,
                            max_wheel_speed_mm_s=max_wheel_speed_mm_s).report
         if len(spans) != len(firmware):  # a set-pose is no reboot: one latch per firmware
             report.update(latched_per_firmware(firmware, frames_of, db))
@@ -478,3 +479,7 @@ def _judged(
     if rebase:  # a life after a reboot: the truth compared in its frame
         report["truth_origin"] = truth.origin
     return report, first.t_first_s
+
+
+def _said_already(_message: str) -> None:
+    """The whole log's read after the stream's: its warnings were said (``iter_log``'s)."""
