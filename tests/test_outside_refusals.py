@@ -81,8 +81,8 @@ def test_a_log_whose_times_go_back_is_warned_with_a_count(
     told: list[str] = []
     frames = read_log(path, warn=told.append)
     assert len(told) == 1, told
-    assert f"{path}: 1 frame of {len(frames)} earlier than the frame before (first: frame 501, "\
-        in told[0]
+    assert (f"{path}: 1 frame of {len(frames)} earlier than the latest frame before them "
+            "(first: frame 501, ") in told[0]
     back_ms = float(told[0].split(" ms back from ")[0].rsplit(" ", 1)[-1])  # how far, said
     assert 989 <= back_ms <= 1000, told[0]  # its second back, less the spacing (<= 11 ms)
     chunked: list[str] = []
@@ -121,13 +121,13 @@ def test_a_recorders_us_inversions_are_not_warned_a_ms_one_is(
     assert told == []
     capsys.readouterr()
     assert main(["analyze", str(path)]) == 0
-    assert "earlier than the frame before" not in capsys.readouterr().err
+    assert "earlier than the latest frame before" not in capsys.readouterr().err
     moved = _stamps_back(drive[".log"], path, 0.0015, 97)
     read_log(path, warn=told.append)
     assert len(told) == 1, told
     assert told[0].startswith(
-        f"{path}: {moved} frames of {len(read_log(drive['.log']))} earlier than the frame before"
-    ), told
+        f"{path}: {moved} frames of {len(read_log(drive['.log']))} earlier than the latest "
+        "frame before them"), told
 
 
 def test_analyze_says_once_that_times_go_back(
@@ -137,7 +137,7 @@ def test_analyze_says_once_that_times_go_back(
     _times_going_back(drive[".log"], path)
     main(["analyze", str(path), "--stream", "always"])
     err = capsys.readouterr().err
-    assert err.count("earlier than the frame before") == 1, err
+    assert err.count("earlier than the latest frame before") == 1, err
 
 
 def test_garbage_lines_in_an_asc_are_skipped_with_a_count(

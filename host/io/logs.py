@@ -174,7 +174,7 @@ class TimeOrder:
         if 2 * self.back <= self.frames:
             return None
         return (f"the log is not in time order ({self.back} of {self.frames} frames earlier "
-                "than the frame before: reversed or shuffled?)")
+                "than the latest frame before them: reversed or shuffled?)")
 
     def report(self, path: Path, warn: Callable[[str], None]) -> None:
         """One warning when any frame's time went back beyond the recorder's stamping."""
@@ -182,7 +182,7 @@ class TimeOrder:
             return
         number, t_s, before_s = self.first
         warn(f"{path}: {self.back} frame{'s' if self.back > 1 else ''} of {self.frames} "
-             f"earlier than the frame before (first: frame {number}, {t_s:.6f} s, "
+             f"earlier than the latest frame before them (first: frame {number}, {t_s:.6f} s, "
              f"{(before_s - t_s) * 1e3:.4g} ms back from {before_s:.6f} s; frames back by "
              f"{STAMPING_S * 1e3:g} ms or less, a recorder's stamping, are not counted): times "
              "kept as recorded; the log's duration may be wrong")

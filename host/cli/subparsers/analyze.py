@@ -114,7 +114,8 @@ def add_subparser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
         "the CPU) or read it whole: auto streams a log whose whole judge would take more "
         f"than {auto_budget()}; the report is the same either way. A log the stream cannot judge "
         "exactly (frame times going back, a burst after a busy bus, a stall before a first "
-        "pose, an APPLY just after a re-primed stall) is read whole: quietly under auto, with "
+        "pose, an APPLY just after a re-primed stall, a pose naming a frame not heard before "
+        "it, a lone pose half) is read whole: quietly under auto, with "
         "one line on stderr under always (default: %(default)s)",
     )
     parser.set_defaults(func=_do_analyze)
