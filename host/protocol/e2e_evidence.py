@@ -15,7 +15,7 @@ Where they differ, the firmware's poses do:
 
 * **taken**: an ODOM_POSE_X or _Y frame's ENC_COUNTER names the encoder frame the firmware
   integrated last before it sent the pose. Where the firmware moved on since the previous send
-  of that message heard (a later one: COUNTER 1..7 on, at most ``NEAR_FRAMES`` encoder frames
+  of that message heard (a later one: ``e2e_sends``, at most ``NEAR_FRAMES`` encoder frames
   before), the named frame came after that send (less ``RACE_FRAMES``): it is the one frame
   of that COUNTER there, else no proof. A send naming the ENC_COUNTER of that send names what
   it named, unless another frame of that COUNTER came since (after a lock-out the firmware
@@ -66,6 +66,7 @@ from odocan.host.protocol.e2e_periods import (
     receive_periods,
 )
 from odocan.host.protocol.e2e_retract import firmware_last
+from odocan.host.protocol.e2e_sends import later_send
 
 # How late a starved recorder may stamp a frame, in periods: held 1..4 periods (the trial's
 # lateness reached +3.9), plus the stamp jitter of ``CAPTURE_TOLERANCE_CYCLES``.
@@ -158,8 +159,10 @@ def pose_evidence(frames: FrameArrays, enc_pos: npt.NDArray[np.intp],
         since = _sent_places(frames.timestamp_s[at], counter, before,
                              frames.timestamp_s[enc_pos[good]])
         found: int | None = None  # the place in ``good`` of the frame the last send named
+        stamps = frames.timestamp_s[at].tolist()
         for k in range(1, len(at)):
-            later = 0 < (counter[k] - counter[k - 1]) & ENC_COUNTER_MASK < COUNTER_MODULO // 2
+            later = later_send(stamps[k] - stamps[k - 1], int(counter[k] - counter[k - 1]),
+                               POSE_PERIOD_S)  # e2e_sends: a lap gap on cadence too
             if not later or before[k] - since[k - 1] > NEAR_FRAMES:
                 found = None  # a send again or a long silence: no proof until the next pair
                 continue
