@@ -24,12 +24,15 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import Any
 
 import can
 import cantools
+import numpy as np
 import pytest
 from cantools.database.can import Database
 
+from odocan.host.protocol.e2e_crosslate import crossed_late
 from odocan.sim.contract import DBC_PATH
 from odocan.sim.robot import load
 from tests.fw_watch import Watch
@@ -46,17 +49,22 @@ def drive(tmp_path_factory: pytest.TempPathFactory) -> Drive:
     return log, watch, code
 
 
-def _decoded(log: Path, name: str, lo_s: float, hi_s: float) -> list[tuple[float, dict]]:
+def _decoded(log: Path, name: str, lo_s: float, hi_s: float
+             ) -> list[tuple[float, dict[str, Any]]]:
     """(time, cantools signals) of the frames of ``name`` heard in [lo_s, hi_s]."""
     db = cantools.database.load_file(str(DBC_PATH))
     assert isinstance(db, Database)
     msg = db.get_message_by_name(name)
-    return [(m.timestamp, dict(msg.decode(m.data, decode_choices=False)))
-            for m in can.LogReader(str(log))
-            if m.arbitration_id == msg.frame_id and lo_s <= m.timestamp <= hi_s]
+    found: list[tuple[float, dict[str, Any]]] = []
+    for m in can.LogReader(str(log)):
+        if m.arbitration_id == msg.frame_id and lo_s <= m.timestamp <= hi_s:
+            signals = msg.decode(bytes(m.data), decode_choices=False)
+            assert isinstance(signals, dict)
+            found.append((m.timestamp, dict(signals)))
+    return found
 
 
-def _one(log: Path, name: str, at_s: float, **signals: int) -> dict:
+def _one(log: Path, name: str, at_s: float, **signals: int) -> dict[str, Any]:
     """The one frame of ``name`` heard within 2 ms of ``at_s`` with those signal values."""
     found = [s for _, s in _decoded(log, name, at_s - 2e-3, at_s + 2e-3)
              if all(s[k] == v for k, v in signals.items())]
@@ -64,15 +72,15 @@ def _one(log: Path, name: str, at_s: float, **signals: int) -> dict:
     return found[0]
 
 
-def _heading_step_rad(a: dict, b: dict) -> float:
+def _heading_step_rad(a: dict[str, Any], b: dict[str, Any]) -> float:
     """The float64 heading change from encoder frame ``a`` to ``b`` (kobuki, 16-bit counts)."""
     robot = load("kobuki")
     p = robot.firmware_params()
     per = 2 * math.pi / p["counts_per_rev"]
     d_l = ((b["LEFT_COUNT"] - a["LEFT_COUNT"] + 2**15) % 2**16) - 2**15
     d_r = ((b["RIGHT_COUNT"] - a["RIGHT_COUNT"] + 2**15) % 2**16) - 2**15
-    return (d_r * per * p["wheel_radius_right_nm"] - d_l * per * p["wheel_radius_left_nm"]) \
-        / p["wheelbase_nm"]
+    return float((d_r * per * p["wheel_radius_right_nm"] - d_l * per * p["wheel_radius_left_nm"])
+                 / p["wheelbase_nm"])
 
 
 def test_the_firmware_integrates_the_frames_it_took(drive: Drive) -> None:
@@ -135,3 +143,23 @@ def test_the_affected_pose_10_mm_off_fails(name: str, drive: Drive, tmp_path: Pa
     wrong = fails_by_position(tampered, tmp_path)
     capsys.readouterr()
     assert wrong == []
+
+
+def test_a_y_run_behind_the_x_sends_is_late() -> None:
+    """As heard at 10.221-10.291 s (kobuki seed 11): X 14 and 0 on time, Y 7, 9, 10 held back
+    150 ms with no on-time Y among them; X and Y of one send heard together before (COUNTER
+    offset 0). The Y frames are marked late, the X frames are not."""
+    t_x = np.array([10.201, 10.221, 10.261])
+    c_x = np.array([13, 14, 0], dtype=np.int64)
+    t_y = np.array([10.2011, 10.231, 10.271, 10.291])
+    c_y = np.array([13, 7, 9, 10], dtype=np.int64)
+    late_x, late_y = crossed_late([t_x, t_y], [c_x, c_y])
+    assert late_x.tolist() == [False, False, False]
+    assert late_y.tolist() == [False, True, True, True]
+
+
+def test_one_message_alone_is_never_marked() -> None:
+    """No X and Y frame heard together: no COUNTER offset, nothing marked."""
+    late = crossed_late([np.array([1.0, 1.02]), np.array([1.5, 1.52])],
+                        [np.array([0, 1], dtype=np.int64), np.array([3, 4], dtype=np.int64)])
+    assert [m.tolist() for m in late] == [[False, False], [False, False]]

@@ -150,9 +150,10 @@ def pose_evidence(frames: FrameArrays, enc_pos: npt.NDArray[np.intp],
         if len(at) < 2:
             continue
         counter = (frames.data[at, 1] & ENC_COUNTER_MASK).astype(np.int64)
-        unread = send_readings(frames.timestamp_s[at], counter, POSE_PERIOD_S)[2]
-        if any(unread) or late.any():  # held back a lap's half or more, or behind the other
-            keep = ~(np.asarray(unread, dtype=bool) | late)  # message's sends: prove nothing
+        ordered, _, unread = send_readings(frames.timestamp_s[at], counter, POSE_PERIOD_S)
+        late &= np.asarray(ordered, dtype=bool)  # read in order, yet behind the other's sends
+        if any(unread) or late.any():  # or held back a lap's half or more: prove nothing
+            keep = ~(np.asarray(unread, dtype=bool) | late)
             at, counter = at[keep], counter[keep]
         named = (frames.data[at, 1] >> 4).astype(np.int64)
         before = np.searchsorted(enc_pos[good], at)  # good encoder frames before each pose
