@@ -36,7 +36,13 @@ from odocan.host.protocol.e2e_crosslate import crossed_late
 from odocan.sim.contract import DBC_PATH
 from odocan.sim.robot import load
 from tests.fw_watch import Watch
-from tests.judges_cli import both_analyses, fails_by_position, raise_first_x, watched_run
+from tests.judges_cli import (
+    both_analyses,
+    fails_by_position,
+    live_judges,
+    raise_first_x,
+    watched_run,
+)
 
 FAULTS = "delay=0.5:150"
 Drive = tuple[Path, Watch, int]  # the log, the firmware's watch, run's exit code
@@ -163,3 +169,27 @@ def test_one_message_alone_is_never_marked() -> None:
     late = crossed_late([np.array([1.0, 1.02]), np.array([1.5, 1.52])],
                         [np.array([0, 1], dtype=np.int64), np.array([3, 4], dtype=np.int64)])
     assert [m.tolist() for m in late] == [[False, False], [False, False]]
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "monitor and bridge fed the correct log: ODOM_TWIST DISTANCE 28.337 mm off the reference's "
+    "path length beyond its tolerance (main da1f202e: the same, plus 1 pose wrong; now 0 poses "
+    "wrong); the live distance judge is not fixed here"))
+def test_the_live_judges_pass_it(drive: Drive) -> None:
+    for judge in live_judges("kobuki", drive[0]):
+        assert judge.tracker.wrongs.count == 0
+        assert judge.distance.verdict() == []
+
+
+@pytest.mark.parametrize("name", [
+    "names_the_late_6",
+    pytest.param("mains_worst_sample", marks=pytest.mark.xfail(strict=True, reason=(
+        "monitor and bridge: X of 10.571 s (naming the 3 of 10.42 s) +10 mm: 0 poses wrong "
+        "(analyze whole and streamed FAIL it by > 5 mm)"))),
+])
+def test_the_live_judges_see_the_tampered_pose(name: str, drive: Drive, tmp_path: Path) -> None:
+    from_s, before_s = TAMPERED[name]
+    tampered = tmp_path / "t.log"
+    raise_first_x(drive[0], tampered, 100, from_s, before_s)
+    for judge in live_judges("kobuki", tampered):
+        assert judge.tracker.wrongs.count > 0
