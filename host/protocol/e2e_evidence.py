@@ -58,6 +58,7 @@ import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
 from odocan.host.protocol.busfacts import ENC_COUNTER_MASK, POSE_PERIOD_S
+from odocan.host.protocol.e2e_crosslate import crossed_late_of
 from odocan.host.protocol.e2e_cycles import new_cycles
 from odocan.host.protocol.e2e_implausible import Readings, by_stamps
 from odocan.host.protocol.e2e_periods import (
@@ -146,13 +147,14 @@ def pose_evidence(frames: FrameArrays, enc_pos: npt.NDArray[np.intp],
     good = np.flatnonzero(enc_crc_ok)
     taken: set[int] = set()
     skipped: set[int] = set()
-    for at in poses:
+    for at, late in zip(poses, crossed_late_of(frames, poses), strict=True):
         if len(at) < 2:
             continue
         counter = (frames.data[at, 1] & ENC_COUNTER_MASK).astype(np.int64)
-        unread = send_readings(frames.timestamp_s[at], counter, POSE_PERIOD_S)[2]
-        if any(unread):  # held back a lap's half or more: its place and send prove nothing
-            keep = ~np.asarray(unread, dtype=bool)
+        ordered, _, unread = send_readings(frames.timestamp_s[at], counter, POSE_PERIOD_S)
+        late &= np.asarray(ordered, dtype=bool)  # read in order, yet behind the other's sends
+        if any(unread) or late.any():  # or held back a lap's half or more: prove nothing
+            keep = ~(np.asarray(unread, dtype=bool) | late)
             at, counter = at[keep], counter[keep]
         named = (frames.data[at, 1] >> 4).astype(np.int64)
         before = np.searchsorted(enc_pos[good], at)  # good encoder frames before each pose
