@@ -67,7 +67,7 @@ from odocan.host.protocol.e2e_periods import (
     receive_periods,
 )
 from odocan.host.protocol.e2e_retract import firmware_last
-from odocan.host.protocol.e2e_sends import later_send
+from odocan.host.protocol.e2e_sends import later_sends
 
 # How late a starved recorder may stamp a frame, in periods: held 1..4 periods (the trial's
 # lateness reached +3.9), plus the stamp jitter of ``CAPTURE_TOLERANCE_CYCLES``.
@@ -152,20 +152,17 @@ def pose_evidence(frames: FrameArrays, enc_pos: npt.NDArray[np.intp],
             continue
         counter = (frames.data[at, 1] & ENC_COUNTER_MASK).astype(np.int64)
         ordered, _, unread = send_readings(frames.timestamp_s[at], counter, POSE_PERIOD_S)
-        late &= np.asarray(ordered, dtype=bool)  # read in order, yet behind the other's sends
-        if any(unread) or late.any():  # or held back a lap's half or more: prove nothing
-            keep = ~(np.asarray(unread, dtype=bool) | late)
-            at, counter = at[keep], counter[keep]
+        # no proof: held back a lap's half or more, or read in order yet behind the other's sends
+        keep = ~(np.asarray(unread, dtype=bool) | (late & np.asarray(ordered, dtype=bool)))
+        at, counter = at[keep], counter[keep]
         named = (frames.data[at, 1] >> 4).astype(np.int64)
         before = np.searchsorted(enc_pos[good], at)  # good encoder frames before each pose
         since = _sent_places(frames.timestamp_s[at], counter, before,
                              frames.timestamp_s[enc_pos[good]])
         found: int | None = None  # the place in ``good`` of the frame the last send named
-        stamps = frames.timestamp_s[at].tolist()
+        later = later_sends(frames.timestamp_s[at], counter, POSE_PERIOD_S)  # on cadence too
         for k in range(1, len(at)):
-            later = later_send(stamps[k] - stamps[k - 1], int(counter[k] - counter[k - 1]),
-                               POSE_PERIOD_S)  # e2e_sends: a lap gap on cadence too
-            if not later or before[k] - since[k - 1] > NEAR_FRAMES:
+            if not later[k - 1] or before[k] - since[k - 1] > NEAR_FRAMES:
                 found = None  # a send again or a long silence: no proof until the next pair
                 continue
             if named[k] != named[k - 1]:  # moved on: its only frame of that COUNTER since

@@ -21,6 +21,9 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+import numpy.typing as npt
+
 from odocan.host.protocol.busfacts import ENC_COUNTER_LAP, ENC_COUNTER_MASK
 
 HALF_LAP = ENC_COUNTER_LAP // 2  # 8: COUNTER steps below it are later sends by the COUNTER alone
@@ -39,3 +42,12 @@ def later_send(dt_s: float, step: int, period_s: float) -> bool:
     x = dt_s / period_s
     sends = step + ENC_COUNTER_LAP * round((x - step) / ENC_COUNTER_LAP)
     return sends > 0 and abs(x - sends) <= ON_CADENCE
+
+
+def later_sends(timestamp_s: npt.NDArray[np.float64], counter: npt.NDArray[np.int64],
+                period_s: float) -> list[bool]:
+    """Per pair of consecutive pose frames (bus times ``timestamp_s``, COUNTERs ``counter``):
+    whether the second was sent after the first (``later_send``)."""
+    stamps, counters = timestamp_s.tolist(), counter.tolist()
+    return [later_send(stamps[k] - stamps[k - 1], counters[k] - counters[k - 1], period_s)
+            for k in range(1, len(stamps))]
