@@ -170,7 +170,8 @@ def test_a_stalls_first_pose_without_its_y_is_judged_by_the_poses_around_it(
     assert 4.201 in lone_halves(path)[0]
     code, report, (judged, sent) = _analyzed(path, "never")
     assert code == 0
-    assert report["samples"]["stall_first_judged"] == 1
+    # the lone first and the backlog's next pose, unresolved too (host.judge.stallnext)
+    assert report["samples"]["stall_first_judged"] == 2
     assert judged == sent
     for wrongs, max_dpos_m in _live_wrongs(path, "kobuki", "exact"):
         assert wrongs == 0
