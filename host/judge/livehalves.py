@@ -19,6 +19,7 @@ if TYPE_CHECKING:
     from odocan.host.judge.tracking import PoseTracker
 
 HALF_COLUMNS = ("pos", "enc_counter", "counter", "t_s")
+END_SEQ = 1 << 62  # after every encoder frame: the watch's end (``HalfPairs.end``)
 
 
 class HalfPairs:
@@ -65,6 +66,17 @@ class HalfPairs:
             due.sort()
         for _, name in due:
             self._settle(name)
+
+    def end(self) -> None:
+        """The watch ends, no later frame comes (``watchend``): the halves not settled yet are
+        settled (in the order heard), and every half still waiting for its partner is judged
+        alone (``livelone``), as ``analyze`` judges a log's last lone half. Before, a half was
+        settled only by a later half or bus time past it, and judged alone only when a later
+        sample paired: a log ending on a pose (kobuki random seed 5, 8 s, cut after its last
+        ODOM_POSE_X or ODOM_POSE_Y) had its last pose never judged live, X raised 100 m OK."""
+        for _, name in sorted((half.pos, name) for name, half in self._unsettled.items()):
+            self._settle(name)
+        self._lone_before(END_SEQ)
 
     def forget(self, before: int) -> None:
         """Drop what is kept of the encoder frames before ``before`` (seq): bounded state."""
