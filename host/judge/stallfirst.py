@@ -242,20 +242,19 @@ def judge_left_out(
         _judge_one(verdict, pose, (before, after), enc, robot, tolerance)
         if pose.lone:  # counted here, not by lonehalves
             verdict.lone_rows.add(k)
-        followers = [pairs.at(j) for j in follow_ons(pairs, is_kept, k, silent_set)]
-        _judge_followers(verdict, followers, (before, after), enc, robot, tolerance)
+        _judge_followers(verdict, follow_ons(pairs, is_kept, k, silent_set), (before, after),
+                         enc, robot, tolerance)
     return verdict
 
 
-def _judge_followers(verdict: FirstVerdict, poses: list[Pair | None],
+def _judge_followers(verdict: FirstVerdict, poses: list[Pair],
                      neighbours: tuple[Pair | None, Pair | None], enc: Encoders,
                      robot: tuple[Geometry, str, int], tolerance: tuple[float, float]) -> None:
     """Judge the poses sent after a silence's first one, before the next sample
     (``stallnext.follow_ons``: the backlog's next), by the silence's ``neighbours`` (the later
     one where near each)."""
     for pose in poses:
-        assert pose is not None and enc.cycle_s is not None
-        after = _near(pose, None, neighbours[1], enc.cycle_s)[1]
+        after = _near(pose, None, neighbours[1], enc.cycle_s or 0.0)[1]
         verdict.unmatched += pose.enc < 0
         verdict.judge(pose.t_s, _best(pose, (neighbours[0], after), enc, robot, tolerance))
 

@@ -30,11 +30,11 @@ class PairsAt(Protocol[P_co]):
 
 
 def follow_ons(pairs: PairsAt[P_co], is_kept: Callable[[P_co], bool], k: int,
-               silent: set[int]) -> list[int]:
-    """The ODOM_POSE_X indices after ``k`` (a silence's first pose) up to the first kept sample
-    or the next silence's first pose (``silent``), at most ``FOLLOW_ON_POSES``, whose pose is
-    whole (both halves) and not a sample: the poses the backlog's work-off left unresolved."""
-    found: list[int] = []
+               silent: set[int]) -> list[P_co]:
+    """The poses of the ODOM_POSE_X indices after ``k`` (a silence's first pose) up to the first
+    kept sample or the next silence's first pose (``silent``), at most ``FOLLOW_ON_POSES``, that
+    are whole (both halves) and no sample: the poses the backlog's work-off left unresolved."""
+    found: list[P_co] = []
     for j in range(k + 1, min(k + 1 + FOLLOW_ON_POSES, pairs.count)):
         if j in silent:
             break
@@ -43,5 +43,5 @@ def follow_ons(pairs: PairsAt[P_co], is_kept: Callable[[P_co], bool], k: int,
             continue
         if is_kept(pose):
             break
-        found.append(j)
+        found.append(pose)
     return found

@@ -26,12 +26,12 @@ import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
 from odocan.host.protocol.busfacts import ENC_COUNTER_MASK, POSE_PERIOD_S
+from odocan.host.protocol.e2e_sends import sends_between
 
 IntArray = npt.NDArray[np.int64]
 BoolArray = npt.NDArray[np.bool_]
 TWIN_S = 1e-3  # the X and Y frames of one send: heard this close together (one tick's sends)
 LATE_PERIODS = 0.5  # a frame of a send already heard in the other message, this much later: late
-HALF_LAP = (ENC_COUNTER_MASK + 1) // 2
 
 
 def counter_offset(t_a: npt.NDArray[np.float64], c_a: IntArray,
@@ -74,7 +74,7 @@ def crossed_late(timestamp_s: list[npt.NDArray[np.float64]], counter: list[IntAr
         m, k = int(which[i]), int(place[i])
         c, t = int(scaled[m][k]), float(t_all[i])
         if top_c >= 0:
-            sends = _sends(t - top_s, c - top_c)
+            sends = sends_between(t - top_s, c - top_c, POSE_PERIOD_S)
             if sends < 0 or (sends == 0 and t - top_s >= LATE_PERIODS * POSE_PERIOD_S):
                 marks[m][k] = True
                 continue
@@ -89,12 +89,3 @@ def crossed_late_of(frames: FrameArrays, poses: list[npt.NDArray[np.intp]]) -> l
     return crossed_late([frames.timestamp_s[at] for at in poses],
                         [(frames.data[at, 1] & ENC_COUNTER_MASK).astype(np.int64)
                          for at in poses])
-
-
-def _sends(dt_s: float, step: int) -> int:
-    """The sends between the latest-sent frame and one ``step`` COUNTERs (mod 16) and ``dt_s``
-    after it: the integer congruent to the step nearest the gap in periods."""
-    x = dt_s / POSE_PERIOD_S
-    step &= ENC_COUNTER_MASK
-    return step + (ENC_COUNTER_MASK + 1) * int(np.floor((x - step + HALF_LAP)
-                                                        / (ENC_COUNTER_MASK + 1)))

@@ -39,9 +39,17 @@ def later_send(dt_s: float, step: int, period_s: float) -> bool:
         return True
     if step == 0 or not math.isfinite(dt_s):
         return False
+    sends = sends_between(dt_s, step, period_s)
+    return sends > 0 and abs(dt_s / period_s - sends) <= ON_CADENCE
+
+
+def sends_between(dt_s: float, step: int, period_s: float) -> int:
+    """The sends from one frame to one ``step`` COUNTERs (mod 16) and ``dt_s`` s after it, on
+    the sender's cadence ``period_s``: the integer congruent to the step nearest the gap in
+    periods (negative: a frame sent before the other)."""
+    step &= ENC_COUNTER_MASK
     x = dt_s / period_s
-    sends = step + ENC_COUNTER_LAP * round((x - step) / ENC_COUNTER_LAP)
-    return sends > 0 and abs(x - sends) <= ON_CADENCE
+    return step + ENC_COUNTER_LAP * math.floor((x - step + HALF_LAP) / ENC_COUNTER_LAP)
 
 
 def later_sends(timestamp_s: npt.NDArray[np.float64], counter: npt.NDArray[np.int64],
