@@ -24,7 +24,9 @@ from typing import TYPE_CHECKING, Any
 from odocan.sim.exceptions import OdocanError
 
 if TYPE_CHECKING:
+    from odocan.host.io.logs import FrameArrays
     from odocan.host.judge.analysis import Tolerance
+    from odocan.host.judge.diagnosis import Judged
     from odocan.host.judge.profilepage import RunningProfile
     from odocan.sim.robot import RobotProfile
 
@@ -104,6 +106,7 @@ def analyze_one(path: str, job: Job) -> LogResult:
     from odocan.host.judge import verdictfacts
     from odocan.host.judge.analysis import Tolerance, analyze
     from odocan.host.judge.configs import ConfigPages, later_mismatches, running_before_configs
+    from odocan.host.judge.diagnosis import judged_before
     from odocan.host.judge.profilepage import head_profile, with_bus_speed
     from odocan.host.judge.samples import AnalysisError
     from odocan.host.judge.stream_analysis import FrameCount, NotStreamable, analyze_file, streams
@@ -119,6 +122,8 @@ def analyze_one(path: str, job: Job) -> LogResult:
         count = FrameCount()
         running = None  # the log's PROFILE page (odocan's DBC only)
         later: list[str] = []  # its pages after an applied config, against the config's robot
+        frames: FrameArrays | None = None  # the whole log, when read
+        judged: Judged | None = None  # its verdict, for the pose fit (diagnosis)
         if streams(log, job.stream):  # in bounded memory (host.judge.stream_analysis)
             running = head_profile(log) if db is None else None
             pages = ConfigPages(profile) if db is None else None  # an applied config's
@@ -144,15 +149,19 @@ def analyze_one(path: str, job: Job) -> LogResult:
             else:
                 require_frames(frames, path)
                 running = running_before_configs(frames, profile.counter_bits)  # its bound
+                judged_as = with_bus_speed(profile, running)
                 with explained(lambda: frames, path):
-                    analysis = analyze(frames, with_bus_speed(profile, running),
-                                       job.integrator, tolerance=tolerance)
+                    analysis = analyze(frames, judged_as, job.integrator, tolerance=tolerance)
+                if not analysis.passed:  # the pose fit need not judge judged_as again
+                    judged = judged_before(frames, judged_as, job.integrator, tolerance,
+                                           analysis)
                 later = later_mismatches(frames, profile, analysis.report["integrator"])
             report = analysis.report
         report["inputs"] = choice.recorded(log_inputs(
             log, profile, report["integrator"], None if job.dbc is None else Path(job.dbc)))
         verdictfacts.mark(report)  # a check on 0 samples, a stuck E2E COUNTER: no PASS
-        _diagnose(log, report, profile, running, tolerance, db is None, later, choice.given_as)
+        _diagnose(log, report, profile, running, tolerance, db is None, later, choice.given_as,
+                  (frames, judged))
     except (OdocanError, OSError) as exc:
         return LogResult(path, error=_one_line(exc))
     except Exception as exc:  # a log no check foresaw: this log's error, the batch goes on
@@ -162,28 +171,30 @@ def analyze_one(path: str, job: Job) -> LogResult:
 
 def _diagnose(log: Path, report: dict[str, Any], profile: RobotProfile,
               running: RunningProfile | None, tolerance: Tolerance, own_dbc: bool,
-              later: list[str], given_as: str) -> None:
+              later: list[str], given_as: str,
+              read: tuple[FrameArrays | None, Judged | None] = (None, None)) -> None:
     """``report["diagnosis"]`` as ``analyze LOG`` makes it: the PROFILE page's line naming a
     wrong ``--robot``, ``later`` (the pages after an applied config, host.judge.configs),
     then, for a failed verdict on odocan's DBC, the pose fit's (``given_as``: how they name
-    the robot, ``host.cli.robotchoice``)."""
+    the robot, ``host.cli.robotchoice``; ``read``: the whole log when it was read, not read
+    again, and its verdict, ``diagnosis.judged_before``)."""
     from odocan.host.io.logs import read_log
     from odocan.host.judge.profilepage import profile_mismatch, with_bus_speed
 
     said = profile_mismatch(running, profile, report["integrator"], given_as)
     hints = ([] if said is None else [said]) + later
-    whole = None
+    whole, judged = read
     if own_dbc and report["integrator_source"] == "argument":  # not the firmware's: a FAIL
         from odocan.host.judge.diagnosis import logged_integrator, mark_integrator
 
-        whole = read_log(log, warn=lambda message: None)
+        whole = whole if whole is not None else read_log(log, warn=lambda message: None)
         mark_integrator(report, logged_integrator(whole))  # its line: mismatches' hint
     if not report["passed"] and own_dbc:  # a wrong --robot must not read as a firmware fault
         from odocan.host.judge.diagnosis import mismatches
 
         whole = whole if whole is not None else read_log(log, warn=lambda message: None)
         hints += mismatches(whole, with_bus_speed(profile, running), report["integrator"],
-                            report["integrator_source"], tolerance, given_as)  # wrong: said
+                            report["integrator_source"], tolerance, given_as, judged)  # wrong: said
     if hints:
         report["diagnosis"] = hints
 

@@ -337,10 +337,11 @@ def diagnose(
     if logged is not None and logged != integrator:
         reasons.append(f"integrator mismatch: the log's ODOM_STATUS reports {logged}, the replay "
                        f"ran {integrator}")
-    fits = fitting_profiles(log, profile, logged or integrator, tolerance)
+    made: dict[str, Analysis] = {}  # the fit's analyses, each made once
+    fits = fitting_profiles(log, profile, logged or integrator, tolerance, analyses=made)
     if profile.name in fits:
-        if logged is None or logged == integrator:
-            lived = unreplayable(analyze(log, profile, integrator, tolerance=tolerance).report)
+        if logged is None or logged == integrator:  # the fit's own call: its analysis
+            lived = unreplayable(made[profile.name].report)
             reasons.append(f"the log fits robot {profile.name!r} with the {integrator} "
                            + ("integrator, but its firmware lived what a lockstep replay does "
                               f"not reproduce: {'; '.join(lived)}" if lived else

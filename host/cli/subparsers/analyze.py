@@ -63,6 +63,7 @@ if TYPE_CHECKING:  # imported where used: a command pays only for what it runs
     from odocan.host.io.logs import FrameArrays
     from odocan.host.judge.analysis import Analysis
     from odocan.host.judge.configs import ConfigPages
+    from odocan.host.judge.diagnosis import Judged
     from odocan.sim import robot
 
 MAX_JOBS = 1024
@@ -158,6 +159,7 @@ def _analyze_single(args: argparse.Namespace) -> int:
     from odocan.host.io.logs import read_log
     from odocan.host.judge.analysis import analyze
     from odocan.host.judge.configs import ConfigPages, running_before_configs
+    from odocan.host.judge.diagnosis import judged_before
     from odocan.host.judge.profilepage import head_profile, profile_mismatch, with_bus_speed
     from odocan.host.outputs import check_distinct
     from odocan.host.report.ci import analysis_checks, write_checks
@@ -181,6 +183,7 @@ def _analyze_single(args: argparse.Namespace) -> int:
                     else None)
         running = pages.running(running)  # the page before a first config (the whole: below)
         frames: FrameArrays | None = None
+        judged: Judged | None = None  # the whole log's verdict, for the pose fit (diagnosis)
         if analysis is None:
             frames = whole = read_log(args.log)
             if db is not None:  # another DBC: its own checks say whether it matches the log
@@ -189,9 +192,13 @@ def _analyze_single(args: argparse.Namespace) -> int:
             else:  # odocan's DBC: say plainly when the log holds none of its frames
                 require_frames(whole, str(args.log))
                 running = running_before_configs(whole, profile.counter_bits)  # its own bound
+                judged_as = with_bus_speed(profile, running)
                 with explained(lambda: whole, str(args.log)):
-                    analysis = analyze(whole, with_bus_speed(profile, running), args.integrator,
+                    analysis = analyze(whole, judged_as, args.integrator,
                                        tolerance=args.tolerance)
+                if not analysis.passed:  # the pose fit need not judge judged_as again
+                    judged = judged_before(whole, judged_as, args.integrator, args.tolerance,
+                                           analysis)
     assert analysis is not None
     say(choice.defaulted("analyze", args.log))  # judged: why the default, if it was taken
     whole_log = frames  # --parquet/--mcap read the whole log: written after the summary
@@ -213,7 +220,8 @@ def _analyze_single(args: argparse.Namespace) -> int:
         frames = frames if frames is not None else read_log(args.log)  # a failed verdict only
         report = analysis.report
         hints += mismatches(frames, with_bus_speed(profile, running), report["integrator"],
-                            report["integrator_source"], args.tolerance, choice.given_as)
+                            report["integrator_source"], args.tolerance, choice.given_as,
+                            judged)
     if hints:
         analysis.report["diagnosis"] = hints
     code = finish(analysis, args, title=f"odocan analyze: {args.log}")
