@@ -170,3 +170,22 @@ def test_a_1_cm_robot_at_4_m_s_stays_within_the_allowance(integrator: str) -> No
             assert got >= error - 1e-12, (split, parts, got, error)
             worst = max(worst, error)
     assert worst > 0.05  # merges that move the robot by centimetres, not 0 <= 0
+
+
+def test_the_cached_allowance_is_keyed_by_every_input() -> None:
+    """``gap_allowance_m`` is cached (perf): a gap asked again, or the same counts under another
+    integrator, bounds, period count or robot, gets exactly the float computed afresh (a 3-period
+    gap of 150, 90 counts on a 0.3 m wheelbase: euler, rk2 and exact differ by a few mm)."""
+    g = Geometry(500, 0.05, 0.05, 0.3)
+    other = Geometry(500, 0.05, 0.051, 0.3)
+    fresh = gap_allowance_m.__wrapped__
+    seen = set()
+    for geometry in (g, other, g):
+        for integrator in ("euler", "rk2", "exact", "euler"):
+            for bounds in (period_bounds(geometry), (60, 60), period_bounds(geometry)):
+                for periods in (3, 2, 3):
+                    got = gap_allowance_m(150, 90, periods, geometry, integrator, bounds)
+                    want = fresh(150, 90, periods, geometry, integrator, bounds)
+                    assert got.hex() == want.hex()
+                    seen.add(got)
+    assert len(seen) > 12  # the inputs matter: a key that dropped one would repeat a value

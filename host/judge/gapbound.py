@@ -33,6 +33,7 @@ placement's tolerance (``breaks.bound_offsets``' slack)."""
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -47,6 +48,10 @@ DP_WORK = 1_000_000  # bins^2 * periods^2 / 2: the dynamic programme's size (a f
 SIGMA_SLOPE = 0.22  # max |d sinc(x / 2) / dx| (0.2174): sigma's change per rad of dtheta
 BIN_SLACK = 0.5 + SIGMA_SLOPE  # g's change across the bins, per bin width (rad)
 SINC_MIN = -0.2173  # the least value of sin(y) / y
+# Distinct gaps kept by ``gap_allowance_m``'s cache: a judge asks the same gap again and again
+# (each reference built, each live placement: 3190 calls of 99 gaps in test_run_delay_stall's
+# figure8_671 drives, 53 s of its 120 s), a few ms of numpy each time.
+ALLOWANCE_CACHE = 4096
 
 
 def period_bounds(geometry: Geometry, max_wheel_speed_mm_s: int | None = None
@@ -73,11 +78,14 @@ def step_response(turn_rad: FloatArray, h_old_rad: FloatArray, integrator: str
     return sigma, h_old_rad + 0.5 * turn_rad
 
 
+@functools.lru_cache(maxsize=ALLOWANCE_CACHE)
 def gap_allowance_m(d_left: int, d_right: int, periods: int, geometry: Geometry,
                     integrator: str, bounds: tuple[int, int]) -> float:
     """The most (m) the firmware's position after a gap of ``periods`` encoder periods can lie
     from the reference's merged step of ``d_left``, ``d_right`` counts (module docstring;
-    ``bounds``: the counts per period per wheel, ``period_bounds``). 0 for one period."""
+    ``bounds``: the counts per period per wheel, ``period_bounds``). 0 for one period.
+    Cached (``ALLOWANCE_CACHE`` gaps): a pure function of its arguments (``Geometry`` is a
+    frozen dataclass, hashed by its fields), so a gap asked again gets the same float."""
     if periods <= 1:
         return 0.0
     a_m = bounds[0] * geometry.m_per_count_left
@@ -106,7 +114,8 @@ def _programme(n: int, wheels: tuple[float, float, float], turn: float, r: tuple
         return 0.0
     centre: FloatArray = lo + width * (np.arange(bins, dtype=np.float64) + 0.5)
     first, last = (min(bins - 1, max(0, int((h - lo) // width))) for h in (0.0, turn))
-    worth = np.stack([_worth(k, centre, width, (a_m, c_m, b_m), r, integrator)
+    turns, g = _bin_steps(centre, width, r, integrator)
+    worth = np.stack([_worth(k, turns, g, (a_m, c_m, b_m))
                       for k in range(1, n + 1)])  # (k - 1, s, e)
     best = np.full((n + 1, bins), -np.inf)
     best[0, first] = 0.0
@@ -116,19 +125,28 @@ def _programme(n: int, wheels: tuple[float, float, float], turn: float, r: tuple
     return max(0.0, float(best[n, last]))
 
 
-def _worth(k: int, centre: FloatArray, width: float, wheels: tuple[float, float, float],
-           r: tuple[float, float], integrator: str) -> FloatArray:
-    """Per pair of bins (s, e): the most a step over ``k`` periods from bin s to bin e adds to
-    sum |ds| g (-inf where no such step is possible)."""
-    a_m, c_m, b_m = wheels
+def _bin_steps(centre: FloatArray, width: float, r: tuple[float, float], integrator: str
+               ) -> tuple[tuple[FloatArray, FloatArray], FloatArray]:
+    """Per pair of bins (s, e): the turns (c_e - c_s -+ ``width``) and g of a step from bin s
+    to bin e at the bins' centres plus the slack, capped at 1 + |r| (module docstring). The
+    same for every step length k: computed once per programme, not once per k (the sinc, cos,
+    sin and hypot were most of its time), with the same operations, so the same floats."""
     turn_c = centre[None, :] - centre[:, None]
-    t_lo = np.maximum(turn_c - width, -k * (a_m + c_m) / b_m)
-    t_hi = np.minimum(turn_c + width, k * (a_m + c_m) / b_m)
-    ds = _ds_max(k * a_m, k * c_m, b_m * t_lo, b_m * t_hi)
     sigma, direction = step_response(turn_c, np.broadcast_to(centre[:, None], turn_c.shape),
                                      integrator)
     g = np.hypot(sigma * np.cos(direction) - r[0], sigma * np.sin(direction) - r[1])
     g = np.minimum(g + BIN_SLACK * width, 1.0 + math.hypot(*r))
+    return (turn_c - width, turn_c + width), g
+
+
+def _worth(k: int, turns: tuple[FloatArray, FloatArray], g: FloatArray,
+           wheels: tuple[float, float, float]) -> FloatArray:
+    """Per pair of bins (s, e): the most a step over ``k`` periods from bin s to bin e adds to
+    sum |ds| g (-inf where no such step is possible; ``turns``, ``g``: ``_bin_steps``')."""
+    a_m, c_m, b_m = wheels
+    t_lo = np.maximum(turns[0], -k * (a_m + c_m) / b_m)
+    t_hi = np.minimum(turns[1], k * (a_m + c_m) / b_m)
+    ds = _ds_max(k * a_m, k * c_m, b_m * t_lo, b_m * t_hi)
     worth: FloatArray = np.where(t_lo <= t_hi, ds * g, -np.inf)
     return worth
 
