@@ -3,7 +3,7 @@ PYTHON ?= python3
 VENV   ?= .venv
 BIN    := $(VENV)/bin
 
-.PHONY: run test lint bench clean
+.PHONY: run test sweeps lint bench clean
 
 $(BIN)/odocan: pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -23,6 +23,10 @@ lint: $(BIN)/odocan
 # module fixtures, and every socket test already takes a fresh group and port (tests/udp_pair.py).
 test: lint
 	$(BIN)/python -m pytest -n auto --dist loadfile
+
+# The tests with every case of every sweep (tests/sweeps.py), the grids `make test` samples.
+sweeps: lint
+	ODOCAN_SWEEPS=full $(BIN)/python -m pytest -n auto --dist loadfile
 
 bench: $(BIN)/odocan
 	for b in bench/*.py; do $(BIN)/python $$b || exit 1; done

@@ -33,10 +33,15 @@ from hypothesis import HealthCheck, settings
 
 from odocan.host.mqtt.options import LIBRARY_LOGGERS, MQTT_LOGGERS
 from odocan.host.protocol.dbcplan import CACHE_ENV
+from tests import sweeps
 
 settings.register_profile("local", deadline=None, suppress_health_check=[HealthCheck.too_slow])
 settings.register_profile("ci", settings.get_profile("local"), derandomize=True)
 settings.load_profile("ci" if os.environ.get("CI") else "local")
+
+
+def pytest_report_header(config: pytest.Config) -> str:
+    return sweeps.header()
 
 
 @pytest.fixture(autouse=True, scope="session")

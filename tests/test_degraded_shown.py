@@ -25,12 +25,13 @@ from odocan.sim.scenarios import get_scenario
 from tests.dbc_typed import decode
 from tests.fault_rig import FaultRig, open_virtual
 from tests.requires import require_executables
+from tests.sweeps import sample
 
 DB = database()
 PMIR = load("pmir")
 STATUS = DB.get_message_by_name("ODOM_STATUS")
 FIRMWARE_IDS = {0x200, 0x201, 0x202, 0x281, 0x302, 0x380}
-STALLS = range(2, 201)
+STALLS = sample(range(2, 201), 4, [*range(2, 14), 16, 31, 32, 64, 99, 150, 200])  # tests.sweeps
 FLOOD_PER_TICK = 20  # babbled frames per 10 ms while the MCU is stopped (the mailbox holds 32)
 AFTER_TICKS = 40  # run on after the stall: the episode is reported and recovers
 

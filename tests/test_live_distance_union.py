@@ -23,6 +23,7 @@ The correct firmware PASSes the live judges on every drive shape of the sim with
 
 from __future__ import annotations
 
+import itertools
 import math
 from functools import cache
 from pathlib import Path
@@ -39,6 +40,7 @@ from odocan.host.judge.liveunion import MergedSpans
 from odocan.sim.board import TICK_S
 from odocan.sim.scenarios import get_scenario
 from tests.fault_rig import FaultRig
+from tests.sweeps import sample
 from tests.test_distance_merged_union import _path_m, _shifted, _taken_mm, _twists
 from tests.test_first_second_reboot import _decoded, _written
 from tests.test_stall_before_first_pose_after_reboot import _live
@@ -186,9 +188,8 @@ SHAPES = ("straight", "spin", "circle", "square", "figure8", "random")  # sim.sc
 STALLS = (2, 17, 150, 300, 600)  # ticks: 0.02 s, 0.17 s, 1.5 s, 3 s, 6 s
 
 
-@pytest.mark.parametrize("halted", STALLS)
-@pytest.mark.parametrize("at_tick", [0, 300])
-@pytest.mark.parametrize("shape", SHAPES)
+@pytest.mark.parametrize(("shape", "at_tick", "halted"),  # tests.sweeps
+                         sample(itertools.product(SHAPES, [0, 300], STALLS), 3))
 def test_the_correct_firmware_passes_live(shape: str, at_tick: int, halted: int) -> None:
     """Stalls of 0.02, 0.17, 1.5, 3 and 6 s, mid-drive (3 s in) and at power-up."""
     messages = _stalled(shape, at_tick, halted)

@@ -18,6 +18,7 @@ them; and no verdict changes when every timestamp is moved by up to 1 us.
 
 from __future__ import annotations
 
+import itertools
 import json
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -37,6 +38,7 @@ from odocan.host.io.logs import read_log
 from odocan.host.judge.analysis import analyze
 from odocan.host.judge.monitor import BusMonitor
 from odocan.sim.robot import load
+from tests.sweeps import sample
 from tests.test_powerup_delay import _live_passes, first_count_page
 
 # (duration s, seed or None: the default, faults) of the trial's reproductions
@@ -47,6 +49,11 @@ DRIVES = [
 ]
 FORMATS = (".log", ".blf", ".asc")
 KOBUKI = load("kobuki")
+# tests.sweeps: every drive as a .log, the first as each format, and one in three of the rest
+FORMATTED = sample(itertools.product(DRIVES, FORMATS), 3,
+                   [(d, ".log") for d in DRIVES] + [(DRIVES[0], f) for f in FORMATS])
+WRONG = sample(itertools.product(DRIVES, FORMATS, ["X", "HEADING"]), 3,
+               [(d, ".log", "X") for d in DRIVES] + [(DRIVES[2], ".blf", "HEADING")])
 
 
 @contextmanager
@@ -85,8 +92,7 @@ def _verdicts(path: Path, run_code: int) -> dict[str, bool]:
     }
 
 
-@pytest.mark.parametrize("fmt", FORMATS)
-@pytest.mark.parametrize("drive", DRIVES, ids=[d[2] for d in DRIVES])
+@pytest.mark.parametrize(("drive", "fmt"), FORMATTED, ids=[f"{d[2]}{f}" for d, f in FORMATTED])
 def test_a_delayed_drive_passes_everywhere(
     tmp_path: Path, drive: tuple[int, int | None, str], fmt: str
 ) -> None:
@@ -95,9 +101,8 @@ def test_a_delayed_drive_passes_everywhere(
     assert all(verdicts.values()), verdicts
 
 
-@pytest.mark.parametrize("wrong", ["X", "HEADING"])
-@pytest.mark.parametrize("fmt", FORMATS)
-@pytest.mark.parametrize("drive", DRIVES, ids=[d[2] for d in DRIVES])
+@pytest.mark.parametrize(("drive", "fmt", "wrong"), WRONG,
+                         ids=[f"{d[2]}{f}-{w}" for d, f, w in WRONG])
 def test_a_pose_two_lsb_off_fails_everywhere(
     tmp_path: Path, drive: tuple[int, int | None, str], fmt: str, wrong: str
 ) -> None:

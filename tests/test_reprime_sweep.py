@@ -38,6 +38,7 @@ from odocan.host.judge.stream_analysis import NotStreamable, analyze_file
 from odocan.host.report.summary import kept_failures, kept_unjudged
 from odocan.sim.board import TICK_S
 from tests.independent_checker import HEADING_LSB_RAD, POSITION_LSB_M, _Odometry
+from tests.sweeps import sample
 from tests.test_analysis_reboot import checker_robot
 from tests.test_reprime_apply import LSB_Q40, METRE_Q40, REBOOT, drive
 from tests.test_staged_reboot import PMIR, _decoded, _live, _written
@@ -48,6 +49,7 @@ AFTERS = (2, 3, 4, 6)  # ticks after the MCU resumed
 SWEEP = [(s, h, a) for s in SCENARIOS for h in HALTS for a in AFTERS]
 SUBSET = [("spin", 400, 2), ("square", 500, 3), ("figure8", 800, 4), ("circle", 600, 6),
           ("circle", 800, 2), ("figure8", 500, 6)]
+SAMPLED = sample(SWEEP, 3, SUBSET)  # tests.sweeps: a default run's share of the grid
 Pose = tuple[float, float, float]  # x m, y m, heading rad (TURNS and HEADING)
 
 
@@ -101,7 +103,7 @@ def _report(messages: tuple[can.Message, ...], path: Path) -> dict[str, Any]:
     return report
 
 
-@pytest.mark.parametrize(("scenario", "halted", "after"), SWEEP)
+@pytest.mark.parametrize(("scenario", "halted", "after"), SAMPLED)
 def test_the_correct_firmware_passes_and_a_metre_fails(
         scenario: str, halted: int, after: int, tmp_path: Path) -> None:
     right, plain = drive(scenario, halted, after), drive(scenario, halted, None)

@@ -7,6 +7,7 @@ repeats and corrupts frames and whose firmware reboots."""
 
 from __future__ import annotations
 
+import itertools
 from functools import cache
 from pathlib import Path
 
@@ -43,9 +44,14 @@ from odocan.sim.faults import FaultSpec
 from odocan.sim.robot import load
 from odocan.sim.scenarios import get_scenario
 from tests.fault_rig import FaultRig
+from tests.sweeps import sample
 from tests.test_stream import awkward_lines
 
 CHUNKS = [1, 2, 7, 64, 1 << 20]
+# tests.sweeps: each log frame by frame and whole, each chunk size once, a third of the rest
+CHUNKED = sample(itertools.product(["awkward", "rig"], CHUNKS), 3,
+                 [("awkward", 1), ("rig", 1), ("awkward", 1 << 20), ("rig", 1 << 20),
+                  ("awkward", 7), ("rig", 2), ("awkward", 64)])
 POSE_COLUMNS = ("enc", "x_m", "y_m", "heading_rad", "heading_raw")
 
 
@@ -88,8 +94,7 @@ def pose_columns(parts: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
     return {name: np.concatenate([p[name] for p in parts]) for name in POSE_COLUMNS}
 
 
-@pytest.mark.parametrize("chunk_frames", CHUNKS)
-@pytest.mark.parametrize("which", ["awkward", "rig"])
+@pytest.mark.parametrize(("which", "chunk_frames"), CHUNKED)
 def test_streamed_truth_and_facts_are_the_whole_logs(
     tmp_path: Path, which: str, chunk_frames: int
 ) -> None:
@@ -135,8 +140,7 @@ def test_streamed_truth_and_facts_are_the_whole_logs(
         assert len(want_truth.enc) == 0  # the synthesized log carries no SIM_TRUTH
 
 
-@pytest.mark.parametrize("chunk_frames", CHUNKS)
-@pytest.mark.parametrize("which", ["awkward", "rig"])
+@pytest.mark.parametrize(("which", "chunk_frames"), CHUNKED)
 def test_streamed_twist_check_is_the_whole_logs(
     tmp_path: Path, which: str, chunk_frames: int
 ) -> None:
@@ -173,8 +177,7 @@ def test_the_twist_band_of_the_last_segment_holds_its_last_step() -> None:
     np.testing.assert_allclose(out[2:], [1.0 - slack, 1.0 - slack])
 
 
-@pytest.mark.parametrize("chunk_frames", CHUNKS)
-@pytest.mark.parametrize("which", ["awkward", "rig"])
+@pytest.mark.parametrize(("which", "chunk_frames"), CHUNKED)
 def test_streamed_lives_are_the_whole_logs(tmp_path: Path, which: str, chunk_frames: int) -> None:
     """The firmware reboot found, and each life started, where the whole log's split puts it."""
     path = log_of(tmp_path, which)
@@ -192,8 +195,7 @@ def test_streamed_lives_are_the_whole_logs(tmp_path: Path, which: str, chunk_fra
         (w.boot, w.t_s, w.uptime_before_s) for w in want]
 
 
-@pytest.mark.parametrize("chunk_frames", CHUNKS)
-@pytest.mark.parametrize("which", ["awkward", "rig"])
+@pytest.mark.parametrize(("which", "chunk_frames"), CHUNKED)
 def test_streamed_stalls_are_the_whole_logs(tmp_path: Path, which: str, chunk_frames: int) -> None:
     """The samples sent after a stall left out and the reference's restarts placed where the
     whole log's ``after_stalls`` puts them, the kept samples in encoder order."""

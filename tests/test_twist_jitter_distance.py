@@ -18,6 +18,7 @@ the judges never see) up to the latest of the ENC_COUNTER it names.
 
 from __future__ import annotations
 
+import itertools
 import math
 from contextlib import AbstractContextManager, nullcontext
 from pathlib import Path
@@ -32,6 +33,7 @@ from odocan.host.judge.monitor import BusMonitor
 from odocan.sim.robot import load
 from tests.dbc_typed import load_can_dbc, numbers
 from tests.firmware_patch import after_lock_outs, distance_taken_off, edited_after
+from tests.sweeps import sample
 from tests.test_capture_jitter import _jittered, _live_passes
 from tests.test_gap_fill import DBC
 from tests.test_live_jitter_lockout import _frames_taken
@@ -135,10 +137,10 @@ def test_a_firmware_whose_distance_is_2_lsb_low_after_the_lock_out_fails(
     assert not any(verdicts.values()), verdicts
 
 
-@pytest.mark.parametrize("robot", ["kobuki", "pmir"])
-@pytest.mark.parametrize("seed", [10, 11, 12])
-@pytest.mark.parametrize("delay_ms", [15, 20])
-@pytest.mark.parametrize("jitter_seed", [0, 1, 2])
+SWEEP = sample(itertools.product(["kobuki", "pmir"], [10, 11, 12], [15, 20], [0, 1, 2]), 3)
+
+
+@pytest.mark.parametrize(("robot", "seed", "delay_ms", "jitter_seed"), SWEEP)  # tests.sweeps
 def test_the_sweep_passes_a_correct_firmware(tmp_path: Path, robot: str, seed: int,
                                              delay_ms: int, jitter_seed: int) -> None:
     """Seeds 10-12, kobuki and pmir, ``delay=0.1:15`` and ``:20``, jitter seeds 0-2."""
