@@ -47,9 +47,17 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FLAG_ERROR, FLAG_REMOTE, FrameArrays
-from odocan.host.protocol.busfacts import ENC_COUNTER_LAP, ENC_COUNTER_MASK
+from odocan.host.protocol.busfacts import ENC_COUNTER_MASK
 from odocan.host.protocol.dbcplan import default_plan
-from odocan.host.protocol.decode import frame_groups, frame_key, frame_keys
+from odocan.host.protocol.decode import frame_groups, frame_keys
+from odocan.host.protocol.e2e_config import (  # re-exported (their old home)
+    COUNTER_LAP,
+    MAX_DELTA_COUNTER,
+    PER_PERIOD_WINDOW,
+    E2EMessage,
+    e2e_messages,
+)
+from odocan.host.protocol.e2e_config import E2EConfigError as E2EConfigError
 from odocan.host.protocol.e2e_crc import (  # re-exported (their old home)
     CRC8H2F_INIT as CRC8H2F_INIT,
 )
@@ -99,10 +107,9 @@ from odocan.host.protocol.e2e_periods import (
 from odocan.host.protocol.e2e_repeats import repeats_by_pages
 from odocan.host.protocol.e2e_silence import add_silence, is_silence, silences
 from odocan.host.protocol.e2e_skipveto import by_page_skips
-from odocan.sim.exceptions import OdocanError
 
 if TYPE_CHECKING:  # a cantools Database or a plan of it (host.protocol.dbcplan)
-    from odocan.host.protocol.dbcplan import DatabaseSpec, MessageSpec
+    from odocan.host.protocol.dbcplan import DatabaseSpec
 
 E2E_KEYS = ("ok", "lost", "repeated", "crc_errors", "wrong_sequence")
 UNKNOWN = "unknown"  # the section of check_frames' counts for frames that are not checked
@@ -115,66 +122,7 @@ UNKNOWN_ID, WRONG_DLC, UNPROTECTED = "unknown_id", "wrong_dlc", "unprotected"
 _STATUS = (OK, OKSOMELOST, REPEATED, WRONG_SEQUENCE, CRC_ERROR)
 _S_OK, _S_LOST, _S_REPEATED, _S_WRONG, _S_CRC = range(5)
 
-COUNTER_LAP = ENC_COUNTER_LAP  # 16: every E2E COUNTER's values (the DBC's, one lap)
 COUNTER_MASK = ENC_COUNTER_MASK  # 0x0F
-MAX_DELTA_COUNTER = ENC_COUNTER_MASK  # 15: the widest window, a lap less one
-# Messages the firmware checks with MaxDeltaCounterInit 0 and a window widened once per period
-# (firmware/encoders.py ``EncoderInput.rx``): only +1 passes without time having passed.
-PER_PERIOD_WINDOW = frozenset({"WHEEL_ENCODERS"})
-
-
-class E2EConfigError(OdocanError):
-    """The DBC's E2E attributes cannot be used (a list that is not 16 data IDs of 0..255)."""
-
-
-@dataclass(frozen=True)
-class E2EMessage:
-    """What the receiver needs of one message of the DBC."""
-
-    name: str
-    key: int  # decode.frame_key: identifier and frame format
-    length: int  # DLC, bytes
-    data_ids: tuple[int, ...] | None  # E2EDataIDs (16), None: not protected
-    max_delta_init: int  # MaxDeltaCounterInit
-    cycle_s: float | None  # receive period: GenMsgCycleTime / E2EFramesPerCycle (None: none)
-    min_periods: int = 1  # periods a frame adds at least (0: the window widens with time only)
-
-
-def e2e_messages(db: DatabaseSpec) -> dict[int, E2EMessage]:
-    """The DBC's messages by ``frame_key``, with their E2E configuration."""
-    return {m.key: m for m in (_e2e_message(message) for message in db.messages)}
-
-
-def _e2e_message(message: MessageSpec) -> E2EMessage:
-    attributes = message.dbc.attributes if message.dbc is not None else {}
-    data_ids = None
-    if "E2EDataIDs" in attributes:
-        data_ids = _parse_data_ids(message.name, str(attributes["E2EDataIDs"].value))
-        if message.length != P02_LENGTH:
-            raise E2EConfigError(f"{message.name}: E2E Profile 2 needs 8-byte frames")
-    cyclic = bool(message.cycle_time) and message.send_type in (None, "Cyclic")
-    per_period = message.name in PER_PERIOD_WINDOW
-    frames = int(attributes["E2EFramesPerCycle"].value) if "E2EFramesPerCycle" in attributes else 1
-    return E2EMessage(
-        name=message.name,
-        key=frame_key(message.frame_id, message.is_extended_frame),
-        length=message.length,
-        data_ids=data_ids,
-        max_delta_init=0 if per_period else 1 if cyclic else MAX_DELTA_COUNTER,
-        cycle_s=message.cycle_time / 1000.0 / max(frames, 1) if message.cycle_time else None,
-        min_periods=0 if per_period else 1,
-    )
-
-
-def _parse_data_ids(name: str, text: str) -> tuple[int, ...]:
-    try:
-        ids = tuple(int(v) for v in text.split(","))
-    except ValueError:
-        raise E2EConfigError(f"{name}: E2EDataIDs {text!r} is not a list of integers") from None
-    if len(ids) != COUNTER_LAP or not all(0 <= v <= 255 for v in ids):
-        raise E2EConfigError(
-            f"{name}: E2EDataIDs must list {COUNTER_LAP} data IDs of 0..255, got {text!r}")
-    return ids
 
 
 # --- one message's sequence (AUTOSAR E2E_P02Check), shared by both APIs ---------------------------
