@@ -285,7 +285,7 @@ def _rejudge(
 def check_frames(
     frames: FrameArrays, db: DatabaseSpec | None = None,
     touched: list[npt.NDArray[np.intp]] | None = None, decided: dict[int, bool] | None = None,
-    settle_all: bool = False,
+    settle_all: bool = False, only: str | None = None,
 ) -> tuple[dict[str, dict[str, int]], npt.NDArray[np.bool_]]:
     """Profile 2 over every frame of a log.
 
@@ -298,6 +298,10 @@ def check_frames(
     asked) says of each encoder frame whether its verdict is one by every reading of its stamp
     (``e2e_decided``); ``settle_all``: the evidence read even where every reading agrees (a live
     hold's few frames, judged as a log whose readings differ somewhere: ``e2e_halts``).
+    ``only`` (a message name): that message's frames judged alone, the others' skipped (their
+    counts and marks left out; a live hold asks only of its encoder frames, ``liveearly``). Its
+    verdicts are the same: a message's sequence reads its own frames, the CRCs and the
+    firmware's evidence (the poses' and pages' right CRCs), never another's verdicts.
 
     The frames are grouped by message once (a stable sort of their message numbers) and the CRCs
     of all protected frames found in one pass; the sequence is then judged per message.
@@ -325,7 +329,7 @@ def check_frames(
     pages = None if crc_ok is None else ok_pages(frames, crc_ok, db)
     for number, config in enumerate(in_order):
         of_id = groups.of(number)
-        if len(of_id) == 0:
+        if len(of_id) == 0 or (only is not None and config.name != only):
             continue
         right_dlc = of_id[frames.dlc[of_id] == config.length]
         unknown["wrong_dlc"] += len(of_id) - len(right_dlc)
