@@ -85,7 +85,7 @@ from odocan.host.protocol.e2e_cycles import (
     new_cycle_s,
     new_cycles,
 )
-from odocan.host.protocol.e2e_decided import all_decided, by_readings
+from odocan.host.protocol.e2e_decided import all_decided, by_readings, reading_key
 from odocan.host.protocol.e2e_evidence import (
     Evidence,
     evidence_frames,
@@ -436,8 +436,13 @@ def _settled(frames: FrameArrays, index: npt.NDArray[np.intp], counter: npt.NDAr
         return settle(crc_ok, counter, (periods, wide, narrow), proofs, config.max_delta_init,
                       released, None if cycle_s is None else (t_s, cycle_s), reading)
 
+    runs: dict[bytes | None, npt.NDArray[np.int8]] = {}  # per reading judged alike (a copy out)
+
     def run(reading: npt.NDArray[np.int8] | None) -> npt.NDArray[np.int8]:
-        return run_with(reading, evidence)
+        key = reading_key(reading, released)
+        if key not in runs:
+            runs[key] = run_with(reading, evidence)
+        return runs[key].copy()
 
     def unread(proofs: Evidence) -> npt.NDArray[np.int8]:
         return run_with(None, proofs)
