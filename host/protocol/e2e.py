@@ -51,13 +51,17 @@ from odocan.host.protocol.busfacts import ENC_COUNTER_MASK
 from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.protocol.decode import frame_groups, frame_keys
 from odocan.host.protocol.e2e_config import (  # re-exported (their old home)
-    COUNTER_LAP,
-    MAX_DELTA_COUNTER,
-    PER_PERIOD_WINDOW,
-    E2EMessage,
-    e2e_messages,
+    COUNTER_LAP as COUNTER_LAP,
+)
+from odocan.host.protocol.e2e_config import (
+    MAX_DELTA_COUNTER as MAX_DELTA_COUNTER,
+)
+from odocan.host.protocol.e2e_config import (
+    PER_PERIOD_WINDOW as PER_PERIOD_WINDOW,
 )
 from odocan.host.protocol.e2e_config import E2EConfigError as E2EConfigError
+from odocan.host.protocol.e2e_config import E2EMessage as E2EMessage
+from odocan.host.protocol.e2e_config import e2e_messages as e2e_messages
 from odocan.host.protocol.e2e_crc import (  # re-exported (their old home)
     CRC8H2F_INIT as CRC8H2F_INIT,
 )
