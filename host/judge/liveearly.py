@@ -82,7 +82,8 @@ class EarlyEnd:
             return False  # a recorder bunched them: its release the pages may re-read
         touched: list[npt.NDArray[np.intp]] = []
         decided = {first: False}
-        _, accepted = check_frames(arrays, db, touched, decided, settle_all=True)
+        _, accepted = check_frames(arrays, db, touched, decided, settle_all=True,
+                                   only=busfacts.ENC_MESSAGE)  # its encoder frames' verdicts
         if any(len(at) for at in touched) or not decided[first]:
             return False
         self.verdict, self._at_s = bool(accepted[first]), math.inf

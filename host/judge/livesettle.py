@@ -38,6 +38,7 @@ from typing import TYPE_CHECKING
 import can
 
 from odocan.host.judge.liveearly import EARLY_S, EarlyEnd
+from odocan.host.judge.liveholdarrays import HoldArrays
 from odocan.host.protocol import busfacts
 from odocan.host.protocol.decode import frame_key
 from odocan.host.protocol.e2e import check_frames, e2e_messages
@@ -78,6 +79,7 @@ class SettleHold:
         self._page: tuple[int, int, int, int] | bool | None = False  # False: not read yet
         self.opener: can.Message | None = None  # the frame that opened the latest hold
         self.early = EarlyEnd()  # whether the evidence ends the hold before ``until_s``
+        self._hold_arrays = HoldArrays()  # a hold's frames as arrays, grown between reads
 
     def open(self, msg: can.Message, now_s: float) -> None:
         """The encoder frame ``msg`` (heard at local ``now_s``) was held: hold from it."""
@@ -179,19 +181,23 @@ class SettleHold:
         """Whether each encoder frame held is taken by the whole log's rule over the frames
         held, after the last one taken before (None for the frames of other messages), and
         whether the evidence changed a verdict of the stamps (``check_frames``' touched)."""
-        before = self._context()
+        arrays, first = self._arrays([m for m, _ in held])
         touched: list[npt.NDArray[np.intp]] = []
-        _, accepted = check_frames(_arrays([*before, *(m for m, _ in held)]), self._db, touched,
-                                   settle_all=True)
-        first = len(before)
+        _, accepted = check_frames(arrays, self._db, touched, settle_all=True,
+                                   only=busfacts.ENC_MESSAGE)  # its encoder frames' verdicts
         return [bool(accepted[first + k]) if self._is_encoder(msg) else None
                 for k, (msg, _) in enumerate(held)], any(len(at) for at in touched)
 
     def _frames(self) -> tuple[FrameArrays, int, DatabaseSpec]:
         """The frames judged before the hold and those held, the place of the first held among
         them, and the DBC (``EarlyEnd.settled``)."""
-        before = self._context()
-        return _arrays([*before, *(m for m, _ in self.held)]), len(before), self._db
+        return (*self._arrays([m for m, _ in self.held]), self._db)
+
+    def _arrays(self, held: list[can.Message]) -> tuple[FrameArrays, int]:
+        """The arrays of the context and the frames ``held`` (kept between reads of a hold:
+        ``liveholdarrays``), and the place of the first held among them."""
+        key = (self._start, self._e2e.retaken)  # what ``_context`` reads besides ``recent``
+        return self._hold_arrays.arrays(self.recent, key, self._context, held)
 
     def _context(self) -> list[can.Message]:
         """The frames judged before the hold (``recent``): the firmware's sends before the first
@@ -265,16 +271,6 @@ class SettleHold:
     def _is_encoder(self, msg: can.Message) -> bool:
         return (msg.arbitration_id == self.can_id and not msg.is_extended_id
                 and not msg.is_error_frame and not msg.is_remote_frame)
-
-
-def _arrays(msgs: list[can.Message]) -> FrameArrays:
-    """``msgs`` as a log's arrays (``check_frames``')."""
-    from odocan.host.io.collector import FrameCollector  # a hold's only (its import's cost)
-
-    collector = FrameCollector()
-    for msg in msgs:
-        collector.on_message_received(msg)
-    return collector.arrays()
 
 
 def _enc_page(db: DatabaseSpec) -> tuple[int, int, int, int] | None:

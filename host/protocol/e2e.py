@@ -47,9 +47,21 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FLAG_ERROR, FLAG_REMOTE, FrameArrays
-from odocan.host.protocol.busfacts import ENC_COUNTER_LAP, ENC_COUNTER_MASK
+from odocan.host.protocol.busfacts import ENC_COUNTER_MASK
 from odocan.host.protocol.dbcplan import default_plan
-from odocan.host.protocol.decode import frame_groups, frame_key, frame_keys
+from odocan.host.protocol.decode import frame_groups, frame_keys
+from odocan.host.protocol.e2e_config import (  # re-exported (their old home)
+    COUNTER_LAP as COUNTER_LAP,
+)
+from odocan.host.protocol.e2e_config import (
+    MAX_DELTA_COUNTER as MAX_DELTA_COUNTER,
+)
+from odocan.host.protocol.e2e_config import (
+    PER_PERIOD_WINDOW as PER_PERIOD_WINDOW,
+)
+from odocan.host.protocol.e2e_config import E2EConfigError as E2EConfigError
+from odocan.host.protocol.e2e_config import E2EMessage as E2EMessage
+from odocan.host.protocol.e2e_config import e2e_messages as e2e_messages
 from odocan.host.protocol.e2e_crc import (  # re-exported (their old home)
     CRC8H2F_INIT as CRC8H2F_INIT,
 )
@@ -77,7 +89,7 @@ from odocan.host.protocol.e2e_cycles import (
     new_cycle_s,
     new_cycles,
 )
-from odocan.host.protocol.e2e_decided import all_decided, by_readings
+from odocan.host.protocol.e2e_decided import all_decided, by_readings, reading_key
 from odocan.host.protocol.e2e_evidence import (
     Evidence,
     evidence_frames,
@@ -99,10 +111,9 @@ from odocan.host.protocol.e2e_periods import (
 from odocan.host.protocol.e2e_repeats import repeats_by_pages
 from odocan.host.protocol.e2e_silence import add_silence, is_silence, silences
 from odocan.host.protocol.e2e_skipveto import by_page_skips
-from odocan.sim.exceptions import OdocanError
 
 if TYPE_CHECKING:  # a cantools Database or a plan of it (host.protocol.dbcplan)
-    from odocan.host.protocol.dbcplan import DatabaseSpec, MessageSpec
+    from odocan.host.protocol.dbcplan import DatabaseSpec
 
 E2E_KEYS = ("ok", "lost", "repeated", "crc_errors", "wrong_sequence")
 UNKNOWN = "unknown"  # the section of check_frames' counts for frames that are not checked
@@ -115,66 +126,7 @@ UNKNOWN_ID, WRONG_DLC, UNPROTECTED = "unknown_id", "wrong_dlc", "unprotected"
 _STATUS = (OK, OKSOMELOST, REPEATED, WRONG_SEQUENCE, CRC_ERROR)
 _S_OK, _S_LOST, _S_REPEATED, _S_WRONG, _S_CRC = range(5)
 
-COUNTER_LAP = ENC_COUNTER_LAP  # 16: every E2E COUNTER's values (the DBC's, one lap)
 COUNTER_MASK = ENC_COUNTER_MASK  # 0x0F
-MAX_DELTA_COUNTER = ENC_COUNTER_MASK  # 15: the widest window, a lap less one
-# Messages the firmware checks with MaxDeltaCounterInit 0 and a window widened once per period
-# (firmware/encoders.py ``EncoderInput.rx``): only +1 passes without time having passed.
-PER_PERIOD_WINDOW = frozenset({"WHEEL_ENCODERS"})
-
-
-class E2EConfigError(OdocanError):
-    """The DBC's E2E attributes cannot be used (a list that is not 16 data IDs of 0..255)."""
-
-
-@dataclass(frozen=True)
-class E2EMessage:
-    """What the receiver needs of one message of the DBC."""
-
-    name: str
-    key: int  # decode.frame_key: identifier and frame format
-    length: int  # DLC, bytes
-    data_ids: tuple[int, ...] | None  # E2EDataIDs (16), None: not protected
-    max_delta_init: int  # MaxDeltaCounterInit
-    cycle_s: float | None  # receive period: GenMsgCycleTime / E2EFramesPerCycle (None: none)
-    min_periods: int = 1  # periods a frame adds at least (0: the window widens with time only)
-
-
-def e2e_messages(db: DatabaseSpec) -> dict[int, E2EMessage]:
-    """The DBC's messages by ``frame_key``, with their E2E configuration."""
-    return {m.key: m for m in (_e2e_message(message) for message in db.messages)}
-
-
-def _e2e_message(message: MessageSpec) -> E2EMessage:
-    attributes = message.dbc.attributes if message.dbc is not None else {}
-    data_ids = None
-    if "E2EDataIDs" in attributes:
-        data_ids = _parse_data_ids(message.name, str(attributes["E2EDataIDs"].value))
-        if message.length != P02_LENGTH:
-            raise E2EConfigError(f"{message.name}: E2E Profile 2 needs 8-byte frames")
-    cyclic = bool(message.cycle_time) and message.send_type in (None, "Cyclic")
-    per_period = message.name in PER_PERIOD_WINDOW
-    frames = int(attributes["E2EFramesPerCycle"].value) if "E2EFramesPerCycle" in attributes else 1
-    return E2EMessage(
-        name=message.name,
-        key=frame_key(message.frame_id, message.is_extended_frame),
-        length=message.length,
-        data_ids=data_ids,
-        max_delta_init=0 if per_period else 1 if cyclic else MAX_DELTA_COUNTER,
-        cycle_s=message.cycle_time / 1000.0 / max(frames, 1) if message.cycle_time else None,
-        min_periods=0 if per_period else 1,
-    )
-
-
-def _parse_data_ids(name: str, text: str) -> tuple[int, ...]:
-    try:
-        ids = tuple(int(v) for v in text.split(","))
-    except ValueError:
-        raise E2EConfigError(f"{name}: E2EDataIDs {text!r} is not a list of integers") from None
-    if len(ids) != COUNTER_LAP or not all(0 <= v <= 255 for v in ids):
-        raise E2EConfigError(
-            f"{name}: E2EDataIDs must list {COUNTER_LAP} data IDs of 0..255, got {text!r}")
-    return ids
 
 
 # --- one message's sequence (AUTOSAR E2E_P02Check), shared by both APIs ---------------------------
@@ -337,7 +289,7 @@ def _rejudge(
 def check_frames(
     frames: FrameArrays, db: DatabaseSpec | None = None,
     touched: list[npt.NDArray[np.intp]] | None = None, decided: dict[int, bool] | None = None,
-    settle_all: bool = False,
+    settle_all: bool = False, only: str | None = None,
 ) -> tuple[dict[str, dict[str, int]], npt.NDArray[np.bool_]]:
     """Profile 2 over every frame of a log.
 
@@ -350,6 +302,10 @@ def check_frames(
     asked) says of each encoder frame whether its verdict is one by every reading of its stamp
     (``e2e_decided``); ``settle_all``: the evidence read even where every reading agrees (a live
     hold's few frames, judged as a log whose readings differ somewhere: ``e2e_halts``).
+    ``only`` (a message name): that message's frames judged alone, the others' skipped (their
+    counts and marks left out; a live hold asks only of its encoder frames, ``liveearly``). Its
+    verdicts are the same: a message's sequence reads its own frames, the CRCs and the
+    firmware's evidence (the poses' and pages' right CRCs), never another's verdicts.
 
     The frames are grouped by message once (a stable sort of their message numbers) and the CRCs
     of all protected frames found in one pass; the sequence is then judged per message.
@@ -377,7 +333,7 @@ def check_frames(
     pages = None if crc_ok is None else ok_pages(frames, crc_ok, db)
     for number, config in enumerate(in_order):
         of_id = groups.of(number)
-        if len(of_id) == 0:
+        if len(of_id) == 0 or (only is not None and config.name != only):
             continue
         right_dlc = of_id[frames.dlc[of_id] == config.length]
         unknown["wrong_dlc"] += len(of_id) - len(right_dlc)
@@ -484,8 +440,13 @@ def _settled(frames: FrameArrays, index: npt.NDArray[np.intp], counter: npt.NDAr
         return settle(crc_ok, counter, (periods, wide, narrow), proofs, config.max_delta_init,
                       released, None if cycle_s is None else (t_s, cycle_s), reading)
 
+    runs: dict[bytes | None, npt.NDArray[np.int8]] = {}  # per reading judged alike (a copy out)
+
     def run(reading: npt.NDArray[np.int8] | None) -> npt.NDArray[np.int8]:
-        return run_with(reading, evidence)
+        key = reading_key(reading, released)
+        if key not in runs:
+            runs[key] = run_with(reading, evidence)
+        return runs[key].copy()
 
     def unread(proofs: Evidence) -> npt.NDArray[np.int8]:
         return run_with(None, proofs)

@@ -45,3 +45,18 @@ def by_readings(decided: dict[int, bool], index: npt.NDArray[np.intp], run: Run,
             reading[j] = way
             codes.add(int(run(reading)[j]))
         decided[pos] = codes == {int(settled[j])}
+
+
+def reading_key(reading: npt.NDArray[np.int8] | None, released: npt.NDArray[np.bool_]
+                ) -> bytes | None:
+    """A key of ``settle``'s per-frame ``reading`` (-1: the rule's), the same for readings it
+    judges alike, so that ``_settled`` runs each once (``by_readings`` asks a frame's three
+    ways; the rule's own way is ``run(None)``'s). After the first frame, the rule reads a frame
+    by its pair's first frame's release, ``int(released[k - 1])`` (1 wide, else 0 strict), in
+    ``settle`` and ``e2e_implausible.by_stamps`` alike: that way is written -1. None: every
+    frame read by the rule."""
+    if reading is None:
+        return None
+    rule = reading.copy()
+    rule[1:][rule[1:] == released[:-1]] = -1
+    return None if bool((rule == -1).all()) else rule.tobytes()

@@ -68,6 +68,7 @@ from odocan.host.protocol.e2e_periods import (
 )
 from odocan.host.protocol.e2e_retract import firmware_last
 from odocan.host.protocol.e2e_sends import later_sends
+from odocan.host.protocol.e2e_windows import Windows
 
 # How late a starved recorder may stamp a frame, in periods: held 1..4 periods (the trial's
 # lateness reached +3.9), plus the stamp jitter of ``CAPTURE_TOLERANCE_CYCLES``.
@@ -81,7 +82,6 @@ NEAR_FRAMES = 14
 RACE_FRAMES = 2  # frames before a send that the firmware may have drained only after it
 LATE_CYCLES = 1.5  # a frame heard this many send periods after its COUNTER's send: held back
 HALF_PERIOD = 0.5  # a run's silence and a frame's lead agree within this (periods)
-_MAX_WINDOW = ENC_COUNTER_MASK  # 15: Profile 2's widest window, a lap less one
 SILENCE_CYCLES = 1.5  # the recorder heard nothing (a bus is never that quiet in a drive)
 BURST_S = 40e-6  # then stamped what it held this close (closer than a bus delivers frames)
 ALIKE_S = 0.5e-6  # but not at once: frames of one instant (the rig's, float noise included)
@@ -187,9 +187,10 @@ def _sent_places(timestamp_s: npt.NDArray[np.float64], counter: IntArray,
     bus: its place is no bound)."""
     in_order, sent_s = sent_times(timestamp_s, counter, POSE_PERIOD_S)
     places: list[int] = before.tolist()
-    for k, ordered in enumerate(in_order):
-        if not ordered:
-            places[k] = min(places[k], int(np.searchsorted(enc_s, sent_s[k], side="right")))
+    late = [k for k, ordered in enumerate(in_order) if not ordered]
+    sent = np.searchsorted(enc_s, np.array([sent_s[k] for k in late], dtype=np.float64), "right")
+    for k, place in zip(late, sent.tolist(), strict=True):  # (one search for them all)
+        places[k] = min(places[k], place)
     return places
 
 
@@ -309,20 +310,17 @@ def settle(crc_ok: npt.NDArray[np.bool_], counter: IntArray,
     (``new_cycle``: the frames' bus times and the message's period; ``e2e_cycles``)."""
     n = len(counter)
     status = np.full(n, S_CRC, dtype=np.int8)
-    windows = [0, 0, 0]
     waiting, last, last_s = True, 0, math.nan
     anchored = False  # the last frame taken is the firmware's E2E check's last (``_bound_skip``)
     columns = [p.tolist() for p in periods]
+    windows_at = Windows(columns)  # read where a frame needs them (``e2e_windows``)
     ok, counters = crc_ok.tolist(), (counter & ENC_COUNTER_MASK).tolist()
     late = released.tolist()
     chosen = reading.tolist() if reading is not None else [-1] * n
     stamps, cycle_s = (new_cycle[0].tolist(), new_cycle[1]) if new_cycle else ([], 0.0)
     taken: list[int] = []  # the frames taken so far (``e2e_retract``)
     cums = (np.cumsum(periods[1]).tolist(), np.cumsum(periods[2]).tolist())
-    for j in range(n):
-        windows = [min(w + c[j], _MAX_WINDOW) for w, c in zip(windows, columns, strict=True)]
-        if not ok[j]:
-            continue
+    for j in np.flatnonzero(crc_ok).tolist():  # a bad CRC only widens the windows
         delta = (counters[j] - last) & ENC_COUNTER_MASK
         if waiting or delta == 1:
             code = S_OK
@@ -333,6 +331,7 @@ def settle(crc_ok: npt.NDArray[np.bool_], counter: IntArray,
             status[j], last_s = S_REPEATED, math.nan  # a frame between: no new cycle till next
             continue
         else:
+            windows = windows_at.at(j)
             which = chosen[j] if chosen[j] >= 0 else int(late[j - 1]) if j else 0
             code = _by_window_or_evidence(j, delta, windows[which], evidence)
             if code == S_WRONG and anchored and _bound_skip(j, delta, windows, evidence):
@@ -346,8 +345,10 @@ def settle(crc_ok: npt.NDArray[np.bool_], counter: IntArray,
         status[j] = code
         if code != S_WRONG:
             taken.append(j)
-            anchored = j in evidence.taken or (anchored and (delta == 1 or _exact(delta, windows)))
-            waiting, last, windows = False, counters[j], [max_delta_init] * 3
+            anchored = j in evidence.taken or (
+                anchored and (delta == 1 or _exact(delta, windows_at.at(j))))
+            waiting, last = False, counters[j]
+            windows_at.reset(j, max_delta_init)
             last_s = stamps[j] if stamps else math.nan
         else:
             last_s = math.nan
