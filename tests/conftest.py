@@ -65,6 +65,21 @@ def _session_cache_dir(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Non
         yield
 
 
+@pytest.fixture(autouse=True, scope="session")
+def _bytecode_kept(tmp_path_factory: pytest.TempPathFactory) -> Iterator[None]:
+    """Under ``PYTHONDONTWRITEBYTECODE`` (set on CI's machines), every ``python -m odocan`` the
+    tests start compiled odocan's ~400 modules afresh (0.5-0.9 s a process, 2-4 % of a run):
+    the session's processes keep their bytecode in a cache of the session's own
+    (``PYTHONPYCACHEPREFIX``), never in the tree, which the setting is there to spare."""
+    if not os.environ.get("PYTHONDONTWRITEBYTECODE"):
+        yield
+        return
+    with pytest.MonkeyPatch.context() as patch:
+        patch.delenv("PYTHONDONTWRITEBYTECODE")
+        patch.setenv("PYTHONPYCACHEPREFIX", str(tmp_path_factory.getbasetemp().parent / "pyc"))
+        yield
+
+
 @pytest.fixture(autouse=True)
 def _logging_as_found() -> Iterator[None]:
     loggers = [logging.getLogger(name) for name in ("odocan", *MQTT_LOGGERS, *LIBRARY_LOGGERS)]

@@ -3,8 +3,10 @@ until an ODOM_STATUS summary page has carried it (DEGRADED and its reason); reco
 would otherwise beat the summary (every 100 ms) and the bus would only ever read OK.
 
 The case is the outside trial's ``kill -STOP``: the MCU stalled for N ticks in the lockstep rig
-(``tests.fault_rig.FaultRig.halted``), at every phase of the summary's 100 ms cycle. A stall of
-N ticks releases the next tick N + 1 periods late: from LOST_TIME_PERIODS on that is TIME_LOST.
+(``tests.fault_rig.FaultRig.halted``), at every phase of the summary's 100 ms cycle (2..200
+ticks: every one up to 13 and the cycle's edges, a quarter of the rest in a default run,
+``tests.sweeps``). A stall of N ticks releases the next tick N + 1 periods late: from
+LOST_TIME_PERIODS on that is TIME_LOST.
 Shorter stalls lose no time the firmware could tell, so they are also run with a babbling node
 filling the bus while the MCU is stopped: the frames that wait overflow the 32-slot mailbox at
 the first tick after (MAILBOX_OVERFLOW). The summaries are decoded here with cantools; the C

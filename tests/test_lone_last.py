@@ -16,6 +16,7 @@ judges them). Which frame is lone is told independently of odocan (cantools, pyt
 
 from __future__ import annotations
 
+import itertools
 from pathlib import Path
 
 import can
@@ -23,6 +24,7 @@ import pytest
 
 from odocan.host.judge.watchend import end_watch
 from tests.log_edit import raise_raw_once
+from tests.sweeps import sample
 from tests.test_live_reboot import bridge_of, monitor_of
 from tests.test_lone_halves import LSB_M, VALUE_BYTES, _analyzed, _odocan, _run, lone_halves
 
@@ -84,8 +86,9 @@ def live_ended(path: Path, robot: str) -> list[tuple[int, float]]:
             for j in (monitor, bridge)]
 
 
-@pytest.mark.parametrize("half", ["x", "y"])
-@pytest.mark.parametrize("lsb", [1_000_000, -10_000, 100])  # 100 m, 1 m, 10 mm
+@pytest.mark.parametrize(("lsb", "half"),  # 100 m, 1 m, 10 mm; tests.sweeps: 10 mm always
+                         sample(itertools.product([1_000_000, -10_000, 100], ["x", "y"]), 2,
+                                [(100, "x"), (100, "y")]))
 def test_a_wrong_last_lone_half_fails_whole_streamed_and_live(
     drive: tuple[str, Path], tmp_path: Path, half: str, lsb: int
 ) -> None:

@@ -3,7 +3,8 @@
 The replay halts each stall where the log's poses say and feeds its receive FIFO what the log
 says the board held (``host.judge.replay_halts``): for every ``stall=T:DUR`` of a small grid
 (T a tick or half a tick either side of 2 s, DUR from the board's threshold of 9 ticks to 20),
-on an instant and a bit-timed bus, seeds 4..6, a correct firmware's replay is identical to its
+on an instant and a bit-timed bus, seeds 4..6 (a default run: the cases found below and a
+third of the rest, ``tests.sweeps``), a correct firmware's replay is identical to its
 log (exit 0), and the same log with ODOM_POSE_X raised 10 mm after the stall is refused (exit
 1). Before: ``stall=2.015:0.105 -b 500000`` (seed 4) was replayed a tick early, departed by
 20.26 mm and was UNJUDGED; ``stall=2.005:0.095`` a tick late, 1 LSB off at 13 of 294 poses.

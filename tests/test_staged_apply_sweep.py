@@ -5,7 +5,8 @@ swept (issue #11: "a FAIL must never blame a correct firmware", never traded for
 The drive of ``tests/test_reprime_sweep.py`` (pmir reset, halted 4-8 s, its receive FIFO
 drained: it re-primes on resuming and says COUNTER_RESET; the spin, the square, the figure-8,
 the circle; 2, 3, 4 or 6 ticks after it resumed), but the host sends X, Y, HEADING and APPLY
-in that tick (three target poses): 192 drives. Measured before: ``analyze`` FAILed the correct
+in that tick (three target poses): 192 drives (a default run: the 24 that failed and a
+quarter of the rest, ``tests.sweeps``). Measured before: ``analyze`` FAILed the correct
 firmware in 24 (the APPLY 2 ticks after, halted 4 s or 8 s, every target): the firmware drained
 its backlog, took the APPLY, then re-primed on the next fresh frame, while the reference started
 at the staged pose on the APPLY's frame and took the step into it (6.3 mrad, 12.6 on the spin;

@@ -143,7 +143,8 @@ SWEEP = sample(itertools.product(["kobuki", "pmir"], [10, 11, 12], [15, 20], [0,
 @pytest.mark.parametrize(("robot", "seed", "delay_ms", "jitter_seed"), SWEEP)  # tests.sweeps
 def test_the_sweep_passes_a_correct_firmware(tmp_path: Path, robot: str, seed: int,
                                              delay_ms: int, jitter_seed: int) -> None:
-    """Seeds 10-12, kobuki and pmir, ``delay=0.1:15`` and ``:20``, jitter seeds 0-2."""
+    """Seeds 10-12, kobuki and pmir, ``delay=0.1:15`` and ``:20``, jitter seeds 0-2 (a third
+    of them in a default run, ``tests.sweeps``)."""
     log, moved = tmp_path / "drive.log", tmp_path / "moved.log"
     main(["run", "--robot", robot, "--duration", str(DURATION_S), "--seed", str(seed),
           "--faults", f"delay=0.1:{delay_ms},seed={seed}", "--log", str(log)])
