@@ -319,7 +319,7 @@ def settle(crc_ok: npt.NDArray[np.bool_], counter: IntArray,
     chosen = reading.tolist() if reading is not None else [-1] * n
     stamps, cycle_s = (new_cycle[0].tolist(), new_cycle[1]) if new_cycle else ([], 0.0)
     taken: list[int] = []  # the frames taken so far (``e2e_retract``)
-    cums = (np.cumsum(periods[1]).tolist(), np.cumsum(periods[2]).tolist())
+    cums = (windows_at.sums[1], windows_at.sums[2])  # the periods summed once (e2e_windows)
     for j in np.flatnonzero(crc_ok).tolist():  # a bad CRC only widens the windows
         delta = (counters[j] - last) & ENC_COUNTER_MASK
         if waiting or delta == 1:
