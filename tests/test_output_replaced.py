@@ -23,7 +23,8 @@ from odocan.host.mqtt.ticktrace import TickTrace
 from odocan.host.outputs import OutputError, write_text
 from odocan.host.report.junit import Check, write_junit
 from odocan.sim.exceptions import Terminated
-from tests.test_partial_output import _limited, signal_mid_write
+from tests.limited import limit_file_bytes, run_limited
+from tests.test_partial_output import LIMIT_BYTES, signal_mid_write
 
 OLD = b"last night's output, kept\n"
 
@@ -52,10 +53,8 @@ def test_a_full_disk_keeps_the_older_output(drive_log: Path, tmp_path: Path, opt
     name = {"--report": "r.json", "--junit": "j.xml", "--mcap": "m.mcap", "--plot": "p.png"}
     out = tmp_path / name[option]
     out.write_bytes(OLD)
-    done = subprocess.run(
-        [sys.executable, "-m", "odocan", "analyze", str(drive_log), "--robot", "kobuki",
-         option, str(out)],
-        capture_output=True, text=True, timeout=300, check=False, preexec_fn=_limited)
+    done = run_limited(["analyze", str(drive_log), "--robot", "kobuki", option, str(out)],
+                       file_bytes=LIMIT_BYTES)
     assert "PASS" in done.stdout
     reason = "File too large" if option != "--mcap" else done.stderr.split(": ", 2)[2].split(";")[0]
     _kept(out, done, option, reason)
@@ -68,9 +67,7 @@ def test_a_full_disk_keeps_the_older_output(drive_log: Path, tmp_path: Path, opt
 def test_a_full_disk_keeps_the_older_plot(tmp_path: Path, option: str, argv: list[str]) -> None:
     out = tmp_path / "plot.png"
     out.write_bytes(OLD)
-    done = subprocess.run([sys.executable, "-m", "odocan", *argv, option, str(out)],
-                          capture_output=True, text=True, timeout=300, check=False,
-                          preexec_fn=_limited)
+    done = run_limited([*argv, option, str(out)], file_bytes=LIMIT_BYTES)
     _kept(out, done, option, "File too large")
 
 
@@ -115,7 +112,7 @@ def test_a_full_disk_with_no_older_file_leaves_none(tmp_path: Path) -> None:
     report = tmp_path / "r.json"
     pid = os.fork()
     if pid == 0:  # a child under the limit, so pytest's own files are not limited
-        _limited()
+        limit_file_bytes(LIMIT_BYTES)
         try:
             write_text(report, "x" * 10_000, "--report")
         except OutputError as exc:
@@ -160,7 +157,7 @@ def test_a_full_disk_keeps_the_older_junit_and_tick_trace(tmp_path: Path, write:
     out.write_bytes(OLD)
     pid = os.fork()
     if pid == 0:  # a child under the limit, so pytest's own files are not limited
-        _limited()
+        limit_file_bytes(LIMIT_BYTES)
         try:
             write(out)
         except OutputError as exc:

@@ -150,19 +150,12 @@ def _odocan_with_memory_limit(*argv: str) -> tuple[int, str]:
     """``python -m odocan ARGV`` in a process of at most 3 GB of address space: a regression
     that reads /dev/zero whole fails with MemoryError here instead of taking the machine."""
     import os
-    import resource
-    import subprocess
-    import sys
 
-    limit = 3 << 30
-
-    def cap() -> None:
-        resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
+    from tests.limited import run_limited
 
     root = Path(__file__).resolve().parents[1]
-    done = subprocess.run([sys.executable, "-m", "odocan", *argv], cwd=root,
-                          env={**os.environ, "PYTHONPATH": str(root)}, preexec_fn=cap,
-                          capture_output=True, text=True, timeout=120)
+    done = run_limited(argv, address_bytes=3 << 30, cwd=root,
+                       env={**os.environ, "PYTHONPATH": str(root)}, timeout=120)
     return done.returncode, done.stderr
 
 

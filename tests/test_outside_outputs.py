@@ -12,10 +12,7 @@ from __future__ import annotations
 import errno
 import io
 import os
-import resource
-import signal
 import subprocess
-import sys
 from pathlib import Path
 from typing import Any
 
@@ -23,6 +20,7 @@ import can
 import pytest
 
 from odocan.host.cli.app import main
+from tests.limited import run_limited
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -127,13 +125,8 @@ def _odocan_with_file_size_limit(limit_bytes: int, *argv: str) -> subprocess.Com
     (RLIMIT_FSIZE, SIGXFSZ ignored: a write past it fails with EFBIG, as a full disk fails with
     ENOSPC) -- a disk that fills, without privileges."""
 
-    def limit() -> None:
-        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
-        resource.setrlimit(resource.RLIMIT_FSIZE, (limit_bytes, limit_bytes))
-
-    env = {**os.environ, "PYTHONPATH": str(ROOT), "PYTHONDONTWRITEBYTECODE": "1"}
-    return subprocess.run([sys.executable, "-m", "odocan", *argv], cwd=ROOT, env=env,
-                          preexec_fn=limit, capture_output=True, text=True, timeout=300)
+    return run_limited(list(argv), file_bytes=limit_bytes, cwd=ROOT,
+                       env={**os.environ, "PYTHONPATH": str(ROOT)})
 
 
 @pytest.mark.parametrize("command", ["run", "analyze"])

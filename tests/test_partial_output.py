@@ -10,21 +10,15 @@ the limit into EFBIG, a real OS error at the same place as ENOSPC.
 from __future__ import annotations
 
 import io
-import resource
-import signal
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
 
+from tests.limited import run_limited
+
 LIMIT_BYTES = 500  # the report, the JUnit file (760 bytes) and the MCAP of a 2 s drive are larger
-
-
-def _limited() -> None:
-    """In the child: writes beyond LIMIT_BYTES fail with EFBIG instead of killing it."""
-    signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
-    resource.setrlimit(resource.RLIMIT_FSIZE, (LIMIT_BYTES, LIMIT_BYTES))
 
 
 @pytest.fixture(scope="module")
@@ -46,11 +40,8 @@ def test_failed_output_leaves_no_partial_file(
     """Past the size limit: the verdict printed, one line naming the path and saying the partial
     file was removed, exit 2, and no file at the path."""
     out = tmp_path / {"--report": "r.json", "--junit": "j.xml", "--mcap": "m.mcap"}[option]
-    done = subprocess.run(
-        [sys.executable, "-m", "odocan", "analyze", str(drive_log), "--robot", "kobuki",
-         option, str(out)],
-        capture_output=True, text=True, timeout=300, check=False, preexec_fn=_limited,
-    )
+    done = run_limited(["analyze", str(drive_log), "--robot", "kobuki", option, str(out)],
+                       file_bytes=LIMIT_BYTES)
     print(done.stdout[-300:], done.stderr)
     assert "PASS" in done.stdout
     assert done.returncode == 2
@@ -124,11 +115,8 @@ def test_a_symlink_is_never_removed(tmp_path: Path, monkeypatch: pytest.MonkeyPa
 
 
 def _vectors(out: Path, *options: str, limited: bool) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "odocan", "vectors", *options, "--out", str(out)],
-        capture_output=True, text=True, timeout=300, check=False,
-        preexec_fn=_limited if limited else None,
-    )
+    return run_limited(["vectors", *options, "--out", str(out)],
+                       file_bytes=LIMIT_BYTES if limited else None)
 
 
 def test_vectors_past_the_limit_leave_no_partial_file(tmp_path: Path) -> None:
@@ -166,10 +154,7 @@ def test_a_plot_past_the_limit_leaves_no_partial_image(
     """``run --latency-plot`` and the experiments' ``--plot`` (umbmark, calibrate) said the
     error but left the image cut at the limit: removed now, as ``--plot`` of run and analyze."""
     out = tmp_path / "plot.png"
-    done = subprocess.run(
-        [sys.executable, "-m", "odocan", *argv, option, str(out)],
-        capture_output=True, text=True, timeout=300, check=False, preexec_fn=_limited,
-    )
+    done = run_limited([*argv, option, str(out)], file_bytes=LIMIT_BYTES)
     assert done.returncode == 2, done.stderr
     assert not out.exists()
     assert done.stderr.splitlines() == [
@@ -180,12 +165,11 @@ def test_parquet_past_the_limit_keeps_the_older_tables(drive_log: Path, tmp_path
     """``--parquet DIR`` is a set of tables, as vectors': on a full disk none of them is cut
     at the limit or lost (an older set there stays byte for byte), the error in one line."""
     out = tmp_path / "tables"
-    argv = [sys.executable, "-m", "odocan", "analyze", str(drive_log), "--robot", "kobuki",
-            "--parquet", str(out)]
-    subprocess.run(argv, capture_output=True, timeout=300, check=True)
+    argv = ["analyze", str(drive_log), "--robot", "kobuki", "--parquet", str(out)]
+    subprocess.run([sys.executable, "-m", "odocan", *argv], capture_output=True, timeout=300,
+                   check=True)
     before = {p.name: p.read_bytes() for p in out.iterdir()}
-    done = subprocess.run(
-        argv, capture_output=True, text=True, timeout=300, check=False, preexec_fn=_limited)
+    done = run_limited(argv, file_bytes=LIMIT_BYTES)
     assert "PASS" in done.stdout
     assert done.returncode == 2, done.stderr
     assert {p.name: p.read_bytes() for p in out.iterdir()} == before

@@ -10,19 +10,13 @@ ignored, so a write past the limit fails with EFBIG."""
 from __future__ import annotations
 
 import json
-import resource
-import signal
 import subprocess
 import sys
 from pathlib import Path
 
+from tests.limited import run_limited
+
 LIMIT_BYTES = 20 * 1024  # the report (about 5 KB) fits, the plot (a PNG of 100 KB) does not
-
-
-def _limited() -> None:
-    """In the child: writes beyond LIMIT_BYTES fail with EFBIG instead of killing it."""
-    signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
-    resource.setrlimit(resource.RLIMIT_FSIZE, (LIMIT_BYTES, LIMIT_BYTES))
 
 
 def test_a_failed_plot_leaves_a_report_that_does_not_pass(tmp_path: Path) -> None:
@@ -31,10 +25,8 @@ def test_a_failed_plot_leaves_a_report_that_does_not_pass(tmp_path: Path) -> Non
                     "2", "--log", str(log)], capture_output=True, text=True, timeout=300,
                    check=True)
     report, plot = tmp_path / "r.json", tmp_path / "p.png"
-    done = subprocess.run(
-        [sys.executable, "-m", "odocan", "analyze", str(log), "--robot", "kobuki",
-         "--report", str(report), "--plot", str(plot)],
-        capture_output=True, text=True, timeout=300, check=False, preexec_fn=_limited)
+    done = run_limited(["analyze", str(log), "--robot", "kobuki", "--report", str(report),
+                        "--plot", str(plot)], file_bytes=LIMIT_BYTES)
     assert "PASS" in done.stdout  # the poses' verdict, printed first
     assert done.returncode == 2
     assert done.stderr.splitlines()[-1].startswith(f"error: --plot {plot}: ")

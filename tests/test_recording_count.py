@@ -12,10 +12,7 @@ from __future__ import annotations
 
 import json
 import os
-import resource
-import signal
 import subprocess
-import sys
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -23,19 +20,15 @@ import can
 import pytest
 
 from odocan.host.io.recording import stopped_after
+from tests.limited import run_limited
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
 def _run_limited(log: Path, limit_bytes: int, *more: str) -> subprocess.CompletedProcess[str]:
-    def limited() -> None:  # as test_partial_output's ``_limited``, at ``limit_bytes``
-        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
-        resource.setrlimit(resource.RLIMIT_FSIZE, (limit_bytes, limit_bytes))
-
-    return subprocess.run(
-        [sys.executable, "-m", "odocan", "run", "--duration", "30", "--log", str(log), *more],
-        cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)}, capture_output=True, text=True,
-        timeout=600, check=False, preexec_fn=limited)
+    return run_limited(["run", "--duration", "30", "--log", str(log), *more],
+                       file_bytes=limit_bytes, cwd=ROOT,
+                       env={**os.environ, "PYTHONPATH": str(ROOT)}, timeout=600)
 
 
 @pytest.mark.parametrize("limit_bytes", [5000, 100_003])
