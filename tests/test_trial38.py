@@ -220,7 +220,12 @@ def test_restarted_firmware_is_a_reboot_event_and_judged_right(rig: _Rig) -> Non
     assert len(reboots) == 1, watch["health"]["events"]
     assert "reference restarted" in reboots[0]["detail"]
     assert watch["reference"]["starts"] == 2
-    assert watch["health"]["state"] == "OK", watch["health"]
+    health = watch["health"]
+    # on a loaded machine the new process may tick first with its mailbox full (it opened the
+    # bus ~0.7 s before): it says so itself, DEGRADED POSE_UNCERTAIN, and is never POSE WRONG
+    # for it (was, 4 runs in 10: tests/test_reboot_halted_first_tick.py)
+    assert health["state"] in ("OK", "DEGRADED"), health
+    assert all(why.startswith("firmware reports DEGRADED") for why in health["why"]), health
     error = watch["error"]["pose_vs_reference"]
     assert error["max_dpos_beyond_allowance_m"] < 1e-4  # was 7.87 m before #11
     assert watch["health"]["pose_wrongs"]["episodes"] == 0

@@ -9,6 +9,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 import numpy as np
+import numpy.typing as npt
 
 from odocan.host.judge.liveadopted import UNHEARD_BOOT
 from odocan.host.judge.livefit import LiveFit
@@ -18,7 +19,7 @@ from odocan.host.judge.liveprimed import UNTOLD_PRIME, choose_primed
 from odocan.host.judge.livesilentboot import SilentBoot
 from odocan.host.judge.livewindow import Counted, window_counts
 from odocan.host.judge.pagesent import counted_from, sent_s
-from odocan.host.judge.primed import counted_start
+from odocan.host.judge.primed import counted_start, within_named
 from odocan.host.judge.reference import ReferenceOdometry
 
 if TYPE_CHECKING:
@@ -149,10 +150,10 @@ class Lives:
             ok, lost, _, after = self.page
             self.page = None
             window = self._tracker.window
-            at = counted_start((window.col("seq").astype(np.int64),
-                                window.col("counter").astype(np.int64)), after, ok, lost)
+            encoders = (window.col("seq").astype(np.int64), window.col("counter").astype(np.int64))
+            at = counted_start(encoders, after, ok, lost)
             if at is not None:
-                self.finish_boot(at)
+                self.finish_boot(self._within_named(encoders, at))
                 return
         if self.boot[0] < 0:
             self.finish_first(False)
@@ -196,11 +197,12 @@ class Lives:
         seqs = window.col("seq").astype(np.int64)
         sent = after if heard is None else counted_from(
             after, sent_s(heard, (t_s, counter)), (seqs, window.col("t_s").astype(np.float64)))
-        at = counted_start((seqs, window.col("counter").astype(np.int64)), sent, ok, lost)
+        encoders = (seqs, window.col("counter").astype(np.int64))
+        at = counted_start(encoders, sent, ok, lost)
         if at is None:  # the window lacks it from there: where the page was heard
-            at = counted_start((seqs, window.col("counter").astype(np.int64)), after, ok, lost)
+            at = counted_start(encoders, after, ok, lost)
         if at is not None:
-            self.finish_boot(at)
+            self.finish_boot(self._within_named(encoders, at))
 
     def finish_primed(self, k: int) -> None:
         """The first life's samples from (0, 0, 0) on the frame it primed on, one of 0 .. k
@@ -213,6 +215,14 @@ class Lives:
             return
         self._tracker.adopted.owe(UNTOLD_PRIME.format(lo=min(frames), hi=max(frames)))
         self.finish_first(False)
+
+    def _within_named(self, encoders: tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]],
+                      at: int) -> int:
+        """A count page's frame ``at`` no later than the waiting boot's power-up pose's word
+        (``primed.within_named``), when it has one."""
+        if self.boot is None or not self.boot_named:
+            return at
+        return within_named(encoders, at, self.boot[0])
 
     def _named(self) -> bool:
         """Whether the waiting boot's frame is its power-up pose's word (``await_boot``)."""
@@ -235,9 +245,13 @@ class Lives:
         if first_life:  # (a stall before its first pose left it unproven: livefirst)
             tracker.first.proven_after_all(tracker)
         tracker.placer.seen.power_up(primed)  # its boot a page before (gapseen.with_boot)
-        tracker.losses.primed(primed)  # ENC_E2E_LOST counted from 0 there
+        page = tracker.losses.primed(primed, not first_life)  # ENC_E2E_LOST from 0 there
         stalled = tracker.first.stalled_from if first_life and poses else None  # told before
         start_reference(tracker, FramePose(primed, 0.0, 0.0, 0.0), counts, poses, stalled)
+        if page is not None:  # the life's page heard before its frame was known, from it
+            tracker.losses.on_page(page[0], page[1], tracker.window, tracker.pairs.sampled,
+                                   (tracker.geometry, tracker.counter_bits, tracker.integrator),
+                                   page[2])
         tracker.powerpose.booted(counts)  # its power-up pose left out (livepowerpose)
         if not first_life:
             tracker.life_truth.booted(primed, tracker.raw.at)

@@ -32,3 +32,26 @@ def counted_start(encoders: tuple[npt.NDArray[np.intp], npt.NDArray[np.int64]], 
     if back and not len(found):
         return None
     return int(at[last - (int(found[0]) + 1 if back else 0)])
+
+
+def within_named(encoders: tuple[npt.NDArray[np.intp], npt.NDArray[np.int64]], at: int,
+                 named: int) -> int:
+    """``counted_start``'s frame ``at`` no later than ``named``, the frame the life's power-up
+    pose named (the latest the firmware had taken at its first tick: it primed there or
+    before). A count landing after it is short by whole COUNTER laps: frames lost in a run of
+    16 or more (a halt right after the boot, its mailbox full) count as that many less a
+    multiple of 16 in ENC_E2E_LOST, the 4-bit COUNTER's jump being all the firmware sees. A
+    reset halted 0.4 s after its first tick was primed 2 laps (32 frames) late, its reference
+    180 mm and 597 mrad off the correct firmware (issue #11). The frame is stepped back whole
+    laps to at or before ``named`` when the log holds one there of the same COUNTER, else
+    ``at`` as counted (``encoders``: the frames' positions and COUNTERs)."""
+    positions, counter = encoders
+    if at <= named:
+        return at
+    i = int(np.searchsorted(positions, at))
+    if i >= len(positions) or positions[i] != at:
+        return at
+    lap = MASK + 1
+    back = np.flatnonzero((positions <= named) & (positions >= named - lap + 1)
+                          & ((counter - counter[i]) & MASK == 0))
+    return int(positions[back[-1]]) if len(back) else at

@@ -1,0 +1,129 @@
+"""A firmware halted right after its first tick following a reset: the live judges start the new
+life where it primed, and allow the frames its mailbox dropped (issue #11, rule 5: a FAIL must
+never blame a correct firmware).
+
+Found by ``tests/test_trial38.py`` on a loaded machine (CI and here, 4 runs in 10): the
+restarted ``odocan firmware`` process opened the bus ~0.7 s before its first tick ran, its
+mailbox dropped 35 of the 79 frames that came, and the monitor said POSE WRONG (0.85 to 6.9 mm
+off; the firmware had taken the frames' steps as one, which ``analyze`` allows). The lockstep
+drives here make the same start deterministic: ``reboot=5:0.1`` then ``stall=5.11:S`` (the MCU
+halted S seconds after its first tick, its mailbox full). Two faults of the live judges
+(``host.judge.livestart``), each alone enough to FAIL these drives:
+
+* the new life's first ENC_E2E_LOST page came before its start was known (the page itself tells
+  it, at the next ODOM_STATUS): its count was read as the life's baseline, so none of the
+  frames lost before it had an allowance (``livelosses.LiveAllowance.primed`` now returns it,
+  taken again from the frame primed on);
+* a halt of 16 frames or more hides whole COUNTER laps from ENC_E2E_LOST (its 4-bit COUNTER's
+  jump is all the firmware sees): counted back from the page, the start landed 1 or 2 laps
+  after the frame the power-up pose had named, though that pose went out before those frames
+  came: 94 mm and 311 mrad off at S = 0.2 s, 180 mm and 597 mrad at 0.4 s
+  (``primed.within_named`` now steps it back to at or before the named frame).
+
+The start is checked independently: the heading is an exact function of the counts since the
+frame primed on (``tests/independent_checker.py``'s rule, float64 here, cantools decoding), so
+the firmware's own HEADING tells which frame it primed on, whatever it merged.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import can
+import cantools
+import pytest
+
+from odocan.host.cli.app import main
+from odocan.sim.contract import DBC_PATH
+from odocan.sim.robot import load
+from tests.judges_cli import live_judges, raise_x_10_mm
+
+ROBOT, REBOOT_S = "pmir", 5.0
+HEADING_LSB_RAD = 2 * math.pi / 65536
+POSITION_LSB_M = 1e-4
+HALTS_S = (0.2, 0.3)  # a lap hidden (ENC_E2E_LOST 3 and 13 of 19 and 29 dropped)
+
+
+@pytest.fixture(scope="module")
+def drives(tmp_path_factory: pytest.TempPathFactory) -> dict[float, Path]:
+    """The lockstep drives, halted S s after the reset's first tick (``HALTS_S`` and 0.4 s)."""
+    out = {}
+    for halt_s in (*HALTS_S, 0.4):
+        log = tmp_path_factory.mktemp("halted") / "drive.log"
+        faults = f"reboot={REBOOT_S:g}:0.1,stall={REBOOT_S + 0.11:g}:{halt_s:g}"
+        code = main(["run", "--robot", ROBOT, "--seed", "5", "--duration", "9", "--faults",
+                     faults, "--firmware", "python", "--log", str(log)])
+        assert code == 0, faults  # analyze's verdict: PASS
+        out[halt_s] = log
+    return out
+
+
+def _headings_off_lsb(log: Path) -> tuple[int, float]:
+    """The new life's samples (ODOM_POSE_X after the reset's power-up pose) and their largest
+    heading error (LSB) against the heading of the counts since the frame that pose names."""
+    db = cantools.database.load_file(str(DBC_PATH))
+    geometry = load(ROBOT).firmware_params()
+    per_count_rad = 2 * math.pi / (geometry["counts_per_rev"] * geometry["wheelbase_nm"])
+    wrap = 1 << geometry["counter_bits"]
+    encoders: list[tuple[int, int, int]] = []  # (COUNTER, left, right) in bus order
+    primed: tuple[int, int] | None = None
+    worst, samples = 0.0, 0
+    with can.LogReader(str(log)) as reader:
+        for msg in reader:
+            name = db.get_message_by_frame_id(msg.arbitration_id).name
+            s = db.decode_message(msg.arbitration_id, msg.data, decode_choices=False,
+                                  scaling=False)
+            if name == "WHEEL_ENCODERS":
+                encoders.append((int(s["COUNTER"]), int(s["LEFT_COUNT"]), int(s["RIGHT_COUNT"])))
+            elif name == "ODOM_POSE_X" and msg.timestamp >= REBOOT_S:
+                named = next(e for e in reversed(encoders) if e[0] == s["ENC_COUNTER"])
+                if primed is None:  # the power-up pose: (0, 0, 0) at the frame it names
+                    assert (s["COUNTER"], s["X"], s["HEADING"]) == (0, 0, 0), s
+                    primed = named[1], named[2]
+                    continue
+                d_left = (named[1] - primed[0] + wrap // 2) % wrap - wrap // 2
+                d_right = (named[2] - primed[1] + wrap // 2) % wrap - wrap // 2
+                heading = per_count_rad * (geometry["wheel_radius_right_nm"] * d_right
+                                           - geometry["wheel_radius_left_nm"] * d_left)
+                off = (s["HEADING"] * HEADING_LSB_RAD - heading + math.pi) % (2 * math.pi)
+                worst = max(worst, abs(off - math.pi) / HEADING_LSB_RAD)
+                samples += 1
+    return samples, worst
+
+
+@pytest.mark.parametrize("halt_s", [*HALTS_S, 0.4])
+def test_the_firmware_primed_where_its_power_up_pose_named(
+        drives: dict[float, Path], halt_s: float) -> None:
+    samples, worst_lsb = _headings_off_lsb(drives[halt_s])
+    assert samples > 150
+    assert worst_lsb <= 1.0, worst_lsb
+
+
+@pytest.mark.parametrize("halt_s", list(HALTS_S))
+def test_the_live_judges_pass_the_correct_firmware(
+        drives: dict[float, Path], halt_s: float) -> None:
+    """Before: POSE WRONG, 94 mm and 311 mrad off (both faults), 0.21 mm (the allowance)."""
+    for judge in live_judges(ROBOT, drives[halt_s]):
+        tracker = judge.tracker
+        assert tracker.reference_starts >= 2
+        assert tracker.max_beyond_allowance_m <= POSITION_LSB_M, tracker.max_beyond_allowance_m
+        assert tracker.vs_reference.max_dheading_rad <= HEADING_LSB_RAD
+
+
+@pytest.mark.parametrize("halt_s", list(HALTS_S))
+def test_x_10_mm_off_after_the_reset_is_wrong_live(
+        drives: dict[float, Path], halt_s: float, tmp_path: Path) -> None:
+    tampered = tmp_path / "tampered.log"
+    assert raise_x_10_mm(drives[halt_s], tampered, REBOOT_S + 1.0) > 100
+    for judge in live_judges(ROBOT, tampered):
+        assert judge.tracker.max_beyond_allowance_m > 9e-3
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "halted 0.4 s: 44 frames dropped, ENC_E2E_LOST 12 (two laps hidden): the start is right "
+    "now (was 180 mm, 597 mrad off), but the allowance is 12 frames' (0.12 mm) for the 0.52 mm "
+    "the merged steps put the position off; analyze fits that life's start instead"))
+def test_a_halt_hiding_laps_of_losses_is_allowed_live(drives: dict[float, Path]) -> None:
+    for judge in live_judges(ROBOT, drives[0.4]):
+        assert judge.tracker.max_beyond_allowance_m <= POSITION_LSB_M
