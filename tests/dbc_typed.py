@@ -67,9 +67,10 @@ def choices(db: Database, message: str, signal: str) -> dict[int, str]:
     return {raw: str(name) for raw, name in table.items()}
 
 
-def integers(message: Message, data: bytes | bytearray) -> dict[str, int]:
-    """One frame of ``message`` decoded (scaled, choices not decoded), every signal an integer."""
-    signals = message.decode(bytes(data), decode_choices=False)
+def integers(message: Message, data: bytes | bytearray, scaling: bool = True) -> dict[str, int]:
+    """One frame of ``message`` decoded (scaled unless not ``scaling``, choices not decoded),
+    every signal an integer."""
+    signals = message.decode(bytes(data), decode_choices=False, scaling=scaling)
     assert isinstance(signals, dict), f"{message.name}: a container message"
     out: dict[str, int] = {}
     for name, value in signals.items():

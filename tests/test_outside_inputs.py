@@ -154,7 +154,7 @@ def _odocan_with_memory_limit(*argv: str) -> tuple[int, str]:
     from tests.limited import run_limited
 
     root = Path(__file__).resolve().parents[1]
-    done = run_limited(argv, address_bytes=3 << 30, cwd=root,
+    done = run_limited(list(argv), address_bytes=3 << 30, cwd=root,
                        env={**os.environ, "PYTHONPATH": str(root)}, timeout=120)
     return done.returncode, done.stderr
 

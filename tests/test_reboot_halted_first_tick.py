@@ -31,12 +31,12 @@ import math
 from pathlib import Path
 
 import can
-import cantools
 import pytest
 
 from odocan.host.cli.app import main
 from odocan.sim.contract import DBC_PATH
 from odocan.sim.robot import load
+from tests.dbc_typed import integers, load_can_dbc
 from tests.judges_cli import live_judges, raise_x_10_mm
 
 ROBOT, REBOOT_S = "pmir", 5.0
@@ -62,7 +62,7 @@ def drives(tmp_path_factory: pytest.TempPathFactory) -> dict[float, Path]:
 def _headings_off_lsb(log: Path) -> tuple[int, float]:
     """The new life's samples (ODOM_POSE_X after the reset's power-up pose) and their largest
     heading error (LSB) against the heading of the counts since the frame that pose names."""
-    db = cantools.database.load_file(str(DBC_PATH))
+    db = load_can_dbc(DBC_PATH)
     geometry = load(ROBOT).firmware_params()
     per_count_rad = 2 * math.pi / (geometry["counts_per_rev"] * geometry["wheelbase_nm"])
     wrap = 1 << geometry["counter_bits"]
@@ -71,11 +71,10 @@ def _headings_off_lsb(log: Path) -> tuple[int, float]:
     worst, samples = 0.0, 0
     with can.LogReader(str(log)) as reader:
         for msg in reader:
-            name = db.get_message_by_frame_id(msg.arbitration_id).name
-            s = db.decode_message(msg.arbitration_id, msg.data, decode_choices=False,
-                                  scaling=False)
+            message = db.get_message_by_frame_id(msg.arbitration_id)
+            name, s = message.name, integers(message, msg.data, scaling=False)
             if name == "WHEEL_ENCODERS":
-                encoders.append((int(s["COUNTER"]), int(s["LEFT_COUNT"]), int(s["RIGHT_COUNT"])))
+                encoders.append((s["COUNTER"], s["LEFT_COUNT"], s["RIGHT_COUNT"]))
             elif name == "ODOM_POSE_X" and msg.timestamp >= REBOOT_S:
                 named = next(e for e in reversed(encoders) if e[0] == s["ENC_COUNTER"])
                 if primed is None:  # the power-up pose: (0, 0, 0) at the frame it names
