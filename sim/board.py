@@ -193,6 +193,17 @@ class FirmwareBoard(BusNode):
             return OdomEcu(self, self.params)
         return OdomEcu(self, self.params, secoc_key=self.secoc_key, nvm=self.nvm)
 
+    def join_bus(self) -> int:
+        """The CAN controller leaves initialization mode (the MCU's init done, its first tick
+        next): the frames the bus carried while it was opened are not received, as a controller
+        receives none before it is in normal mode; how many there were. ``odocan firmware``
+        joins before its loop: a process that had opened its bus 0.7 s before its first tick (a
+        loaded machine) gave its new firmware 79 frames at once (``tests/test_trial38.py``)."""
+        dropped = 0
+        while self.bus.recv(0) is not None:
+            dropped += 1
+        return dropped
+
     def reboot(self) -> None:
         """A reset of the MCU: RAM lost (a new firmware, INIT), the NVM cell kept."""
         self.ecu = self._start_firmware()

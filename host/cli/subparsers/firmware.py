@@ -96,6 +96,7 @@ def _do_firmware(args: argparse.Namespace) -> int:
                            nvm=nvm)
         if isinstance(nvm, FileNvm) and nvm.error is not None:  # the boot's EPOCH write
             raise ConfigurationError(f"--nvm: {nvm.error}")
+        board.join_bus()
         started_s = time.monotonic()
         with stop_on_signals(loop):
             stats = loop.run(lambda _k: board.run_tick(), args.duration)
