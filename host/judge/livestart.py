@@ -13,6 +13,7 @@ import numpy.typing as npt
 
 from odocan.host.judge.liveadopted import UNHEARD_BOOT
 from odocan.host.judge.livefit import LiveFit
+from odocan.host.judge.livepagetick import page_after
 from odocan.host.judge.liveplacing import place_reference
 from odocan.host.judge.livepose import FramePose, Sample
 from odocan.host.judge.liveprimed import UNTOLD_PRIME, choose_primed
@@ -180,7 +181,7 @@ class Lives:
         elif boot is not None and self._named():
             self.finish_boot(boot[0])
         elif boot is not None and len(tracker.window):  # counted from its send (on_status)
-            self.page = (ok, lost, tracker.status_heard, int(tracker.window.col("seq")[-1]) + 1)
+            self.page = (ok, lost, tracker.status_heard, page_after(tracker))
         elif proven and not started and tracker.integrator is not None:
             self.finish_boot(0, first_life=True)  # the samples judged before keep their errors
 
