@@ -181,7 +181,8 @@ class Lives:
         elif boot is not None and self._named():
             self.finish_boot(boot[0])
         elif boot is not None and len(tracker.window):  # counted from its send (on_status)
-            self.page = (ok, lost, tracker.status_heard, page_after(tracker))
+            after, posed = page_after(tracker)  # its tick's pose's word: not moved by time
+            self.page = (ok, lost, None if posed else tracker.status_heard, after)
         elif proven and not started and tracker.integrator is not None:
             self.finish_boot(0, first_life=True)  # the samples judged before keep their errors
 
