@@ -13,7 +13,7 @@ import numpy.typing as npt
 
 from odocan.host.judge.liveadopted import UNHEARD_BOOT
 from odocan.host.judge.livefit import LiveFit
-from odocan.host.judge.livepagetick import page_after
+from odocan.host.judge.livepagetick import TICK_GAP_S, page_after
 from odocan.host.judge.liveplacing import place_reference
 from odocan.host.judge.livepose import FramePose, Sample
 from odocan.host.judge.liveprimed import UNTOLD_PRIME, choose_primed
@@ -83,6 +83,7 @@ class Lives:
         self.boot_poses: list[FramePose] = []  # the new life's samples while it waits
         self.boot_named = False  # ``boot``'s frame named by its power-up pose (``bootnamed``)
         self.boot_unnamed = -1  # ... the guess without it (its first pose after not counting on)
+        self.boot_tick_named = False  # ... that pose heard in the boot summary's tick
         self.held: dict[int, Sample] = {}  # ... as settled (unjudged), by encoder frame
         self.pending: FramePose | None = None  # the first pose, heard before the integrator
         self.backlog_counts: list[Counted] = []  # the frames since the pending pose's
@@ -140,6 +141,9 @@ class Lives:
         taken over it once the first pose after the summary counted on from it, else this."""
         self.boot = (guess, now_s + BOOT_COUNT_WAIT_S)
         self.boot_named = unnamed is not None
+        pose = self._tracker.powerup.latest  # the named pose in the summary's tick: the boot's
+        self.boot_tick_named = self.boot_named and pose is not None and \
+            0.0 <= now_s - pose[0] < TICK_GAP_S
         self.boot_unnamed = guess if unnamed is None else unnamed
         self.boot_poses, self.held, self.page = [], {}, None
 
@@ -221,8 +225,10 @@ class Lives:
     def _within_named(self, encoders: tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]],
                       at: int) -> int:
         """A count page's frame ``at`` no later than the waiting boot's power-up pose's word
-        (``primed.within_named``), when it has one."""
-        if self.boot is None or not self.boot_named:
+        (``primed.within_named``), when that pose came in the boot summary's tick: one heard
+        20..60 ms before it may be the old firmware's, the new one's lost on the bus, and the
+        count right (``tests/test_reboot_lost_powerup.py``)."""
+        if self.boot is None or not self.boot_tick_named:
             return at
         return within_named(encoders, at, self.boot[0])
 
