@@ -115,11 +115,29 @@ BEYOND_ELEVEN_SENDS = (
     "ENC_COUNTER laps); the on-time frames after it, stepping back from it by 1 to 3, could")
 
 
+class _Logs(dict[str, Path]):
+    """Each drive of ``DRIVES`` recorded once, when a test first asks for it, by the Python
+    firmware, watched: it must be right (``named_drive``); the tests only read it."""
+
+    def __init__(self, tmp: pytest.TempPathFactory) -> None:
+        super().__init__()
+        self.tmp = tmp
+
+    def __missing__(self, name: str) -> Path:
+        self[name] = named_drive(name, DRIVES, self.tmp.mktemp(name))[1]
+        return self[name]
+
+
+@pytest.fixture(scope="module")
+def logs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """The drives, each recorded once for the module (``_Logs``)."""
+    return _Logs(tmp_path_factory)
+
+
 @pytest.fixture(scope="module", params=sorted(DRIVES))
-def drive(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory
-          ) -> tuple[str, Path]:
+def drive(request: pytest.FixtureRequest, logs: dict[str, Path]) -> tuple[str, Path]:
     """The drive recorded by the Python firmware, watched: it must be right."""
-    return named_drive(request.param, DRIVES, tmp_path_factory.mktemp(request.param))
+    return request.param, logs[request.param]
 
 
 def test_the_correct_firmware_replays_pass_every_pose_identical(
@@ -157,11 +175,12 @@ def test_plus_10_mm_after_the_fault_fails(drive: tuple[str, Path], tmp_path: Pat
 @pytest.mark.parametrize("name", ["kobuki-random-911", "pmir-figure8-912"])
 @pytest.mark.parametrize(("field", "lsb"), [(POSE_X, TEN_MM_LSB), (HEADING, TEN_MRAD_LSB)],
                          ids=["x-10-mm", "heading-10-mrad"])
-def test_a_tamper_before_the_reboot_fails(name: str, field: tuple[int, int], lsb: int,
-                                          tmp_path: Path) -> None:
+def test_a_tamper_before_the_reboot_fails(logs: dict[str, Path], name: str,
+                                          field: tuple[int, int], lsb: int, tmp_path: Path
+                                          ) -> None:
     """X 10 mm or HEADING 10 mrad off in the life before the reboot only (its poses late by
     200 ms to its end compared where they were sent): FAIL, not PASS."""
-    log = named_drive(name, DRIVES, tmp_path)[1]
+    log = logs[name]
     out = tmp_path / "tampered.log"
     assert raise_raw(log, out, "ODOM_POSE_X", field, lsb, *LIFE_0_S, wrap=True) > 20
     done = cli("replay", str(out))
@@ -173,12 +192,11 @@ def test_a_tamper_before_the_reboot_fails(name: str, field: tuple[int, int], lsb
 
 
 @pytest.fixture(scope="module", params=sorted(AFTER_STALL))
-def after_stall(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory
-                ) -> tuple[str, int, str]:
-    """The drive recorded again, raised from after its stall: (name, exit code, verdict)."""
+def after_stall(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory,
+                logs: dict[str, Path]) -> tuple[str, int, str]:
+    """The drive raised from after its stall: (name, exit code, verdict)."""
     name, work = request.param, tmp_path_factory.mktemp(f"{request.param}-after-stall")
-    log = named_drive(name, DRIVES, work)[1]
-    return (name, *_tampered_verdict(name, log, AFTER_STALL[name], work))
+    return (name, *_tampered_verdict(name, logs[name], AFTER_STALL[name], work))
 
 
 def test_plus_10_mm_after_the_stall_is_never_a_pass(after_stall: tuple[str, int, str]) -> None:
