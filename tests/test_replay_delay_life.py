@@ -69,10 +69,15 @@ A reboot under the same delay (issue #11: run and analyze PASS, replay FAILed):
 
 The firmware is proven right by the tests' watch (``tests.fw_watch``), not by the judges; the
 tampered log is made with python-can and cantools (``tests.log_edit``).
+
+Sampled (``tests.sweeps``): +10 mm after the fault keeps each fault mix and robot once
+(``AFTER_FAULT_PINS``; kobuki 674, 700, 701 raised after their stall below), the tamper before
+the reboot each drive and each field once; every drive's PASS, the stalls and the rest run in full.
 """
 
 from __future__ import annotations
 
+import itertools
 import json
 from pathlib import Path
 
@@ -80,6 +85,7 @@ import pytest
 
 from tests.judges_cli import POSE_X, TEN_MM_LSB, cli, named_drive, raise_x_10_mm
 from tests.log_edit import raise_raw
+from tests.sweeps import sample
 
 REBOOT_200 = "reboot=1.5:0.3,delay=0.1:200"
 # name: robot, scenario, seed, duration (s), faults, tamper from (s, after the fault named)
@@ -105,6 +111,13 @@ HEADING = (6, 2)  # ODOM_POSE_X's HEADING: bytes 6..7, 2 pi / 65536
 TEN_MRAD_LSB = 105  # 10.07 mrad in HEADING's LSBs
 # the same drives raised from after their stall: FAIL too (``replay_stallkept``)
 AFTER_STALL = {"kobuki-700": 3.8, "kobuki-701": 3.8, "kobuki-674": 6.2}
+AFTER_FAULT_PINS = ["kobuki-700", "pmir-717", "kobuki-813", "pmir-812", "kobuki-square-841",
+                    "pmir-circle-842", "pmir-figure8-912"]  # each fault mix, each robot of it
+AFTER_FAULT = sample(sorted(DRIVES), 3, AFTER_FAULT_PINS)  # tests.sweeps
+FIELDS = {"x-10-mm": (POSE_X, TEN_MM_LSB), "heading-10-mrad": (HEADING, TEN_MRAD_LSB)}
+BEFORE_REBOOT = sample(  # tests.sweeps: each drive, each field
+    itertools.product(FIELDS, ["kobuki-random-911", "pmir-figure8-912"]), 3,
+    [("x-10-mm", "pmir-figure8-912"), ("heading-10-mrad", "kobuki-random-911")])
 BEYOND_ELEVEN_SENDS = (
     "pmir random 840, 9 s, delay=0.1:240: replay FAILs the correct firmware by 39.6 mm between "
     "gaps and 348.7 mrad (71.2 mm and 2 pi before this rule). A pose frame 12 to 15 sends late "
@@ -115,11 +128,29 @@ BEYOND_ELEVEN_SENDS = (
     "ENC_COUNTER laps); the on-time frames after it, stepping back from it by 1 to 3, could")
 
 
+class _Logs(dict[str, Path]):
+    """Each drive of ``DRIVES`` recorded once, when a test first asks for it, by the Python
+    firmware, watched: it must be right (``named_drive``); the tests only read it."""
+
+    def __init__(self, tmp: pytest.TempPathFactory) -> None:
+        super().__init__()
+        self.tmp = tmp
+
+    def __missing__(self, name: str) -> Path:
+        self[name] = named_drive(name, DRIVES, self.tmp.mktemp(name))[1]
+        return self[name]
+
+
+@pytest.fixture(scope="module")
+def logs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """The drives, each recorded once for the module (``_Logs``)."""
+    return _Logs(tmp_path_factory)
+
+
 @pytest.fixture(scope="module", params=sorted(DRIVES))
-def drive(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory
-          ) -> tuple[str, Path]:
+def drive(request: pytest.FixtureRequest, logs: dict[str, Path]) -> tuple[str, Path]:
     """The drive recorded by the Python firmware, watched: it must be right."""
-    return named_drive(request.param, DRIVES, tmp_path_factory.mktemp(request.param))
+    return request.param, logs[request.param]
 
 
 def test_the_correct_firmware_replays_pass_every_pose_identical(
@@ -147,21 +178,21 @@ def _tampered_verdict(name: str, log: Path, from_s: float, work: Path) -> tuple[
     return done.returncode, said[-1]
 
 
-def test_plus_10_mm_after_the_fault_fails(drive: tuple[str, Path], tmp_path: Path) -> None:
-    name, log = drive
-    code, verdict = _tampered_verdict(name, log, DRIVES[name][5], tmp_path)
+@pytest.mark.parametrize("name", AFTER_FAULT)
+def test_plus_10_mm_after_the_fault_fails(logs: dict[str, Path], name: str, tmp_path: Path
+                                          ) -> None:
+    code, verdict = _tampered_verdict(name, logs[name], DRIVES[name][5], tmp_path)
     assert code == 1, f"{name}: {verdict}"
     assert verdict.startswith("FAIL"), f"{name}: {verdict}"
 
 
-@pytest.mark.parametrize("name", ["kobuki-random-911", "pmir-figure8-912"])
-@pytest.mark.parametrize(("field", "lsb"), [(POSE_X, TEN_MM_LSB), (HEADING, TEN_MRAD_LSB)],
-                         ids=["x-10-mm", "heading-10-mrad"])
-def test_a_tamper_before_the_reboot_fails(name: str, field: tuple[int, int], lsb: int,
+@pytest.mark.parametrize(("field_id", "name"),
+                         [pytest.param(f, n, id=f"{f}-{n}") for f, n in BEFORE_REBOOT])
+def test_a_tamper_before_the_reboot_fails(logs: dict[str, Path], field_id: str, name: str,
                                           tmp_path: Path) -> None:
     """X 10 mm or HEADING 10 mrad off in the life before the reboot only (its poses late by
     200 ms to its end compared where they were sent): FAIL, not PASS."""
-    log = named_drive(name, DRIVES, tmp_path)[1]
+    log, (field, lsb) = logs[name], FIELDS[field_id]
     out = tmp_path / "tampered.log"
     assert raise_raw(log, out, "ODOM_POSE_X", field, lsb, *LIFE_0_S, wrap=True) > 20
     done = cli("replay", str(out))
@@ -173,12 +204,11 @@ def test_a_tamper_before_the_reboot_fails(name: str, field: tuple[int, int], lsb
 
 
 @pytest.fixture(scope="module", params=sorted(AFTER_STALL))
-def after_stall(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory
-                ) -> tuple[str, int, str]:
-    """The drive recorded again, raised from after its stall: (name, exit code, verdict)."""
+def after_stall(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory,
+                logs: dict[str, Path]) -> tuple[str, int, str]:
+    """The drive raised from after its stall: (name, exit code, verdict)."""
     name, work = request.param, tmp_path_factory.mktemp(f"{request.param}-after-stall")
-    log = named_drive(name, DRIVES, work)[1]
-    return (name, *_tampered_verdict(name, log, AFTER_STALL[name], work))
+    return (name, *_tampered_verdict(name, logs[name], AFTER_STALL[name], work))
 
 
 def test_plus_10_mm_after_the_stall_is_never_a_pass(after_stall: tuple[str, int, str]) -> None:
