@@ -16,6 +16,9 @@ E2E check fresh there; now the first count page names that frame itself, counted
 frames a fresh check from it takes (``silentboot.fresh_counted_start``). PASS, and the same log
 with ODOM_POSE_X raised by 10 mm from the boot on (``tests.log_edit.raise_raw``, E2E CRC
 recomputed) FAILs.
+
+Not a grid, every drive named below: each drive (robot, seed, duration, boot) is recorded and
+tampered once for the module (``recorded``), the whole, streamed and live judges reading it.
 """
 
 from __future__ import annotations
@@ -23,14 +26,16 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
 
 from tests.judges_cli import raise_x_10_mm
 
-FAULTS = "delay=0.1:15,reboot=10:0.3"
-BOOTED_S = 10.3  # the reboot at 10 s, its boot 0.3 s
+BOOT_S = 0.3
+FAULTS = f"delay=0.1:15,reboot=10:{BOOT_S:g}"
+BOOTED_S = 10 + BOOT_S  # the reboot at 10 s, its boot 0.3 s
 DRIVES = [("kobuki", 1, 16), ("kobuki", 2, 12), ("pmir", 1, 12)]  # (robot, seed, duration s)
 
 
@@ -41,12 +46,35 @@ def _cli(*args: str) -> int:
     return done.returncode
 
 
+Recorded = Callable[[str, int, int, float], tuple[Path, Path]]
+
+
+@pytest.fixture(scope="module")
+def recorded(tmp_path_factory: pytest.TempPathFactory) -> Recorded:
+    """(robot, seed, duration s, boot s) -> the correct firmware's log of that random drive
+    under ``delay=0.1:15,reboot=10:<boot>`` and the same log with ODOM_POSE_X raised 10 mm from
+    the boot's end on; each drive run once for the module."""
+    logs: dict[tuple[str, int, int, float], tuple[Path, Path]] = {}
+
+    def record(robot: str, seed: int, duration: int, boot_s: float) -> tuple[Path, Path]:
+        key = (robot, seed, duration, boot_s)
+        if key not in logs:
+            tmp = tmp_path_factory.mktemp(f"{robot}-{seed}-{duration}-{boot_s:g}")
+            log, tampered = tmp / "drive.log", tmp / "t.log"
+            assert _cli("run", "--robot", robot, "--scenario", "random", "--seed", str(seed),
+                        "--duration", str(duration), "--faults",
+                        f"delay=0.1:15,reboot=10:{boot_s:g}", "--log", str(log)) == 0
+            assert raise_x_10_mm(log, tampered, 10 + boot_s) > 50
+            logs[key] = (log, tampered)
+        return logs[key]
+
+    return record
+
+
 @pytest.mark.parametrize(("robot", "seed", "duration"), DRIVES)
 def test_a_reboot_with_a_boot_time_under_a_delay_passes_and_a_tamper_fails(
-        robot: str, seed: int, duration: int, tmp_path: Path) -> None:
-    log, tampered = tmp_path / "drive.log", tmp_path / "t.log"
-    assert _cli("run", "--robot", robot, "--scenario", "random", "--seed", str(seed),
-                "--duration", str(duration), "--faults", FAULTS, "--log", str(log)) == 0
+        robot: str, seed: int, duration: int, tmp_path: Path, recorded: Recorded) -> None:
+    log, tampered = recorded(robot, seed, duration, BOOT_S)  # FAULTS, tampered from BOOTED_S
     events = []
     for stream in ("always", "never"):
         report = tmp_path / f"{stream}.json"
@@ -56,7 +84,6 @@ def test_a_reboot_with_a_boot_time_under_a_delay_passes_and_a_tamper_fails(
     assert events[0] == events[1]
     primed = [e for e in events[0] if e["kind"] == "power_up_primed_on"]
     assert all("it passes from frame" in e["detail"] for e in primed), primed
-    assert raise_x_10_mm(log, tampered, BOOTED_S) > 50
     for stream in ("always", "never"):
         assert _cli("analyze", str(tampered), "--robot", robot, "--stream", stream) == 1, stream
 
@@ -67,7 +94,7 @@ LIVE_FIXED = [("kobuki", 1, 16, 0.3), ("kobuki", 1, 14, 0.5), ("pmir", 1, 14, 0.
 
 @pytest.mark.parametrize(("robot", "seed", "duration", "boot_s"), LIVE_FIXED)
 def test_the_live_judges_follow_a_reboot_with_a_boot_time_under_a_delay(
-        robot: str, seed: int, duration: int, boot_s: float, tmp_path: Path) -> None:
+        robot: str, seed: int, duration: int, boot_s: float, recorded: Recorded) -> None:
     """The monitor and the bridge (``host.judge.liveboottick``). Their E2E sequence, run on
     across the reboot, refused the frame the new firmware primed on (kobuki seed 1, 0.3 s boot:
     COUNTER 6 at 10.30 s, the boot summary at 10.301 s; the next it took COUNTER 8 at 10.32 s),
@@ -87,11 +114,7 @@ def test_the_live_judges_follow_a_reboot_with_a_boot_time_under_a_delay(
     from odocan.host.judge.analysis import HEADING_LSB_RAD, POSITION_LSB_M
     from tests.test_live_reboot import bridge_of, monitor_of
 
-    log, tampered = tmp_path / "drive.log", tmp_path / "t.log"
-    assert _cli("run", "--robot", robot, "--scenario", "random", "--seed", str(seed),
-                "--duration", str(duration), "--faults", f"delay=0.1:15,reboot=10:{boot_s}",
-                "--log", str(log)) == 0
-    assert raise_x_10_mm(log, tampered, 10 + boot_s) > 50
+    log, tampered = recorded(robot, seed, duration, boot_s)
     for judge in (monitor_of, bridge_of):
         right = judge(log, robot, "exact").tracker.vs_reference
         assert right.max_dpos_m <= POSITION_LSB_M, (judge, right.max_dpos_m)
@@ -101,7 +124,8 @@ def test_the_live_judges_follow_a_reboot_with_a_boot_time_under_a_delay(
 
 
 @pytest.mark.parametrize("seed", [1, 2])
-def test_a_longer_boot_under_a_delay_passes_and_a_tamper_fails(seed: int, tmp_path: Path) -> None:
+def test_a_longer_boot_under_a_delay_passes_and_a_tamper_fails(
+        seed: int, recorded: Recorded) -> None:
     """A 0.5 s boot: the first count page names the frame the firmware primed on, counted back
     over the frames a fresh E2E check from there takes (``silentboot.fresh_counted_start``).
     Kobuki seed 1 (14 s) FAILed the correct firmware 48.10 mm, 83.87 mrad: the firmware primed
@@ -112,12 +136,8 @@ def test_a_longer_boot_under_a_delay_passes_and_a_tamper_fails(seed: int, tmp_pa
     Seed 2 FAILed it 59.3 mm: two frames reached the firmware in its first tick (a delay), it
     primed on the first (COUNTER 8 at 10.495 s), refused the next (COUNTER 10 at 10.50 s, the
     summary's frame) and every frame after till its first page (ENC_E2E_OK 1)."""
-    log, tampered = tmp_path / "drive.log", tmp_path / "t.log"
-    assert _cli("run", "--robot", "kobuki", "--scenario", "random", "--seed", str(seed),
-                "--duration", "14", "--faults", "delay=0.1:15,reboot=10:0.5",
-                "--log", str(log)) == 0
+    log, tampered = recorded("kobuki", seed, 14, 0.5)
     for stream in ("always", "never"):
         assert _cli("analyze", str(log), "--robot", "kobuki", "--stream", stream) == 0, stream
-    assert raise_x_10_mm(log, tampered, 10.5) > 50
     for stream in ("always", "never"):
         assert _cli("analyze", str(tampered), "--robot", "kobuki", "--stream", stream) == 1, stream

@@ -17,6 +17,9 @@ gap rests on), re-signed with cantools' Profile 2 CRC. The checker is the test's
 decodes the log; float64 odometry of every encoder frame (the silence one merged step, as the
 firmware took it, or none where it is ambiguous) matches the correct firmware's pose within 2 LSB,
 the firmware's pages heard through the silence show ENC_E2E_OK unchanged.
+
+Sampled (``tests.sweeps``): the grid of wrong poses (edit x drive); pinned, each drive and each
+edit once, among them the 10 m after the square's 30 s silence (the PASS found).
 """
 
 from __future__ import annotations
@@ -40,6 +43,7 @@ from odocan.sim.scenarios import get_scenario
 from tests.dbc_typed import dbc_attribute, decode, number
 from tests.fault_rig import FaultRig
 from tests.independent_checker import Robot, _Odometry
+from tests.sweeps import sample
 from tests.test_replay_clock_step import _raise_x
 from tests.test_sender_stall_drop import live_judges
 
@@ -48,6 +52,9 @@ ROBOT = "kobuki"
 DRIVES = (("square", 0, 45.0, 5.0, 30.0), ("random", 4, 22.0, 6.0, 8.0),
           ("circle", 0, 28.0, 7.0, 12.0))
 EDITS_LSB = (10, 1_000, 100_000)  # 1 mm, 100 mm, 10 m of X
+# (edit, scenario) judged: each edit and each drive once, the found 10 m after 30 s among them
+EDITED = sample([(lsb, drive[0]) for lsb in EDITS_LSB for drive in DRIVES], 4,
+                [(10, "random"), (1_000, "circle"), (100_000, "square")])
 EDIT_BEFORE_S = 0.002  # the edit starts with the first pose after the silence (sent 1 ms after
 # its tick's encoder frame; the last pose in the silence went out 10 ms before)
 
@@ -240,7 +247,9 @@ def test_a_firmware_that_reprimed_where_its_pages_say_it_took_frames_fails(
 @pytest.mark.parametrize("lsb", EDITS_LSB)
 def test_a_pose_wrong_after_the_silence_fails_every_judge(
         drives: list[tuple[Path, float]], tmp_path: Path, lsb: int) -> None:
-    for path, end_s in drives:
+    for (path, end_s), drive in zip(drives, DRIVES, strict=True):
+        if (lsb, drive[0]) not in EDITED:
+            continue
         edited = tmp_path / f"{path.stem}-{lsb}.log"
         assert _raise_x(path, edited, lsb, end_s - EDIT_BEFORE_S) > 100
         worst_m, _, _ = _checked(edited)
