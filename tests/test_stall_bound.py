@@ -11,6 +11,9 @@ of the frames the firmware may have missed plus the tolerance; the rest shows in
 The merge errors are checked against this file's own float64 odometry (``independent_checker``'s
 ``_Odometry``, not ``host.judge.reference*``): the worst over every set of frames lost, and the
 very step the synthesized firmware took.
+
+tests.sweeps: the jumps keep the correct firmware (0 LSB) of a stall and of a hold and each jump
+(3, 10, 100 LSB) once; the curves keep each stall length and each integrator once.
 """
 
 from __future__ import annotations
@@ -45,6 +48,7 @@ from odocan.sim.scenarios import get_scenario
 from tests.fault_rig import FaultRig
 from tests.independent_checker import Robot, _Odometry
 from tests.requires import require_executables
+from tests.sweeps import sample
 from tests.synth_log import STALL_FIFO_FRAMES, synthesize_stalled, wandering_drive
 from tests.test_babble_firmware import _biased_x
 from tests.test_judge_campaign import profile_of, robots
@@ -106,8 +110,12 @@ def _wrong_log(tmp_path: Path, kind: str, bias_lsb: int) -> Path:
     return synth.write(tmp_path / f"{kind}-{bias_lsb}.log")
 
 
-@pytest.mark.parametrize("kind", ["stall", "hold"])
-@pytest.mark.parametrize("bias_lsb", [0, 3, 10, 100])  # 0.3 mm, 1 mm, 1 cm
+# 0.3 mm, 1 mm, 1 cm; the correct firmware of both kinds and every jump pinned
+JUMPS = sample([(b, k) for b in (0, 3, 10, 100) for k in ("stall", "hold")], 3,
+               [(0, "stall"), (0, "hold"), (3, "hold")])
+
+
+@pytest.mark.parametrize(("bias_lsb", "kind"), JUMPS)
 def test_a_jump_at_a_stall_fails_every_judge(tmp_path: Path, kind: str, bias_lsb: int) -> None:
     """Before: PASS in analyze (max error 0.069 mm whatever the jump), OK in the monitor."""
     path = _wrong_log(tmp_path, kind, bias_lsb)
@@ -172,8 +180,12 @@ def _merged_offset_m(profile: RobotProfile, integrator: str, d_left: npt.NDArray
     return math.hypot(fine.x - merged.x, fine.y - merged.y)
 
 
-@pytest.mark.parametrize("integrator", ["rk2", "euler"])
-@pytest.mark.parametrize("frames", [8, 40, 120, MAX_MERGE_FRAMES + 20])
+# rk2 at 40 frames pinned: every length and both integrators kept
+CURVES = sample([(f, i) for f in (8, 40, 120, MAX_MERGE_FRAMES + 20) for i in ("rk2", "euler")],
+                4, [(40, "rk2")])
+
+
+@pytest.mark.parametrize(("frames", "integrator"), CURVES)
 def test_a_correct_firmware_on_a_curve_passes_with_its_merge_error_absorbed(
     tmp_path: Path, integrator: str, frames: int
 ) -> None:
