@@ -9,14 +9,11 @@ not: on kobuki, 600 s, seed 3, ``delay=0.1:15,seed=7``, stamps moved 0..3 ms (ji
 reference's path length by 0.383 mm") at 284.8 s, where analyze PASSes it. Shown here on the
 first 300 s of that drive, the capture cut to 276..290 s (the live judge joins mid-drive: its
 offset fitted), which main FAILs by 0.322 mm; now ``liveskip`` gives the same allowance page by
-page. The verdict is the float64 checker's (``test_twist_jitter_distance``), on the whole drive,
-its search for each twist's frame one sweep in bus time here (the same offsets; the scan per
-twist took 110 s of a drive's 185 s here under load).
+page. The verdict is the float64 checker's (``test_twist_jitter_distance``), on the whole drive.
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from contextlib import AbstractContextManager, nullcontext
 from pathlib import Path
@@ -29,12 +26,10 @@ from odocan.host.judge.monitor import BusMonitor
 from odocan.host.judge.reference import Geometry
 from odocan.host.mqtt.telemetry import RobotTelemetry
 from odocan.sim.robot import load
-from tests.dbc_typed import load_can_dbc, numbers
 from tests.firmware_patch import Taken, distance_taken_off, edited_after
 from tests.test_capture_jitter import _jittered
-from tests.test_gap_fill import DBC
 from tests.test_live_jitter_lockout import _frames_taken
-from tests.test_twist_jitter_distance import WIRE_MM
+from tests.test_twist_jitter_distance import WIRE_MM, _float64_distance_off_mm
 
 ROBOT, DURATION_S, SEED, FAULTS, JITTER_SEED = "kobuki", 300, 3, "delay=0.1:15,seed=7", 1
 CUT_S = (276.0, 290.0)  # the capture's part fed live (the skipped span at 284.8 s inside)
@@ -57,50 +52,6 @@ def _nth_taken(n: int) -> Callable[[Taken], bool]:
         return seen[0] == n
 
     return trigger
-
-
-def _float64_distance_off_mm(log: Path, robot: str, taken: list[bytes]) -> list[float]:
-    """``test_twist_jitter_distance._float64_distance_off_mm``'s offsets, each twist's frame
-    found by one sweep in bus time, not a scan of every frame taken per twist (300 s: 30000 x
-    30000): per ODOM_TWIST of ``log`` (cantools) its DISTANCE less the float64 path length (sum
-    of |dS| of the midpoint, m per count from the radii) of the frames the firmware took, up to
-    the latest it took (in its order) of the ENC_COUNTER named, on the bus by the twist's time."""
-    db, profile = load_can_dbc(DBC), load(robot)
-    wrap = 1 << min(profile.counter_bits, 24)
-    m_per_count = [2 * math.pi * r / profile.counts_per_rev
-                   for r in (profile.wheel_radius_left_m, profile.wheel_radius_right_m)]
-    enc_id = db.get_message_by_name("WHEEL_ENCODERS").frame_id
-    twist_id = db.get_message_by_name("ODOM_TWIST").frame_id
-    with can.LogReader(str(log)) as reader:
-        messages = list(reader)
-    bus_s = {bytes(m.data): m.timestamp for m in reversed(messages)
-             if m.arbitration_id == enc_id}  # each frame's first time on the bus
-    path: list[tuple[float, int, float]] = []  # (bus time s, COUNTER, path mm) per frame taken
-    total_mm, prev = 0.0, None
-    for data in taken:
-        signals = numbers(db, "WHEEL_ENCODERS", data)
-        counts = (int(signals["LEFT_COUNT"]), int(signals["RIGHT_COUNT"]))
-        if prev is not None:
-            d = [((now - then + wrap // 2) % wrap) - wrap // 2
-                 for now, then in zip(counts, prev, strict=True)]
-            total_mm += 1e3 * abs(0.5 * (d[0] * m_per_count[0] + d[1] * m_per_count[1]))
-        prev = counts
-        path.append((bus_s[data], data[1] & 0xF, total_mm))
-    by_time = sorted(range(len(path)), key=lambda k: path[k][0])
-    latest: dict[int, int] = {}  # COUNTER: the latest frame taken (path index) on the bus yet
-    offs: list[float] = []
-    seen = 0
-    for m in messages:  # in bus time (the log's order)
-        if m.arbitration_id != twist_id:
-            continue
-        while seen < len(by_time) and path[by_time[seen]][0] <= m.timestamp:
-            k = by_time[seen]
-            latest[path[k][1]] = max(k, latest.get(path[k][1], k))
-            seen += 1
-        twist = numbers(db, "ODOM_TWIST", m.data)
-        if int(twist["ENC_COUNTER"]) in latest:
-            offs.append(1e3 * float(twist["DISTANCE"]) - path[latest[int(twist["ENC_COUNTER"])]][2])
-    return offs
 
 
 def _drive(tmp_path: Path, wrong: AbstractContextManager[list[int]]

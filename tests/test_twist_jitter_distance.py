@@ -53,7 +53,9 @@ def _distance_low_after_a_lock_out(mm: int) -> AbstractContextManager[list[int]]
 def _float64_distance_off_mm(log: Path, robot: str, taken: list[bytes]) -> list[float]:
     """Per ODOM_TWIST of ``log`` (cantools): its DISTANCE less the float64 path length (sum of
     |dS| of the midpoint, m per count from the radii) of the frames the firmware took, up to
-    the latest it took before the twist (by the log's bus times) of the ENC_COUNTER it names."""
+    the latest it took (in its order) of the ENC_COUNTER it names, on the bus by the twist's
+    time (the log's bus times): each twist's frame found by one sweep in bus time, not a scan
+    of every frame taken per twist (300 s: 30 000 x 30 000, 110 s of a 185 s test)."""
     db, profile = load_can_dbc(DBC), load(robot)
     wrap = 1 << min(profile.counter_bits, 24)
     m_per_count = [2 * math.pi * r / profile.counts_per_rev
@@ -75,15 +77,20 @@ def _float64_distance_off_mm(log: Path, robot: str, taken: list[bytes]) -> list[
             total_mm += 1e3 * abs(0.5 * (d[0] * m_per_count[0] + d[1] * m_per_count[1]))
         prev = counts
         path.append((bus_s[data], data[1] & 0xF, total_mm))
-    offs = []
-    for m in messages:
+    by_time = sorted(range(len(path)), key=lambda k: path[k][0])
+    latest: dict[int, int] = {}  # COUNTER: the latest frame taken (path index) on the bus yet
+    offs: list[float] = []
+    seen = 0
+    for m in messages:  # in bus time (the log's order)
         if m.arbitration_id != twist_id:
             continue
+        while seen < len(by_time) and path[by_time[seen]][0] <= m.timestamp:
+            k = by_time[seen]
+            latest[path[k][1]] = max(k, latest.get(path[k][1], k))
+            seen += 1
         twist = numbers(db, "ODOM_TWIST", m.data)
-        named = [mm for t_s, counter, mm in path
-                 if t_s <= m.timestamp and counter == twist["ENC_COUNTER"]]
-        if named:
-            offs.append(1e3 * float(twist["DISTANCE"]) - named[-1])  # m on the wire
+        if int(twist["ENC_COUNTER"]) in latest:
+            offs.append(1e3 * float(twist["DISTANCE"]) - path[latest[int(twist["ENC_COUNTER"])]][2])
     return offs
 
 
