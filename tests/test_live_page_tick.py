@@ -18,14 +18,16 @@ from pathlib import Path
 
 import pytest
 
+from odocan.firmware import frames as fr
 from odocan.host.cli.app import main
 from odocan.sim.contract import DBC_PATH
 from tests.dbc_typed import integers, load_can_dbc
+from tests.independent_checker import HEADING_LSB_RAD, POSITION_LSB_M
 from tests.judges_cli import STREAMS, analyze, live_judges, raise_x_10_mm
 
 ROBOT, REBOOT_S = "pmir", 5.0
-POSITION_LSB_M, HEADING_LSB_RAD = 1e-4, 9.587379924285257e-05
-ENC_ID, POSE_X_ID, POSE_Y_ID, STATUS_ID = 0x100, 0x200, 0x201, 0x380
+ENC_ID, POSE_X_ID, POSE_Y_ID = fr.WHEEL_ENCODERS_ID, fr.ODOM_POSE_X_ID, fr.ODOM_POSE_Y_ID
+STATUS_ID = fr.ODOM_STATUS_ID
 
 
 def _moved(lines: list[str]) -> list[str]:

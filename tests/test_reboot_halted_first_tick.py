@@ -37,11 +37,10 @@ from odocan.host.cli.app import main
 from odocan.sim.contract import DBC_PATH
 from odocan.sim.robot import load
 from tests.dbc_typed import integers, load_can_dbc
+from tests.independent_checker import HEADING_LSB_RAD, POSITION_LSB_M
 from tests.judges_cli import live_judges, raise_x_10_mm
 
 ROBOT, REBOOT_S = "pmir", 5.0
-HEADING_LSB_RAD = 2 * math.pi / 65536
-POSITION_LSB_M = 1e-4
 HALTS_S = (0.2, 0.3)  # a lap hidden (ENC_E2E_LOST 3 and 13 of 19 and 29 dropped)
 
 
