@@ -13,13 +13,13 @@ import numpy.typing as npt
 
 from odocan.host.judge.liveadopted import UNHEARD_BOOT
 from odocan.host.judge.livefit import LiveFit
-from odocan.host.judge.livepagetick import TICK_GAP_S, page_after
 from odocan.host.judge.liveplacing import place_reference
 from odocan.host.judge.livepose import FramePose, Sample
 from odocan.host.judge.liveprimed import UNTOLD_PRIME, choose_primed
 from odocan.host.judge.livesilentboot import SilentBoot
 from odocan.host.judge.livewindow import Counted, window_counts
 from odocan.host.judge.pagesent import counted_from, sent_s
+from odocan.host.judge.pagetick import TICK_GAP_S, held_back, page_after
 from odocan.host.judge.primed import counted_start, within_named
 from odocan.host.judge.reference import ReferenceOdometry
 
@@ -94,9 +94,10 @@ class Lives:
         # (``powerup.primed_after``; a recorder stamping ODOM_STATUS late: ``liveprimed``)
         self.primed_from: tuple[int | None, list[int]] | None = None  # the frame chosen, those
         # it may have primed on (``finish_primed``)
-        self.page: tuple[int, int, tuple[float, int] | None, int] | None = None  # a reboot's
-        # first count page, waiting for the next ODOM_STATUS (``on_status``): ENC_E2E_OK,
-        # ENC_E2E_LOST, its bus time and COUNTER, the seq after the latest frame heard before it
+        self.page: tuple[int, int, tuple[float, int] | None, int, int | None] | None = None
+        # a reboot's first count page, waiting for the next ODOM_STATUS (``on_status``):
+        # ENC_E2E_OK, ENC_E2E_LOST, its bus time and COUNTER, the seq after the latest frame
+        # heard before it and after the one its tick's pose names (``pagetick``; None: none)
 
     def waits(self, pose: FramePose, now_s: float) -> bool:
         """Whether the on-board ``pose`` waits for its life's start (a boot's frame, the
@@ -152,7 +153,8 @@ class Lives:
         ODOM_STATUS frame after it: from where it was heard)."""
         assert self.boot is not None
         if self.page is not None:
-            ok, lost, _, after = self.page
+            ok, lost, _, heard_after, named = self.page
+            after = heard_after if named is None else named
             self.page = None
             window = self._tracker.window
             encoders = (window.col("seq").astype(np.int64), window.col("counter").astype(np.int64))
@@ -185,24 +187,30 @@ class Lives:
         elif boot is not None and self._named():
             self.finish_boot(boot[0])
         elif boot is not None and len(tracker.window):  # counted from its send (on_status)
-            after, posed = page_after(tracker)  # its tick's pose's word: not moved by time
-            self.page = (ok, lost, None if posed else tracker.status_heard, after)
+            after, named = page_after(tracker)  # its tick's pose's word (``pagetick``)
+            self.page = (ok, lost, tracker.status_heard, after, named)
         elif proven and not started and tracker.integrator is not None:
             self.finish_boot(0, first_life=True)  # the samples judged before keep their errors
 
     def on_status(self, t_s: float, counter: int) -> None:
         """The ODOM_STATUS frame heard after a reboot's first count page (``page``): it tells
         when that page was sent (``pagesent``); the new life starts on the frame the page
-        counts back to from there."""
+        counts back to from the frame its tick's pose names unless it was held back, else from
+        its send (``pagetick``)."""
         if self.page is None or self.boot is None:
             self.page = None
             return
-        ok, lost, heard, after = self.page
+        ok, lost, heard, after, named = self.page
         self.page = None
         window = self._tracker.window
         seqs = window.col("seq").astype(np.int64)
-        sent = after if heard is None else counted_from(
-            after, sent_s(heard, (t_s, counter)), (seqs, window.col("t_s").astype(np.float64)))
+        if heard is None:
+            sent = after if named is None else named
+        elif named is not None and not held_back(heard[0], sent_s(heard, (t_s, counter))):
+            sent = named  # (``pagetick``)
+        else:
+            sent = counted_from(after, sent_s(heard, (t_s, counter)),
+                                (seqs, window.col("t_s").astype(np.float64)))
         encoders = (seqs, window.col("counter").astype(np.int64))
         at = counted_start(encoders, sent, ok, lost)
         if at is None:  # the window lacks it from there: where the page was heard

@@ -21,7 +21,9 @@ its own stamp: from the latest encoder frame stamped before it. Only the next fr
 the page counts (its CRC holding), and not a power-up tick's (COUNTER 0 or 1): a firmware
 rebooted right after the page restarts its sequence, and its first pair is no cadence of the
 page's. On a log without held-back status frames nothing moves: the next pair comes a cycle
-after the page.
+after the page. A page not held back (``pagetick.held_back``) whose tick's pose was heard right
+before it counts from the frame that pose names (``pagetick``): a frame heard between the
+firmware's mailbox read and its page is not one it took.
 
 One rule for the whole-log judge (``reboots.page_counted_start``, the replay's first power-up),
 the streamed (``stream_lives``) and the live judge (``livestart.Lives.on_counts``).
@@ -33,8 +35,10 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
+from odocan.host.judge.bootnamed import PoseRows, pose_enc_rows
 from odocan.host.judge.bootticks import status_rows
 from odocan.host.judge.gapseen import crc_holds
+from odocan.host.judge.pagetick import held_back, named_after
 from odocan.host.judge.samples import ENC_E2E_PAGE
 from odocan.host.protocol.busfacts import ENC_COUNTER_MASK, STATUS_CYCLE_S
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
@@ -72,30 +76,34 @@ def counted_from(
 
 
 def pages_counted_from(
-    frames: FrameArrays, decoder: BulkDecoder, pages: npt.NDArray[np.int64]
+    frames: FrameArrays,
+    decoder: BulkDecoder,
+    pages: npt.NDArray[np.int64],
+    taken: tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]],
 ) -> npt.NDArray[np.int64]:
-    """``counted_from`` of each count page at log positions ``pages`` (CRC holding) of a whole
-    log, its next ODOM_STATUS frame heard (CRC holding) read by ``sent_s`` (vectorised: a page
-    moves only when held back)."""
+    """The log position each count page at log positions ``pages`` (CRC holding) of a whole
+    log counts back from: from the frame its tick's pose names unless it was held back
+    (``pagetick``; ``taken``: the positions and COUNTERs of the encoder frames the firmware
+    takes), else ``counted_from`` its send, its next ODOM_STATUS frame heard (CRC holding) read
+    by ``sent_s``."""
     where, t_s, counter = status_rows(frames, decoder)
+    poses = pose_enc_rows(frames, decoder)
     out = np.asarray(pages, dtype=np.int64).copy()
-    row = np.searchsorted(where, out)
-    ok = (row + 1 < len(where)) & (row < len(where))
-    ok[ok] = where[row[ok]] == out[ok]
-    row, nxt = row[ok], row[ok] + 1
-    step = (counter[nxt] - counter[row]) & ENC_COUNTER_MASK
-    moved = (
-        np.isin(step, NEXT_TICK_STEPS)
-        & ~np.isin(counter[nxt], POWER_UP_COUNTERS)
-        & (t_s[nxt] - STATUS_CYCLE_S < t_s[row])
-    )
-    if not moved.any():
-        return out
-    enc = decoder.select(frames, "WHEEL_ENCODERS").astype(np.int64)
-    encoders = (enc, np.asarray(frames.timestamp_s[enc], dtype=np.float64))
-    for k, r in zip(np.flatnonzero(ok)[moved].tolist(), row[moved].tolist(), strict=True):
-        sent = sent_s((float(t_s[r]), int(counter[r])), (float(t_s[r + 1]), int(counter[r + 1])))
-        out[k] = counted_from(int(out[k]), sent, encoders)
+    encoders: tuple[npt.NDArray[np.int64], npt.NDArray[np.float64]] | None = None
+    for k, page in enumerate(out.tolist()):
+        r = int(np.searchsorted(where, page))
+        if r == len(where) or where[r] != page:
+            continue
+        named = named_after((page, float(t_s[r])), poses, taken)
+        sent = float(t_s[r]) if r + 1 == len(where) else sent_s(
+            (float(t_s[r]), int(counter[r])), (float(t_s[r + 1]), int(counter[r + 1])))
+        if named is not None and not held_back(float(t_s[r]), sent):
+            out[k] = named
+        elif sent < t_s[r]:  # held back: counted from its send
+            if encoders is None:
+                enc = decoder.select(frames, "WHEEL_ENCODERS").astype(np.int64)
+                encoders = (enc, np.asarray(frames.timestamp_s[enc], dtype=np.float64))
+            out[k] = counted_from(page, sent, encoders)
     return out
 
 
@@ -124,31 +132,40 @@ def encoder_count_pages(
 Counts = tuple[int, int, int]  # ENC_E2E_OK, ENC_E2E_LOST, the position counted from
 
 
+Waiting = tuple[int, int, int, float, int, int | None]  # position, OK, LOST, t, COUNTER, named
+
+
 class StreamPages:
     """The count pages of a log chunk by chunk (``stream_lives``), each as (position heard,
-    ``Counts``): ``pages_counted_from`` of the whole log. A page whose next ODOM_STATUS frame is
-    not in its chunk waits for the next chunk (``finish``: the log's end, counted from where it
-    was heard)."""
+    ``Counts``): ``pages_counted_from`` of the whole log. A page whose next ODOM_STATUS frame
+    is not in its chunk waits for the next chunk (``finish``: the log's end, counted from where
+    its tick's pose names or it was heard)."""
 
     def __init__(self, decoder: BulkDecoder) -> None:
         self._decoder = decoder
-        self._waiting: list[tuple[int, int, int, float, int]] = []  # position, OK, LOST, t, CTR
+        self._waiting: list[Waiting] = []
 
     def feed(
         self,
         chunk: FrameArrays,
         offset: int,
         encoders: tuple[npt.NDArray[np.int64], npt.NDArray[np.float64]],
+        told_by: tuple[PoseRows, tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]],
     ) -> list[tuple[int, Counts]]:
         """The pages told by ``chunk`` (at log position ``offset``): those waiting and the
-        chunk's own whose next ODOM_STATUS frame it holds; ``encoders``: the positions and bus
-        times of the encoder frames carried, this chunk's included."""
+        chunk's own whose next ODOM_STATUS frame it holds;
+        ``encoders``: the positions and bus times of the encoder frames carried, ``told_by``:
+        the poses (``pose_enc_rows``) and the positions and COUNTERs of the encoder frames
+        taken carried, this chunk's included."""
         where, t_s, counter = status_rows(chunk, self._decoder)
         rows = [
             (int(p) + offset, float(t), int(c))
             for p, t, c in zip(where.tolist(), t_s.tolist(), counter.tolist(), strict=True)
         ]
-        pages = self._waiting + _chunk_pages(chunk, self._decoder, offset, rows)
+        pages = self._waiting + [
+            (*page, named_after((page[0], page[3]), *told_by))
+            for page in _chunk_pages(chunk, self._decoder, offset, rows)
+        ]
         positions = np.array([position for position, _, _ in rows], dtype=np.int64)
         told, self._waiting = [], []
         for page in pages:
@@ -157,21 +174,16 @@ class StreamPages:
                 self._waiting.append(page)
                 continue
             sent = sent_s((page[3], page[4]), rows[k][1:])
-            told.append(
-                (
-                    page[0],
-                    (
-                        page[1],
-                        page[2],
-                        counted_from(page[0], sent, encoders) if sent < page[3] else page[0],
-                    ),
-                )
-            )
+            named = page[5]
+            if named is None or held_back(page[3], sent):
+                named = counted_from(page[0], sent, encoders) if sent < page[3] else page[0]
+            told.append((page[0], (page[1], page[2], named)))
         return told
 
     def finish(self) -> list[tuple[int, Counts]]:
         """The pages still waiting at the log's end: no frame after them tells their send."""
-        told, self._waiting = [(p[0], (p[1], p[2], p[0])) for p in self._waiting], []
+        told = [(p[0], (p[1], p[2], p[0] if p[5] is None else p[5])) for p in self._waiting]
+        self._waiting = []
         return told
 
 

@@ -117,7 +117,7 @@ def split_lives(frames: FrameArrays, decoder: BulkDecoder) -> list[Life]:
     encoders, counters = rows["index"][keep], rows["COUNTER"][keep].astype(np.int64)
     pages, every = encoder_count_pages(frames, decoder), (frames.select(rows["index"]),
                                                           rows["index"].astype(np.int64))
-    sent = pages_counted_from(frames, decoder, pages[0])  # each page where it was sent
+    sent = pages_counted_from(frames, decoder, pages[0], (encoders.astype(np.int64), counters))
     poses, after = powerup_poses(frames, decoder), pose_enc_rows(frames, decoder)
     heard = heard_encoders(every, decoder)  # the power-up pose's word (``bootnamed``)
     starts: list[int] = []

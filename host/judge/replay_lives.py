@@ -159,7 +159,8 @@ def first_power_up(frames: FrameArrays, decoder: BulkDecoder,
     sent = status_pages_sent_at(frames, decoder, where)
     counted = page_counted_start(position, len(frames), (track.index, track.counter),
                                  (sent, ok, lost), sent=np.minimum(sent, pages_counted_from(
-                                     frames, decoder, where)))  # held back in order too
+                                     frames, decoder, where, (track.index.astype(np.int64),
+                                                              track.counter.astype(np.int64)))))
     if "COUNTER" in page and not holds_first_cycle(int(page["COUNTER"][row])):
         # not the boot summary (lost): the firmware powered up a cycle or more before it
         return None if counted is None or counted <= int(track.index[0]) else (counted, position)

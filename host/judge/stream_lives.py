@@ -162,8 +162,8 @@ class StreamLives:
                                                                         self._offset))
         falls, twist = second_evidence(chunk, self.decoder, TWIST_COUNTERS, self._falls[1])
         self._falls = (joined(self._falls[0], falls), twist)  # rare: all kept
-        pages = self._pages.feed(chunk, self._offset, (self._every[1],
-                                                       self._every[0].timestamp_s))
+        pages = self._pages.feed(chunk, self._offset, (self._every[1], self._every[0].timestamp_s),
+                                 (self._poses, (self._encoders, self._counters)))
         events = sorted(self._deferred + self._boot_events(chunk) + list(pages),
                         key=lambda event: event[0])
         self._corroborate(chunk)
