@@ -81,6 +81,7 @@ class Lives:
         self._tracker = tracker
         self.boot: tuple[int, float] | None = None  # after a reboot: primed guess, wait until
         self.boot_poses: list[FramePose] = []  # the new life's samples while it waits
+        self.stalled_waiting = False  # ... a stall before the first of them (livebootstall)
         self.boot_named = False  # ``boot``'s frame named by its power-up pose (``bootnamed``)
         self.boot_unnamed = -1  # ... the guess without it (its first pose after not counting on)
         self.boot_tick_named = False  # ... that pose heard in the boot summary's tick
@@ -147,6 +148,7 @@ class Lives:
             0.0 <= now_s - pose[0] < TICK_GAP_S
         self.boot_unnamed = guess if unnamed is None else unnamed
         self.boot_poses, self.held, self.page = [], {}, None
+        self.stalled_waiting = False
 
     def expire(self) -> None:
         """The wait for the count page is over: start without it (a page heard with no
@@ -263,6 +265,9 @@ class Lives:
         tracker.placer.seen.power_up(primed)  # its boot a page before (gapseen.with_boot)
         page = tracker.losses.primed(primed, not first_life)  # ENC_E2E_LOST from 0 there
         stalled = tracker.first.stalled_from if first_life and poses else None  # told before
+        if self.stalled_waiting and poses and not first_life:  # halted after its first tick
+            stalled = primed  # (``livebootstall``)
+        self.stalled_waiting = False
         start_reference(tracker, FramePose(primed, 0.0, 0.0, 0.0), counts, poses, stalled)
         if page is not None:  # the life's page heard before its frame was known, from it
             tracker.losses.on_page(page[0], page[1], tracker.window, tracker.pairs.sampled,

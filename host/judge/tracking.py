@@ -22,6 +22,7 @@ from odocan.host.judge.liveadopted import (
     REBOOT_BEFORE_INTEGRATOR,
     AdoptedStarts,
 )
+from odocan.host.judge.livebootstall import left_out_waiting
 from odocan.host.judge.liveboottick import BootTick
 from odocan.host.judge.livechoice import LiveChoice
 from odocan.host.judge.livecutreprime import CutHold
@@ -80,8 +81,7 @@ class PoseTracker:
     narrowed sample by sample as ``analyze`` fits it (``host.judge.livefit``), until a power-up
     is proven (``on_enc_counts``): then exactly (0, 0, 0), as ``analyze`` starts it. The first
     life's samples wait for its first ENC_E2E_OK page (up to ``BOOT_COUNT_WAIT_S``), so that a
-    power-up's are all judged from (0, 0, 0), as ``analyze`` judges them.
-    """
+    power-up's are all judged from (0, 0, 0), as ``analyze`` judges them."""
 
     def __init__(
         self, geometry: Geometry, counter_bits: int, integrator: str | None = None
@@ -309,8 +309,9 @@ class PoseTracker:
                 self.reprime.stalled(pose.seq, y.t_s, self.first.made_before(y.t_s),
                                      self.raw.gate.least)
             return None
-        if started and self.reprime.unnamed_first(pose, y, queued, last_s):
-            return None  # the first kept after a long stall whose first named no frame
+        if (started and self.reprime.unnamed_first(pose, y, queued, last_s)) or (
+                left_out_waiting(self, y.t_s, queued, last_s)):  # livereprime, livebootstall
+            return None
         lives = self.lives  # a life's start (a boot's frame, the integrator): livestart
         if (not started or lives.boot is not None) and lives.waits(pose, self.now_s):
             return None
