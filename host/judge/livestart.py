@@ -19,7 +19,7 @@ from odocan.host.judge.liveprimed import UNTOLD_PRIME, choose_primed
 from odocan.host.judge.livesilentboot import SilentBoot
 from odocan.host.judge.livewindow import Counted, window_counts
 from odocan.host.judge.pagesent import counted_from, sent_s
-from odocan.host.judge.pagetick import TICK_GAP_S, held_back, page_after
+from odocan.host.judge.pagetick import TICK_GAP_S, page_after, page_held_back
 from odocan.host.judge.primed import counted_start, within_named
 from odocan.host.judge.reference import ReferenceOdometry
 
@@ -208,7 +208,7 @@ class Lives:
         seqs = window.col("seq").astype(np.int64)
         if heard is None:
             sent = after if named is None else named
-        elif named is not None and not held_back(heard[0], sent_s(heard, (t_s, counter))):
+        elif named is not None and not page_held_back(heard[0], sent_s(heard, (t_s, counter))):
             sent = named  # (``pagetick``)
         else:
             sent = counted_from(after, sent_s(heard, (t_s, counter)),

@@ -21,8 +21,8 @@ its own stamp: from the latest encoder frame stamped before it. Only the next fr
 the page counts (its CRC holding), and not a power-up tick's (COUNTER 0 or 1): a firmware
 rebooted right after the page restarts its sequence, and its first pair is no cadence of the
 page's. On a log without held-back status frames nothing moves: the next pair comes a cycle
-after the page. A page not held back (``pagetick.held_back``) whose tick's pose was heard right
-before it counts from the frame that pose names (``pagetick``): a frame heard between the
+after the page. A page not held back (``pagetick.page_held_back``) whose tick's pose was heard
+right before it counts from the frame that pose names (``pagetick``): a frame heard between the
 firmware's mailbox read and its page is not one it took.
 
 One rule for the whole-log judge (``reboots.page_counted_start``, the replay's first power-up),
@@ -38,7 +38,7 @@ from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.bootnamed import PoseRows, pose_enc_rows
 from odocan.host.judge.bootticks import status_rows
 from odocan.host.judge.gapseen import crc_holds
-from odocan.host.judge.pagetick import held_back, named_after
+from odocan.host.judge.pagetick import named_after, page_held_back, pages_named_after
 from odocan.host.judge.samples import ENC_E2E_PAGE
 from odocan.host.protocol.busfacts import ENC_COUNTER_MASK, STATUS_CYCLE_S
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
@@ -87,23 +87,28 @@ def pages_counted_from(
     takes), else ``counted_from`` its send, its next ODOM_STATUS frame heard (CRC holding) read
     by ``sent_s``."""
     where, t_s, counter = status_rows(frames, decoder)
-    poses = pose_enc_rows(frames, decoder)
     out = np.asarray(pages, dtype=np.int64).copy()
-    encoders: tuple[npt.NDArray[np.int64], npt.NDArray[np.float64]] | None = None
-    for k, page in enumerate(out.tolist()):
-        r = int(np.searchsorted(where, page))
-        if r == len(where) or where[r] != page:
-            continue
-        named = named_after((page, float(t_s[r])), poses, taken)
-        sent = float(t_s[r]) if r + 1 == len(where) else sent_s(
-            (float(t_s[r]), int(counter[r])), (float(t_s[r + 1]), int(counter[r + 1])))
-        if named is not None and not held_back(float(t_s[r]), sent):
-            out[k] = named
-        elif sent < t_s[r]:  # held back: counted from its send
-            if encoders is None:
-                enc = decoder.select(frames, "WHEEL_ENCODERS").astype(np.int64)
-                encoders = (enc, np.asarray(frames.timestamp_s[enc], dtype=np.float64))
-            out[k] = counted_from(page, sent, encoders)
+    row = np.searchsorted(where, out)
+    ok = row < len(where)
+    ok[ok] = where[row[ok]] == out[ok]
+    row = row[ok]
+    heard_s, sent = t_s[row], t_s[row].copy()
+    nxt = np.minimum(row + 1, len(where) - 1)
+    step = (counter[nxt] - counter[row]) & ENC_COUNTER_MASK
+    cadence = (row + 1 < len(where)) & np.isin(step, NEXT_TICK_STEPS) & ~np.isin(
+        counter[nxt], POWER_UP_COUNTERS)
+    sent[cadence] = np.minimum(heard_s[cadence], t_s[nxt[cadence]] - STATUS_CYCLE_S)
+    named = pages_named_after(out[ok], heard_s, pose_enc_rows(frames, decoder), taken)
+    by_tick = (named >= 0) & ~page_held_back(heard_s, sent)
+    counted = out[ok]
+    counted[by_tick] = named[by_tick]
+    moved = np.flatnonzero(~by_tick & (sent < heard_s))
+    if len(moved):
+        enc = decoder.select(frames, "WHEEL_ENCODERS").astype(np.int64)
+        encoders = (enc, np.asarray(frames.timestamp_s[enc], dtype=np.float64))
+        for k in moved.tolist():
+            counted[k] = counted_from(int(counted[k]), float(sent[k]), encoders)
+    out[ok] = counted
     return out
 
 
@@ -175,7 +180,7 @@ class StreamPages:
                 continue
             sent = sent_s((page[3], page[4]), rows[k][1:])
             named = page[5]
-            if named is None or held_back(page[3], sent):
+            if named is None or page_held_back(page[3], sent):
                 named = counted_from(page[0], sent, encoders) if sent < page[3] else page[0]
             told.append((page[0], (page[1], page[2], named)))
         return told

@@ -16,8 +16,8 @@ pose naming the latest frame it took (ENC_COUNTER). So when the latest ODOM_POSE
 less than ``TICK_GAP_S`` before the page, and is not behind the pose heard before it (one the bus
 held back and let go after later ones names an older frame), the page counts from the frame that
 pose names (the latest taken before the pose with its COUNTER, within a lap). Unless the page was
-held back (``held_back``: its send, ``pagesent``, a cycle before the next pair, ``TICK_GAP_S`` or
-more before it was heard; its pose is then a later tick's): counted from its send then. The
+held back (``page_held_back``: its send, ``pagesent``, a cycle before the next pair,
+``TICK_GAP_S`` or more before it was heard; its pose is then a later tick's): from its send. The
 send's bound is no closer: a loaded firmware's catching-up ticks break it by a few ms (the next
 pair 95.7 ms after: counted from 4.3 ms too early, a frame early, 2.4 mm and 15.7 mrad off). In
 lockstep, where nothing comes between a tick's reads and its frames, all are the same frame.
@@ -39,15 +39,6 @@ if TYPE_CHECKING:
 TICK_GAP_S = 0.005  # a pose and the status pair of one tick are heard less than this apart (s)
 
 
-def of_tick(page_s: float, pose: tuple[float, int], before: int | None) -> bool:
-    """Whether the pose heard at bus time ``pose[0]`` with E2E COUNTER ``pose[1]``, the latest
-    before a count page heard at ``page_s``, is the page's tick's (module docstring;
-    ``before``: the COUNTER of the pose heard before it, None: none)."""
-    if not 0.0 <= page_s - pose[0] < TICK_GAP_S:
-        return False
-    return before is None or (pose[1] - before) % POSE_COUNTER_LAP < POSE_COUNTER_LAP // 2
-
-
 def named_after(
     page: tuple[int, float],
     poses: PoseRows,
@@ -55,22 +46,42 @@ def named_after(
 ) -> int | None:
     """The log position after the frame the tick's pose of a count page heard at ``page`` (log
     position, bus time) names (``pagesent.counted_from``'s meaning), or None when no pose
+    tells it (``pages_named_after`` of one page)."""
+    named = int(pages_named_after(np.array([page[0]]), np.array([page[1]]), poses, taken)[0])
+    return None if named < 0 else named
+
+
+def pages_named_after(
+    pages: npt.NDArray[np.int64],
+    pages_s: npt.NDArray[np.float64],
+    poses: PoseRows,
+    taken: tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]],
+) -> npt.NDArray[np.int64]:
+    """For count pages heard at log positions ``pages`` and bus times ``pages_s``: the log
+    position after the frame each one's tick's pose names (module docstring), -1 where no pose
     tells it; ``poses``: ``bootnamed.pose_enc_rows`` heard (in log order), ``taken``: the
     positions and COUNTERs of the encoder frames the firmware takes, in log order."""
-    k = int(np.searchsorted(poses[0], page[0])) - 1
-    before = int(poses[2][k - 1]) if k > 0 else None
-    if k < 0 or not of_tick(page[1], (float(poses[1][k]), int(poses[2][k])), before):
-        return None
-    j = int(np.searchsorted(taken[0], poses[0][k]))  # the frames taken before the pose
-    lap = slice(max(0, j - ENC_COUNTER_LAP), j)
-    named = np.flatnonzero(taken[1][lap] == poses[3][k])
-    return int(taken[0][lap][named[-1]]) + 1 if len(named) else None
+    none = np.full(len(pages), -1, dtype=np.int64)
+    if not len(poses[0]) or not len(taken[0]):
+        return none
+    k = np.searchsorted(poses[0], pages) - 1
+    at = np.maximum(k, 0)
+    gap_s = pages_s - poses[1][at]
+    step = (poses[2][at] - poses[2][np.maximum(at - 1, 0)]) % POSE_COUNTER_LAP
+    told = (k >= 0) & (gap_s >= 0.0) & (gap_s < TICK_GAP_S) & (
+        (at == 0) | (step < POSE_COUNTER_LAP // 2))
+    back = np.searchsorted(taken[0], poses[0][at])[:, None] - np.arange(1, ENC_COUNTER_LAP + 1)
+    match = (back >= 0) & (taken[1][np.maximum(back, 0)] == poses[3][at][:, None])
+    told &= match.any(axis=1)
+    latest = back[np.arange(len(pages)), match.argmax(axis=1)]  # the latest taken first
+    return np.where(told, taken[0][np.maximum(latest, 0)] + 1, none)
 
 
-def held_back(page_s: float, sent_s: float) -> bool:
-    """Whether a count page heard at ``page_s`` and sent at ``sent_s`` or before
-    (``pagesent.sent_s``) was held back on the bus: its tick's pose is then another tick's."""
-    return page_s - sent_s >= TICK_GAP_S
+def page_held_back(page_s: npt.ArrayLike, sent_s: npt.ArrayLike) -> npt.NDArray[np.bool_]:
+    """Whether count pages heard at ``page_s`` and sent at ``sent_s`` or before
+    (``pagesent.sent_s``) were held back on the bus: their tick's pose is then another tick's."""
+    held: npt.NDArray[np.bool_] = np.asarray(page_s) - np.asarray(sent_s) >= TICK_GAP_S
+    return held
 
 
 def page_after(tracker: PoseTracker) -> tuple[int, int | None]:
@@ -84,9 +95,9 @@ def page_after(tracker: PoseTracker) -> tuple[int, int | None]:
     if page is None or not len(xs):
         return after, None
     counters = xs.col("counter")
-    before = int(counters[-2]) if len(xs) > 1 else None
     pose_s = float(xs.col("t_s")[-1])
-    if not of_tick(page[0], (pose_s, int(counters[-1])), before):
+    step = (int(counters[-1]) - int(counters[-2])) % POSE_COUNTER_LAP if len(xs) > 1 else 0
+    if not 0.0 <= page[0] - pose_s < TICK_GAP_S or step >= POSE_COUNTER_LAP // 2:
         return after, None
     named = np.flatnonzero((window.col("t_s") <= pose_s)
                            & (window.col("counter") == xs.col("enc_counter")[-1]))
