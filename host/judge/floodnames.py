@@ -35,6 +35,7 @@ from odocan.sim.robot import RobotProfile
 
 HALF_LAP = ENC_COUNTER_LAP // 2
 MATCH_LSB = 2  # wire headings truncate (<1 LSB each, the anchor's and the pose's) + margin
+FOLLOW_CYCLES = 4  # cycles after a renamed X half its tick's Y half and twist may come (``follow``)
 BAM16 = 1 << 16
 
 IntArray = npt.NDArray[np.int64]
@@ -144,10 +145,13 @@ def follow(named: IntArray, enc_counter: IntArray, t_s: FloatArray,
            renamed: tuple[IntArray, IntArray, IntArray, FloatArray], cycle_s: float) -> IntArray:
     """``named`` with each frame sent with a renamed ODOM_POSE_X half (``renamed``: its plain
     name, its resolved one, its ENC_COUNTER and bus time) taking its name: the same ENC_COUNTER
-    and plain name, less than a cycle apart (the firmware's one state of that tick: the Y
-    half, the twist)."""
+    and plain name, less than a cycle before it or ``FOLLOW_CYCLES`` after it (the firmware's
+    one state of that tick: the Y half, the twist; a first tick that drained a backlog of 79
+    frames sent them 17.7 ms after its X, ``lapfirst._tick_window_s``; a later tick naming the
+    same plain frame by the same ENC_COUNTER named the same frame)."""
     out = named.copy()
     for plain, resolved, counter, sent_s in zip(*(r.tolist() for r in renamed), strict=True):
-        out[(named == plain) & (enc_counter == counter) & (np.abs(t_s - sent_s) < cycle_s)] = (
-            resolved)
+        off_s = t_s - sent_s
+        out[(named == plain) & (enc_counter == counter) & (off_s > -cycle_s)
+            & (off_s < FOLLOW_CYCLES * cycle_s)] = resolved
     return out

@@ -54,6 +54,7 @@ import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.floodnames import of_robot
+from odocan.host.judge.primedlap import primed_candidate
 from odocan.host.judge.reference import Geometry, integrate, wrap_delta
 from odocan.host.judge.samples import (
     HEADING_LSB_RAD,
@@ -171,6 +172,8 @@ def lap_named(frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: Bul
         return enc, halves
     found = older_lap(said, reference_at(enc, cands, start or (0.0, 0.0, 0.0), robot,
                                          integrator))
+    if found is None and start is None:  # primed after the life's first frame (primedlap)
+        found = primed_candidate(said, enc, cands, robot, integrator)
     if found is None:
         return enc, halves
     px = halves.px
@@ -211,7 +214,8 @@ def _first_pose(frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: B
     i = int(named_x[0])
     px, py = halves.px, halves.py
     t_s, counter = float(px["timestamp_s"][i]), int(px["ENC_COUNTER"][i])
-    j = _same_tick(py["timestamp_s"], py["ENC_COUNTER"], t_s, counter, enc.cycle_s,
+    window_s = (enc.cycle_s, _tick_window_s(px["timestamp_s"], i, enc.cycle_s))
+    j = _same_tick(py["timestamp_s"], py["ENC_COUNTER"], t_s, counter, window_s,
                    halves.ey == halves.ex[i])
     if j is None:
         return None
@@ -220,7 +224,7 @@ def _first_pose(frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: B
     except AnalysisError:
         twist = None
     k = None if twist is None else _same_tick(twist["timestamp_s"], twist["ENC_COUNTER"], t_s,
-                                              counter, enc.cycle_s, None)
+                                              counter, window_s, None)
     heading = (float(py["TURNS"][j]) * 2 * math.pi
                + float(px["HEADING"][i]) * HEADING_LSB_RAD)
     distance = None if twist is None or k is None else float(twist["DISTANCE"][k]) * (
@@ -229,10 +233,24 @@ def _first_pose(frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: B
                    heading, distance)
 
 
+def _tick_window_s(x_s: npt.NDArray[np.float64], i: int, cycle_s: float) -> float:
+    """How far from the X half at row ``i`` its tick's other frames may be heard: a cycle, or
+    up to the next X half when that comes later. A first tick that drained a backlog of 79
+    frames on a loaded machine sent its Y half and twist 17.7 ms after its X (the next X 32 ms
+    after it; ``backlog_first_tick_b5.log``): within one 10 ms cycle the pose went untold and
+    its name, 32 frames late, FAILed the correct firmware by 58.8 mm."""
+    if i + 1 >= len(x_s):
+        return cycle_s
+    return max(cycle_s, float(x_s[i + 1]) - float(x_s[i]))
+
+
 def _same_tick(t_s: npt.NDArray[np.float64], counters: npt.NDArray[np.int64], at_s: float,
-               counter: int, cycle_s: float, also: npt.NDArray[np.bool_] | None) -> int | None:
-    """The first row of ``counter`` less than a cycle after ``at_s`` (and ``also``)."""
-    near = (np.asarray(counters) == counter) & (np.abs(np.asarray(t_s) - at_s) < cycle_s)
+               counter: int, window: tuple[float, float], also: npt.NDArray[np.bool_] | None
+               ) -> int | None:
+    """The first row of ``counter`` less than ``window`` (before, after: s) from ``at_s`` (and
+    ``also``)."""
+    off_s = np.asarray(t_s) - at_s
+    near = (np.asarray(counters) == counter) & (off_s > -window[0]) & (off_s < window[1])
     if also is not None:
         near &= also
     rows = np.flatnonzero(near)
@@ -260,4 +278,5 @@ def lagged(frames: FrameArrays, accepted: npt.NDArray[np.bool_], decoder: BulkDe
     if len(cands) < 2:
         return False
     refs = reference_at(enc, cands, (0.0, 0.0, 0.0), robot, "exact")
-    return older_lap(said, [r._replace(x_m=said.x_m, y_m=said.y_m) for r in refs]) is not None
+    return older_lap(said, [r._replace(x_m=said.x_m, y_m=said.y_m) for r in refs]) is not None \
+        or primed_candidate(said, enc, cands, robot, "exact", heading_only=True) is not None
