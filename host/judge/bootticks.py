@@ -69,8 +69,8 @@ COUNTER 0 every 0.8 s of UPTIME 0, a held-back pose after it, was told a second 
 A reset 32 k ticks in whose power-up pose the bus lost breaks no pose COUNTER (the old life's
 last read 15): the twist's DISTANCE going back is its second evidence (``host.judge.distfall``).
 A pose with no pose heard before breaks nothing once ODOM_STATUS frames were heard (a firmware
-INIT before its first pose: ``initfirst``). One rule, for every judge: ``SourceWatch.observe`` (the live monitor, the bridge, the streamed
-``analyze``; ``hear_pose`` and ``told_ahead`` live) and ``boot_ticks`` and ``aheadticks`` (the
+INIT before its first pose: ``initfirst``). One rule, for every judge: ``SourceWatch.observe``
+(the live monitor, the bridge, the streamed ``analyze``; ``hear_pose`` and ``told_ahead`` live) and ``boot_ticks`` and ``aheadticks`` (the
 whole log's quiet stretches, ``SourceWatch.observe_quiet``).
 """
 
