@@ -70,8 +70,9 @@ A reset 32 k ticks in whose power-up pose the bus lost breaks no pose COUNTER (t
 last read 15): the twist's DISTANCE going back is its second evidence (``host.judge.distfall``).
 A pose with no pose heard before breaks nothing once ODOM_STATUS frames were heard (a firmware
 INIT before its first pose: ``initfirst``). One rule, for every judge: ``SourceWatch.observe``
-(the live monitor, the bridge, the streamed ``analyze``; ``hear_pose`` and ``told_ahead`` live) and ``boot_ticks`` and ``aheadticks`` (the
-whole log's quiet stretches, ``SourceWatch.observe_quiet``).
+(the live monitor, the bridge, the streamed ``analyze``; ``hear_pose`` and ``told_ahead`` live)
+and ``boot_ticks`` and ``aheadticks`` (the whole log's quiet stretches,
+``SourceWatch.observe_quiet``).
 """
 
 from __future__ import annotations
