@@ -68,9 +68,11 @@ status frame the bus held back breaks no sequence there either (``aheadticks``: 
 COUNTER 0 every 0.8 s of UPTIME 0, a held-back pose after it, was told a second reboot).
 A reset 32 k ticks in whose power-up pose the bus lost breaks no pose COUNTER (the old life's
 last read 15): the twist's DISTANCE going back is its second evidence (``host.judge.distfall``).
-One rule, for every judge: ``SourceWatch.observe`` (the live monitor, the bridge, the streamed
-``analyze``; ``hear_pose`` and ``told_ahead`` live) and ``boot_ticks`` and ``aheadticks`` (the
-whole log's quiet stretches, ``SourceWatch.observe_quiet``).
+A pose with no pose heard before breaks nothing once ODOM_STATUS frames were heard (a firmware
+INIT before its first pose: ``initfirst``). One rule, for every judge: ``SourceWatch.observe``
+(the live monitor, the bridge, the streamed ``analyze``; ``hear_pose`` and ``told_ahead`` live)
+and ``boot_ticks`` and ``aheadticks`` (the whole log's quiet stretches,
+``SourceWatch.observe_quiet``).
 """
 
 from __future__ import annotations
@@ -82,6 +84,7 @@ import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.distfall import Falls, any_tied
+from odocan.host.judge.initfirst import first_pose_breaks, status_before_first
 from odocan.host.protocol import busfacts
 from odocan.host.protocol.busfacts import ENC_COUNTER_MASK
 from odocan.host.protocol.decode import BulkDecoder, DecodeError
@@ -145,17 +148,19 @@ def status_breaks(counter_before: int, since_s: float) -> bool:
 
 
 def next_run(run: tuple[float, int, bool] | None, t_s: float, counter: int,
-             before_s: float | None) -> tuple[float, int, bool]:
+             before_s: float | None, status_heard: bool = False) -> tuple[float, int, bool]:
     """The pose run after an ODOM_POSE_X of E2E ``counter`` heard at bus time ``t_s`` (its CRC
     holding): (bus time of the run's pose of COUNTER 0, NaN when the COUNTERs did not count on
     from one since; the latest COUNTER; whether that pose of COUNTER 0 ``breaks_sequence`` of
     the pose heard before it, or had none). ``run``: the one before (None: no pose yet);
     ``before_s``: the bus time of the pose heard before (None: none). A pose of COUNTER 0 starts
     a run; one whose COUNTER is above the latest continues it (frames lost between keep it:
-    they take no time away); any other breaks it."""
+    they take no time away); any other breaks it. One with no pose before breaks it only when
+    no ODOM_STATUS frame was heard before either (``status_heard``: ``initfirst``)."""
     if counter == 0:
-        new = run is None or before_s is None or breaks_sequence(run[1], t_s - before_s)
-        return t_s, 0, new
+        if run is None or before_s is None:
+            return t_s, 0, first_pose_breaks(status_heard)
+        return t_s, 0, breaks_sequence(run[1], t_s - before_s)
     if run is not None and counter > run[1]:
         return run[0], counter, run[2]
     return math.nan, counter, False
@@ -230,7 +235,8 @@ def boot_ahead(summary_s: float, status_broke: bool, t_s: float, counter: int,
         small = 0 < counter < BOOT_POSE_FRAMES
         return bool(soon and status_broke and small
                     and (fell or restarts_small(counter, t_s, before)))
-    broke = status_broke or before is None or breaks_sequence(before[1], t_s - before[0])
+    broke = status_broke or (before is not None  # none: a summary came first (``initfirst``)
+                             and breaks_sequence(before[1], t_s - before[0]))
     return bool(soon and broke)
 
 
@@ -347,14 +353,18 @@ def boot_ticks(uptime_s: npt.NDArray[np.int64], counters: npt.NDArray[np.int64],
 
 
 def poses_before(frames: FrameArrays, decoder: BulkDecoder, positions: npt.NDArray[np.int64],
-                 carried: tuple[float, int, bool, float] | None = None
+                 carried: tuple[float, int, bool, float] | None = None,
+                 status_carried: bool = False
                  ) -> tuple[Runs, tuple[float, int, bool, float] | None]:
     """For the frames at ``positions`` (in order) the pose run of the ODOM_POSE_X frames before
     each whose CRC holds (``next_run``: its start's bus time, its latest COUNTER, whether its
     start broke the sequence; NaN, -1, False where none; ``carried``: the run of the frames
     before ``frames`` and its latest pose's bus time, a stream's earlier chunks), and that after
-    them all (the next chunk's ``carried``)."""
+    them all (the next chunk's ``carried``). The first pose breaks the sequence only with no
+    ODOM_STATUS frame before it (``initfirst``; ``status_carried``: an earlier chunk had one)."""
     where, t_pose, counter = _rows(frames, decoder, POSE_MESSAGE)
+    first_new = carried is None and len(where) > 0 and first_pose_breaks(status_before_first(
+        _rows(frames, decoder, STATUS_MESSAGE)[0], where, status_carried))
     if carried is not None:
         where = np.concatenate(([-1], where))
         t_pose = np.concatenate(([carried[3]], t_pose))
@@ -362,7 +372,8 @@ def poses_before(frames: FrameArrays, decoder: BulkDecoder, positions: npt.NDArr
     if len(where) == 0:
         n = len(positions)
         return (np.full(n, math.nan), np.full(n, -1, np.int64), np.zeros(n, bool)), None
-    start, new = _run_starts(t_pose, counter, None if carried is None else (carried[0], carried[2]))
+    start, new = _run_starts(t_pose, counter, None if carried is None else (carried[0], carried[2]),
+                             first_new)
     k = np.searchsorted(where, positions) - 1  # the latest strictly before each
     found = k >= 0
     at = np.maximum(k, 0)
@@ -395,11 +406,11 @@ def status_before(frames: FrameArrays, decoder: BulkDecoder, positions: npt.NDAr
 
 
 def _run_starts(t_pose: npt.NDArray[np.float64], counter: npt.NDArray[np.int64],
-                carried: tuple[float, bool] | None
+                carried: tuple[float, bool] | None, first_new: bool = True
                 ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.bool_]]:
     """``next_run``'s start (bus time s, NaN: none) and whether it broke the sequence, after
     each pose row at once; ``carried``: the first row is a run carried in, its (start, broke)
-    (None: not)."""
+    (None: not); ``first_new``: whether the first row, with no pose before, breaks it."""
     n = len(counter)
     rows = np.arange(n)
     stepped_on = np.zeros(n, dtype=bool)
@@ -410,6 +421,7 @@ def _run_starts(t_pose: npt.NDArray[np.float64], counter: npt.NDArray[np.int64],
     new[1:] = ((counter[:-1] != 0)  # a repeat is no break (``REPEAT_NO_BREAK``)
                & (t_pose[1:] - t_pose[:-1]
                   < (POSE_COUNTER_LAP - counter[:-1]) * POSE_PERIOD_S - SEQUENCE_SLACK_S))
+    new[0] = first_new
     value = np.where(counter == 0, t_pose, math.nan)
     broke = (counter == 0) & new
     if carried is not None:

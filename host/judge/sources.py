@@ -303,7 +303,7 @@ class SourceWatch:
         ``ahead`` summary may leave the next summary to tell that one a power-up tick
         (``bootticks.boot_ahead``, ``told_ahead``)."""
         before = None if self.pose is None or self.pose_s is None else (self.pose_s, self.pose[1])
-        self.pose = next_run(self.pose, t_s, counter, self.pose_s)
+        self.pose = next_run(self.pose, t_s, counter, self.pose_s, self.status_last is not None)
         self.pose_s = t_s
         held = self.pose_order.hear(counter, t_s)  # a hole of its sequence filled (liveheldpose)
         self.ticks.hear_pose(t_s, counter)

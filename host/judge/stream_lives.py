@@ -367,7 +367,8 @@ class StreamLives:
             self._held = heard_in_chunk(self._watch, chunk, self.decoder, page["index"], [])[2]
             tick_pages(chunk, self.decoder, page["index"], self._watch.ticks)
             self._ahead_posed(pose_rows(chunk, self.decoder), self._pose, -1, None)
-            self._pose = poses_before(chunk, self.decoder, page["index"], self._pose)[1]
+            self._pose = poses_before(chunk, self.decoder, page["index"], self._pose,
+                                      self._status is not None)[1]
             self._status = status_before(chunk, self.decoder, page["index"], self._status)[1]
             self._held_before = heldboot.statuses_before(chunk, self.decoder, page["index"],
                                                          self._held_before)[1]
@@ -385,7 +386,7 @@ class StreamLives:
         ticks = tick_pages(chunk, self.decoder, index[good], self._watch.ticks)  # (``heldtick``)
         carried, rows = self._pose, pose_rows(chunk, self.decoder)
         (pose_t, pose_counter, pose_new), self._pose = poses_before(
-            chunk, self.decoder, index[good], self._pose)
+            chunk, self.decoder, index[good], self._pose, self._status is not None)
         self._ahead_posed(rows, carried, -1, int(index[good][0]) if good.any() else None)
         events: list[tuple[int, _Boot | Counts]] = []
         (status_t, status_counter), self._status = status_before(
