@@ -10,6 +10,7 @@ import json
 import os
 import subprocess
 import sys
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
@@ -22,7 +23,7 @@ from odocan.host.judge.monitor import BusMonitor
 from odocan.host.judge.reference import Geometry
 from odocan.host.mqtt.telemetry import RobotTelemetry
 from odocan.sim.contract import DBC_PATH
-from odocan.sim.robot import load
+from odocan.sim.robot import RobotProfile, load
 from tests.fw_watch import Watch, watched
 from tests.log_edit import raise_raw, raise_raw_once
 
@@ -148,12 +149,18 @@ def raw_signals(log: Path, names: tuple[str, ...]) -> list[tuple[float, str, dic
 
 def live_judges(robot: str, log: Path) -> tuple[BusMonitor, RobotTelemetry]:
     """The monitor and the bridge's judge for ``robot``, each fed ``log`` frame by frame."""
-    profile = load(robot)
-    monitor = BusMonitor(profile)
+    with can.LogReader(str(log)) as reader:
+        return fed_judges(load(robot), reader)
+
+
+def fed_judges(profile: RobotProfile, messages: Iterable[can.Message],
+               integrator: str | None = None) -> tuple[BusMonitor, RobotTelemetry]:
+    """The monitor (told ``integrator``, None: from the bus) and the bridge's judge for
+    ``profile``, each fed ``messages`` one by one at their bus time."""
+    monitor = BusMonitor(profile) if integrator is None else BusMonitor(profile, integrator)
     bridge = RobotTelemetry("r1", Geometry.of(profile), "exact",
                             counter_bits=profile.counter_bits)
-    with can.LogReader(str(log)) as reader:
-        for msg in reader:
-            monitor.feed(msg, now_s=msg.timestamp)
-            bridge.feed(msg)
+    for msg in messages:
+        monitor.feed(msg, now_s=msg.timestamp)
+        bridge.feed(msg)
     return monitor, bridge

@@ -33,7 +33,6 @@ from odocan.host.io.logs import read_log
 from odocan.host.judge import bootticks
 from odocan.host.judge.analysis import analyze
 from odocan.host.judge.monitor import BusMonitor
-from odocan.host.judge.reference import Geometry
 from odocan.host.judge.stream_analysis import analyze_file
 from odocan.host.judge.stream_refusal import NotStreamable
 from odocan.host.mqtt.telemetry import RobotTelemetry
@@ -44,6 +43,7 @@ from odocan.sim.scenarios import get_scenario
 from tests import host_frames as hf
 from tests import independent_checker as ic
 from tests.fault_rig import FaultRig
+from tests.judges_cli import fed_judges
 from tests.sweeps import sample
 
 PMIR = load("pmir")
@@ -143,12 +143,7 @@ def _wrong(messages: tuple[can.Message, ...], reboot_at: int, bias_lsb: int = X_
 
 
 def _live(messages: tuple[can.Message, ...]) -> tuple[BusMonitor, RobotTelemetry]:
-    monitor = BusMonitor(PMIR, "exact")
-    bridge = RobotTelemetry("r1", Geometry.of(PMIR), "exact", counter_bits=PMIR.counter_bits)
-    for msg in messages:
-        monitor.feed(msg, now_s=msg.timestamp)
-        bridge.feed(msg)
-    return monitor, bridge
+    return fed_judges(PMIR, messages, "exact")
 
 
 @pytest.mark.parametrize(("reboot_at", "firmware"), [

@@ -31,7 +31,6 @@ from odocan.firmware import frames as fr
 from odocan.host.io.logs import read_log
 from odocan.host.judge.analysis import analyze
 from odocan.host.judge.monitor import BusMonitor
-from odocan.host.judge.reference import Geometry
 from odocan.host.judge.stream_analysis import analyze_file
 from odocan.host.mqtt.telemetry import RobotTelemetry
 from odocan.sim.board import TICK_S
@@ -40,7 +39,7 @@ from odocan.sim.robot import load
 from odocan.sim.scenarios import get_scenario
 from tests.fault_rig import FaultRig
 from tests.independent_checker import HEADING_LSB_RAD, POSITION_LSB_M
-from tests.judges_cli import raise_x_10_mm
+from tests.judges_cli import fed_judges, raise_x_10_mm
 
 PMIR = load("pmir")
 DB = database()
@@ -92,12 +91,7 @@ def _written(messages: tuple[can.Message, ...], path: Path) -> Path:
 
 
 def _live(messages: tuple[can.Message, ...]) -> tuple[BusMonitor, RobotTelemetry]:
-    monitor = BusMonitor(PMIR, "exact")
-    bridge = RobotTelemetry("r1", Geometry.of(PMIR), "exact", counter_bits=PMIR.counter_bits)
-    for msg in messages:
-        monitor.feed(msg, now_s=msg.timestamp)
-        bridge.feed(msg)
-    return monitor, bridge
+    return fed_judges(PMIR, messages, "exact")
 
 
 def _one_life_premise(messages: tuple[can.Message, ...]) -> None:
