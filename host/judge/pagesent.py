@@ -158,10 +158,9 @@ class StreamPages:
         told_by: tuple[PoseRows, tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]],
     ) -> list[tuple[int, Counts]]:
         """The pages told by ``chunk`` (at log position ``offset``): those waiting and the
-        chunk's own whose next ODOM_STATUS frame it holds;
-        ``encoders``: the positions and bus times of the encoder frames carried, ``told_by``:
-        the poses (``pose_enc_rows``) and the positions and COUNTERs of the encoder frames
-        taken carried, this chunk's included."""
+        chunk's own whose next ODOM_STATUS frame it holds; ``encoders``: the positions and bus
+        times of the encoder frames carried, ``told_by``: the poses (``pose_enc_rows``) and the
+        positions and COUNTERs of the encoder frames taken carried, this chunk's included."""
         where, t_s, counter = status_rows(chunk, self._decoder)
         rows = [
             (int(p) + offset, float(t), int(c))
