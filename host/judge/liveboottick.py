@@ -17,9 +17,13 @@ not INIT, less than a cycle before it), refused with its CRC right, is taken int
 the new firmware took it, and the host's sequence restarts at it as the firmware's did
 (``E2EMonitor.retake``, its counts unchanged): the frames after it are judged as the new
 firmware judged them, and the first count page names it by the window's own rule. Not taken:
-a frame whose COUNTER goes back from the latest taken (a late frame the firmware drained after
-a newer one it primed on), nor a repeat less than half a COUNTER lap after it (a twin,
-``livetwins``, or the frame again)."""
+a frame whose COUNTER goes back from the latest taken, that one heard in the summary's tick too
+(a late frame the firmware drained after a newer one it primed on), nor a repeat less than half
+a COUNTER lap after it (a twin, ``livetwins``, or the frame again). The latest taken heard a
+cycle or more before the summary came before the new firmware's first drain: it primed on the
+late frame (pmir and kobuki random 2 ``reboot=3:0.1,delay=0.3:55``: COUNTER 0 sent at 3.04 s,
+held back to 3.095 s, after the on-time COUNTER 4 of 3.08 s; the page OK 6, LOST 5 then counted
+back a lap early, 20.9-23.9 mm and 119-156 mrad beyond, ``tests/test_live_reboot_late_primed.py``)."""
 
 from __future__ import annotations
 
@@ -119,8 +123,9 @@ def boot_frame(tracker: PoseTracker, e2e: E2EMonitor, told: tuple[int, str, int 
         return None
     rows = tracker.window.rows
     step = (frame[0] - int(rows[-1][2])) & ENC_COUNTER_MASK if rows else 1
-    if step >= HALF_LAP or (step == 0 and frame[3] - rows[-1][3] < TWIN_S):
-        return None  # a late frame (its COUNTER going back), a twin or the same frame again
+    if (step >= HALF_LAP and t_s - rows[-1][3] < CYCLE_S) or (
+            step == 0 and frame[3] - rows[-1][3] < TWIN_S):
+        return None  # a late frame after one of the tick (drained first), a twin, the same
     e2e.retake(tick.can_id, frame[0], frame[3])
     take((frame[0], frame[1], frame[2], frame[4]), frame[3])
     return frame
