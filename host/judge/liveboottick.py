@@ -20,8 +20,8 @@ firmware judged them, and the first count page names it by the window's own rule
 a frame whose COUNTER goes back from the latest taken, that one heard in the summary's tick too
 (a late frame the firmware drained after a newer one it primed on), nor a repeat less than half
 a COUNTER lap after it (a twin, ``livetwins``, or the frame again). The latest taken heard a
-cycle or more before the summary came before the new firmware's first drain: it primed on the
-late frame (pmir and kobuki random 2 ``reboot=3:0.1,delay=0.3:55``: COUNTER 0 sent at 3.04 s,
+cycle or more before a summary not held back (its bus time its tick's) came before the new
+firmware's first drain: it primed on the late frame (pmir and kobuki random 2 ``reboot=3:0.1,delay=0.3:55``: COUNTER 0 sent at 3.04 s,
 held back to 3.095 s, after the on-time COUNTER 4 of 3.08 s; the page OK 6, LOST 5 then counted
 back a lap early, 20.9-23.9 mm and 119-156 mrad beyond, ``tests/test_live_reboot_late_primed.py``)."""
 
@@ -104,13 +104,16 @@ class BootTick:
 
 
 def boot_frame(tracker: PoseTracker, e2e: E2EMonitor, told: tuple[int, str, int | None, float],
-               take: Callable[[tuple[int, int, int, int], float], object]) -> Frame | None:
+               take: Callable[[tuple[int, int, int, int], float], object],
+               held_tick_s: float | None = None) -> Frame | None:
     """The refused encoder frame the firmware booted by the summary heard now primed on
     (module docstring; ``told``: the summary's UPTIME s, STATE, the latest encoder frame at it
     when the reboot was told after it, and its bus time s), the host's WHEEL_ENCODERS
     sequence restarted at it, and given to ``take`` as an accepted frame (the judges'
     WHEEL_ENCODERS handler: COUNTER, LEFT_COUNT, RIGHT_COUNT, CTRL_UPTIME; bus time s). None
-    when the summary's rule names an accepted frame (or none)."""
+    when the summary's rule names an accepted frame (or none). ``held_tick_s``: the summary was
+    held back past its tick (``sources.SourceWatch.held_tick_s``): its bus time tells no drain,
+    a late frame is not taken."""
     uptime_s, state, seq, t_s = told
     tick = tracker.boot_tick
     frame, tick.frame = (None if tick.behind else tick.frame), None
@@ -123,8 +126,9 @@ def boot_frame(tracker: PoseTracker, e2e: E2EMonitor, told: tuple[int, str, int 
         return None
     rows = tracker.window.rows
     step = (frame[0] - int(rows[-1][2])) & ENC_COUNTER_MASK if rows else 1
-    if (step >= HALF_LAP and t_s - rows[-1][3] < CYCLE_S) or (
-            step == 0 and frame[3] - rows[-1][3] < TWIN_S):
+    late = step >= HALF_LAP and (  # the newer one drained first (the module docstring)
+        held_tick_s is not None or t_s - rows[-1][3] < CYCLE_S)
+    if late or (step == 0 and frame[3] - rows[-1][3] < TWIN_S):
         return None  # a late frame after one of the tick (drained first), a twin, the same
     e2e.retake(tick.can_id, frame[0], frame[3])
     take((frame[0], frame[1], frame[2], frame[4]), frame[3])

@@ -412,7 +412,7 @@ class BusMonitor:
         the first pose after it): its counters restarted, not frames lost or out of sequence."""
         lost = rebooted(self, self.config, self._bus_time_s)  # its configs were in its RAM
         boot_frame(self.tracker, self.e2e, (uptime_s, state, seq, self._bus_time_s),
-                   self._take_encoders)
+                   self._take_encoders, self.sources.held_tick_s)
         detail += ": " + src.start_new_life(self.tracker, self.e2e, self.db, uptime_s, state, seq,
                                             self.sources)
         self.first_after.new_life()

@@ -314,7 +314,8 @@ class RobotTelemetry(CommandFollowing):
         self.reboots += 1
         lost = rebooted(self, self.config, t_s)  # its staging and configs were in its RAM
         self.config_doubt = None  # and the config in doubt with them
-        boot_frame(self.tracker, self.e2e, (uptime_s, state, seq, t_s), self._on_encoders)
+        boot_frame(self.tracker, self.e2e, (uptime_s, state, seq, t_s), self._on_encoders,
+                   self.sources.held_tick_s)
         start_new_life(self.tracker, self.e2e, self.db, uptime_s, state, seq, self.sources)
         # its first ticks' (bootticks; its power-up pose's, its summary held back: bootnamed)
         since_s = self.tracker.powerup.life_from_s(self.sources.life_from_s) - SAME_TICK_S
