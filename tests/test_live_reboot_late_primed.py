@@ -76,7 +76,8 @@ def _first_heading_off_lsb(robot: str, log: Path) -> tuple[float, float, float]:
                     first = next(e for e in reversed(encoders) if e[1] == s["ENC_COUNTER"])
                     heading_lsb = s["HEADING"]
                 elif s["COUNTER"] == 0 and (s["X"], s["HEADING"]) == (0, 0):  # held back too
-                    assert first is not None and heading_lsb is not None
+                    assert first is not None
+                    assert heading_lsb is not None
                     named = next(e for e in reversed(encoders)
                                  if e[1] == s["ENC_COUNTER"] and e[0] < first[0])
                     ahead = next(e for e in reversed(encoders) if e[0] < named[0]

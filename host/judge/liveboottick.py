@@ -21,9 +21,10 @@ a frame whose COUNTER goes back from the latest taken, that one heard in the sum
 (a late frame the firmware drained after a newer one it primed on), nor a repeat less than half
 a COUNTER lap after it (a twin, ``livetwins``, or the frame again). The latest taken heard a
 cycle or more before a summary not held back (its bus time its tick's) came before the new
-firmware's first drain: it primed on the late frame (pmir and kobuki random 2 ``reboot=3:0.1,delay=0.3:55``: COUNTER 0 sent at 3.04 s,
-held back to 3.095 s, after the on-time COUNTER 4 of 3.08 s; the page OK 6, LOST 5 then counted
-back a lap early, 20.9-23.9 mm and 119-156 mrad beyond, ``tests/test_live_reboot_late_primed.py``)."""
+firmware's first drain: it primed on the late frame (pmir and kobuki random 2
+``reboot=3:0.1,delay=0.3:55``: COUNTER 0 sent at 3.04 s, held back to 3.095 s, after the
+on-time COUNTER 4 of 3.08 s; the page OK 6, LOST 5 then counted back a lap early, 20.9-23.9 mm
+and 119-156 mrad beyond; ``tests/test_live_reboot_late_primed.py``)."""
 
 from __future__ import annotations
 
