@@ -36,6 +36,7 @@ from odocan.host.judge.primed import within_named
 
 if TYPE_CHECKING:
     from odocan.host.judge.bootnamed import LivePowerUp
+    from odocan.host.judge.livepose import FramePose
 
 HELD_POWERUP_S = HALF_LAP * CYCLE_S  # a power-up pose held back past its summary: this soon
 
@@ -76,3 +77,8 @@ def bounded_start(encoders: tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]],
         return at
     stepped = within_named(encoders, at, named)
     return named if stepped <= word.floor < named else stepped
+
+
+def power_up_pose(pose: FramePose) -> bool:
+    """Whether ``pose`` is a power-up pose, (0, 0, 0): at the frame its life primed on."""
+    return pose.x_m == 0.0 and pose.y_m == 0.0 and pose.heading_rad == 0.0

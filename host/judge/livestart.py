@@ -12,7 +12,12 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.judge.liveadopted import UNHEARD_BOOT
-from odocan.host.judge.livebootbound import BootWord, bounded_start, old_life_floor
+from odocan.host.judge.livebootbound import (
+    BootWord,
+    bounded_start,
+    old_life_floor,
+    power_up_pose,
+)
 from odocan.host.judge.livefit import LiveFit
 from odocan.host.judge.liveplacing import place_reference
 from odocan.host.judge.livepose import FramePose, Sample
@@ -63,7 +68,8 @@ def start_reference(tracker: PoseTracker, pose: FramePose, counts: list[Counted]
     held_samples = tracker.lives.held
     for heard in poses:
         at = raw.at.get(heard.seq)
-        if at is not None and stalled_from is not None:
+        if at is not None and stalled_from is not None and not (
+                heard.seq == stalled_from and power_up_pose(heard)):  # (livebootstall)
             at, stalled_from = place_reference(tracker, heard, at), None
         held = held_samples.pop(heard.seq, None)
         if at is not None and held is not None:  # settled again, judged now
