@@ -18,6 +18,8 @@ the allowance, pmir / kobuki), now all within 0.1 mm:
   halt naming frames the host's E2E check refused (``livebootstall``). Without the delay too:
   pmir random 5 ``reboot=2.5:0.05,stall=2.56:0.3`` 1.84 mm (``NO_DELAY``).
 
+Not yet: seed 12, its boot summary INIT (``INIT_XFAIL``: no power-up pose bounds the count).
+
 The start is checked independently, as ``tests/test_reboot_halted_first_tick.py`` does: the
 heading is an exact function of the counts since the frame the power-up pose names (float64,
 cantools decoding), so the firmware's own HEADING tells where it primed, whatever it merged.
@@ -42,11 +44,19 @@ REBOOT_S, NAMED_WITHIN_S = 2.5, 0.5
 FAULTS = "reboot=2.5:0.05,stall=2.56:0.3,delay=0.2:30"
 NO_DELAY = "reboot=2.5:0.05,stall=2.56:0.3"
 Drive = tuple[str, int, str]  # robot, seed, faults
+INIT_BOOT: Drive = ("pmir", 12, FAULTS)  # its boot summary INIT: no power-up pose (0, 0, 0)
 DRIVES: tuple[Drive, ...] = (
     ("pmir", 1, FAULTS), ("pmir", 3, FAULTS), ("pmir", 4, FAULTS), ("pmir", 5, FAULTS),
-    ("pmir", 6, FAULTS), ("kobuki", 4, FAULTS), ("kobuki", 6, FAULTS), ("pmir", 5, NO_DELAY))
+    ("pmir", 6, FAULTS), ("kobuki", 4, FAULTS), ("kobuki", 6, FAULTS), ("pmir", 5, NO_DELAY),
+    INIT_BOOT)
 CASES = [pytest.param(d, id=f"{d[0]}-{d[1]}{'' if d[2] == FAULTS else '-no-delay'}")
-         for d in DRIVES]
+         for d in DRIVES[:-1]]
+INIT_XFAIL = pytest.param(INIT_BOOT, id="pmir-12", marks=pytest.mark.xfail(strict=True, reason=(
+    "POSE WRONG live, 2.50 mm beyond and 44.0 mrad (main: 19.68 mm): the boot summary INIT "
+    "(the frames of 2.54 and 2.55 s held back past its first tick), the firmware primed on the "
+    "next frame (2.56 s, COUNTER 0: its HEADING within 0.5 LSB from there, 459 LSB from 2.72 s); "
+    "the first count page (OK 9, LOST 15) counted a lap late to 2.72 s (the halt hid 16 lost "
+    "frames) and no power-up pose bounds it (livebootbound)")))
 
 
 @pytest.fixture(scope="module")
@@ -111,12 +121,12 @@ def test_the_firmware_primed_where_its_power_up_pose_named(
     assert worst_lsb <= 1.0, worst_lsb
 
 
-@pytest.mark.parametrize("drive", CASES)
+@pytest.mark.parametrize("drive", [*CASES, pytest.param(INIT_BOOT, id="pmir-12")])
 def test_both_analyses_pass(drives: dict[Drive, Path], drive: Drive) -> None:
     assert both_analyses(drives[drive]) == [0, 0]
 
 
-@pytest.mark.parametrize("drive", CASES)
+@pytest.mark.parametrize("drive", [*CASES, INIT_XFAIL])
 def test_the_live_judges_pass_the_correct_firmware(
         drives: dict[Drive, Path], drive: Drive) -> None:
     """Before (mm beyond the allowance, monitor and bridge alike): pmir 1, 3, 4, 5, 6: 0.32,
@@ -129,7 +139,7 @@ def test_the_live_judges_pass_the_correct_firmware(
         assert tracker.vs_reference.max_dheading_rad <= HEADING_LSB_RAD
 
 
-@pytest.mark.parametrize("drive", CASES)
+@pytest.mark.parametrize("drive", [*CASES, pytest.param(INIT_BOOT, id="pmir-12")])
 def test_x_10_mm_off_after_the_reset_is_wrong_live(
         drives: dict[Drive, Path], drive: Drive, tmp_path: Path) -> None:
     tampered = tmp_path / "tampered.log"
