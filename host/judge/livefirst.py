@@ -228,6 +228,8 @@ def left_out_first(tracker: PoseTracker, pose: FramePose, t_s: float, queued: bo
             and not tracker.reference_starts and tracker.integrator is not None):
         lives.finish_boot(0, first_life=True)  # from (0, 0, 0) on frame 0, as analyze
     tracker.first.stalled_from = primed  # (``LiveDistance``: its merged step's allowance)
+    if lives.boot is not None and lives.boot[0] >= 0 and not lives.boot_poses:
+        lives.stalled_waiting = True  # a reboot's, placed at its start (``livebootstall``)
     if tracker.raw.odometry is not None:
         rule.owe_from(primed)  # placed at the next sample, bounded from that frame
         tracker.losses.stalled_first(primed)  # the frames between: the placement's, no loss's

@@ -12,6 +12,12 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.judge.liveadopted import UNHEARD_BOOT
+from odocan.host.judge.livebootbound import (
+    BootWord,
+    bounded_start,
+    old_life_floor,
+    power_up_pose,
+)
 from odocan.host.judge.livefit import LiveFit
 from odocan.host.judge.liveplacing import place_reference
 from odocan.host.judge.livepose import FramePose, Sample
@@ -20,7 +26,7 @@ from odocan.host.judge.livesilentboot import SilentBoot
 from odocan.host.judge.livewindow import Counted, window_counts
 from odocan.host.judge.pagesent import counted_from, sent_s
 from odocan.host.judge.pagetick import TICK_GAP_S, page_after, page_held_back
-from odocan.host.judge.primed import counted_start, within_named
+from odocan.host.judge.primed import counted_start
 from odocan.host.judge.reference import ReferenceOdometry
 
 if TYPE_CHECKING:
@@ -62,7 +68,8 @@ def start_reference(tracker: PoseTracker, pose: FramePose, counts: list[Counted]
     held_samples = tracker.lives.held
     for heard in poses:
         at = raw.at.get(heard.seq)
-        if at is not None and stalled_from is not None:
+        if at is not None and stalled_from is not None and not (
+                heard.seq == stalled_from and power_up_pose(heard)):  # (livebootstall)
             at, stalled_from = place_reference(tracker, heard, at), None
         held = held_samples.pop(heard.seq, None)
         if at is not None and held is not None:  # settled again, judged now
@@ -85,6 +92,7 @@ class Lives:
         self.boot_named = False  # ``boot``'s frame named by its power-up pose (``bootnamed``)
         self.boot_unnamed = -1  # ... the guess without it (its first pose after not counting on)
         self.boot_tick_named = False  # ... that pose heard in the boot summary's tick
+        self.boot_floor = -1  # ... the old life's latest sampled frame (``livebootbound``)
         self.held: dict[int, Sample] = {}  # ... as settled (unjudged), by encoder frame
         self.pending: FramePose | None = None  # the first pose, heard before the integrator
         self.backlog_counts: list[Counted] = []  # the frames since the pending pose's
@@ -147,6 +155,7 @@ class Lives:
         self.boot_tick_named = self.boot_named and pose is not None and \
             0.0 <= now_s - pose[0] < TICK_GAP_S
         self.boot_unnamed = guess if unnamed is None else unnamed
+        self.boot_floor = old_life_floor(self._tracker.pairs.sampled, guess)
         self.boot_poses, self.held, self.page = [], {}, None
         self.stalled_waiting = False
 
@@ -234,13 +243,16 @@ class Lives:
 
     def _within_named(self, encoders: tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]],
                       at: int) -> int:
-        """A count page's frame ``at`` no later than the waiting boot's power-up pose's word
-        (``primed.within_named``), when that pose came in the boot summary's tick: one heard
-        20..60 ms before it may be the old firmware's, the new one's lost on the bus, and the
-        count right (``tests/test_reboot_lost_powerup.py``)."""
-        if self.boot is None or not self.boot_tick_named:
+        """A count page's frame ``at`` bounded by the waiting boot's power-up pose's word
+        (``livebootbound``: no later than it, ``primed.within_named``), when that pose came in
+        the boot summary's tick (one heard 20..60 ms before it may be the old firmware's, the
+        new one's lost on the bus, and the count right: ``tests/test_reboot_lost_powerup.py``)
+        or held back just after it."""
+        if self.boot is None:
             return at
-        return within_named(encoders, at, self.boot[0])
+        word = BootWord(self.boot[0] if self.boot_tick_named else None, self.boot_unnamed,
+                        self.boot[1] - BOOT_COUNT_WAIT_S, self.boot_floor)
+        return bounded_start(encoders, at, word, self._tracker.powerup)
 
     def _named(self) -> bool:
         """Whether the waiting boot's frame is its power-up pose's word (``await_boot``)."""

@@ -1,0 +1,84 @@
+"""Bounds on the frame a rebooted firmware's first count page counts back to, live (issue #11: "a
+FAIL must never blame a correct firmware").
+
+A reset, the MCU halted right after the new life's first tick with its mailbox full, and frames
+held back on the bus (lockstep ``--scenario random --duration 7 --faults
+reboot=2.5:0.05,stall=2.56:0.3,delay=0.2:30``, ``tests/test_reboot_halt_delay.py``): the firmware
+took the frames its mailbox kept, which are not those the host's E2E sequence took in bus order
+(the late ones it refused), so its first count page (``primed.counted_start``) counted back over
+the live window can land anywhere. ``analyze`` PASSed every seed; the monitor and the bridge said
+POSE WRONG, the life started on the wrong frame:
+
+* seed 3 (pmir 124.9 mm, 169.7 mrad beyond; kobuki 158.5 mm): the page (ENC_E2E_OK 3,
+  ENC_E2E_LOST 11) counted back to the frame of 2.80 s, after the one the power-up pose named
+  (2.55 s), stepped back a lap to the frame of 2.48 s (``within_named``), which the old
+  firmware's pose of 2.481 s had named, 7 frames before it. The new
+  firmware's mailbox was empty at its reset: it took no frame the old firmware had taken. A count
+  at or before the latest frame a sample of the old life was made of (``floor``) is wrong: the
+  power-up pose's frame stands (``bounded_start``).
+* seed 6 (pmir 149.7 mm, 132.0 mrad; kobuki 151.9 mm): the power-up pose was held back 30 ms,
+  heard after the boot summary, so the summary did not take its word; the page (OK 10, LOST 14)
+  counted back to 2.71 s, a COUNTER lap late (the halt hid 16 lost frames, ``within_named``).
+  A power-up pose heard less than half an encoder COUNTER lap after the summary, naming the
+  frame the summary's own rule named, is its word too (``held_named``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from typing import TYPE_CHECKING, NamedTuple
+
+import numpy as np
+import numpy.typing as npt
+
+from odocan.host.judge.livewindow import CYCLE_S, HALF_LAP
+from odocan.host.judge.primed import within_named
+
+if TYPE_CHECKING:
+    from odocan.host.judge.bootnamed import LivePowerUp
+    from odocan.host.judge.livepose import FramePose
+
+HELD_POWERUP_S = HALF_LAP * CYCLE_S  # a power-up pose held back past its summary: this soon
+
+
+class BootWord(NamedTuple):
+    """What a waiting boot knows of its frame (``livestart.Lives``): the frame (seq) its power-up
+    pose named in the summary's tick (None: none), the summary's own rule's frame, the summary's
+    bus time (s) and the latest frame a sample of the old life was made of (-1: none)."""
+
+    named: int | None
+    unnamed: int
+    summary_s: float
+    floor: int
+
+
+def old_life_floor(sampled: Iterable[int], guess: int) -> int:
+    """The latest encoder frame (seq) before ``guess`` an on-board sample was made of when a
+    reboot is told (``livehalves.HalfPairs.sampled``): the old firmware took it; -1 when none."""
+    return max((seq for seq in sampled if seq < guess), default=-1)
+
+
+def held_named(powerup: LivePowerUp, word: BootWord) -> int | None:
+    """The frame a power-up pose heard after the summary (held back less than
+    ``HELD_POWERUP_S``) names, when it is the summary's own rule's frame; else None."""
+    latest = powerup.latest
+    if latest is None or latest[1] is None or latest[1] != word.unnamed:
+        return None
+    return latest[1] if 0.0 <= latest[0] - word.summary_s < HELD_POWERUP_S else None
+
+
+def bounded_start(encoders: tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]], at: int,
+                  word: BootWord, powerup: LivePowerUp) -> int:
+    """A count page's frame ``at`` bounded by the boot's power-up pose's word (module docstring):
+    no later than it (``primed.within_named``: whole laps back), and that frame itself when the
+    count lands at or before the old life's ``floor``; ``at`` when no power-up pose named one."""
+    named = word.named if word.named is not None else held_named(powerup, word)
+    if named is None:
+        return at
+    stepped = within_named(encoders, at, named)
+    return named if stepped <= word.floor < named else stepped
+
+
+def power_up_pose(pose: FramePose) -> bool:
+    """Whether ``pose`` is a power-up pose, (0, 0, 0): at the frame its life primed on."""
+    return pose.x_m == 0.0 and pose.y_m == 0.0 and pose.heading_rad == 0.0
