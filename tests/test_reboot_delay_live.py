@@ -36,10 +36,12 @@ from odocan.sim.contract import database
 from odocan.sim.robot import load
 from tests.independent_checker import HEADING_LSB_RAD, POSITION_LSB_M
 from tests.judges_cli import both_analyses, correct_drive, live_judges, raise_x_10_mm, raw_signals
+from tests.test_replay_speed_live import played
 
 ROBOTS = ("pmir", "kobuki")
 REBOOT_S = 3.0
 DRIVE = ("random", 3, 7, f"reboot={REBOOT_S:g},delay=0.5:20")  # scenario, seed, duration, faults
+SPEEDS = (0.5, 0.7, 2.0, 4.0)
 
 
 @pytest.fixture(scope="module")
@@ -92,15 +94,26 @@ def test_the_live_judges_pass_the_correct_firmware(drives: dict[str, Path], robo
     6034.97 and 7873.44 mrad, pace 0.696; the bridge fed as it came 0.0547 and 0.0588 mm."""
     monitor, bridge = live_judges(robot, drives[robot])
     paced, pace = _paced_bridge(robot, drives[robot])
-    assert monitor.pace.facts.pace == 1.0
-    assert pace.facts.pace == 1.0
     for judge in (monitor, bridge, paced):
         tracker = judge.tracker
         assert tracker.reference_starts >= 2
         assert tracker.max_beyond_allowance_m <= POSITION_LSB_M, tracker.max_beyond_allowance_m
         assert tracker.vs_reference.max_dheading_rad <= HEADING_LSB_RAD
+    assert monitor.pace.facts.pace == 1.0  # a live bus: its times kept
+    assert pace.facts.pace == 1.0
     assert [e["t_s"] for e in monitor.events if e["kind"] == "reboot"] == pytest.approx(
         [REBOOT_S], abs=0.02)
+
+
+@pytest.mark.parametrize("speed", SPEEDS, ids=str)
+def test_the_reordered_bus_replayed_at_speed_n_is_measured_so(
+        drives: dict[str, Path], speed: float) -> None:
+    """The pmir drive as ``replay --realtime --speed N`` delivers it (``played``: its stamps /
+    N, in its reordered order): the pace within 0.1 % (before: about 0.7 x N)."""
+    pace = LivePace(database())
+    for msg in played(drives["pmir"], speed):
+        pace.stamped(msg)
+    assert pace.pace == pytest.approx(speed, rel=1e-3)
 
 
 @pytest.mark.parametrize("robot", ROBOTS)
