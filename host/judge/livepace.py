@@ -64,6 +64,8 @@ class LivePace:
         self._data_ids = None if config is None else config.data_ids
         self.facts = PaceFacts(pace=1.0 if self._data_ids is None else None)
         self._pairs = EncoderPairs()  # the CRC-right ones' one-step intervals (pacepairs)
+        self._last: tuple[float, int] | None = None  # (bus time, COUNTER) of the last CRC-right
+        self._in_order: list[float] = []  # one-step intervals of frames heard in turn
         self._first_s: float | None = None  # the bus time the first CRC-right one was heard
         self._intervals: list[float] = []
         self._origin = (0.0, 0.0)  # (bus time as heard, drive time) the map counts from
@@ -96,13 +98,17 @@ class LivePace:
 
     def _measure(self, t_s: float, data: bytes) -> None:
         """One encoder frame heard: the one-step intervals it closes (``pacepairs``, in any
-        order) measure (or narrow) the pace."""
+        order) measure (or narrow) the pace; while undecided, so does its interval from the
+        frame heard just before it when one COUNTER step after it (``_decide``)."""
         assert self._data_ids is not None
         counter = data[1] & ENC_COUNTER_MASK
         if crc8h2f_p02_one(data, self._data_ids[counter]) != data[0]:
             return
         if self._first_s is None:
             self._first_s = t_s
+        last, self._last = self._last, (t_s, counter)
+        if last is not None and (counter - last[1]) & ENC_COUNTER_MASK == 1 and t_s >= last[0]:
+            self._in_order.append(t_s - last[0])
         for interval_s in self._pairs.intervals(t_s, counter, data):
             self._sum_s, self._count = self._sum_s + interval_s, self._count + 1
             if self.facts.pace is None:
@@ -113,16 +119,22 @@ class LivePace:
                 self._repace(t_s, ENC_CYCLE_S * self._count / self._sum_s)
 
     def _decide(self, t_s: float) -> None:
-        """The pace from the intervals measured: a live bus's 1.0 unless both their mean and
-        their mean without silences (``_mean_period_s``) lie outside ``LIVE_BAND`` (a live bus
-        with a silence stepping the COUNTER by one stays live; a replay heard in bursts has
-        no interval left but its bursts' gaps and zeros). The pace is then their plain mean's,
-        which a receiver's bursts do not bias."""
+        """The pace from the intervals measured: a live bus's 1.0 unless their mean and their
+        mean without silences (``_mean_period_s``) lie outside ``LIVE_BAND``, both for the pairs
+        in any order and for the frames heard in order (a live bus with a silence stepping the
+        COUNTER by one stays live; a replay heard in bursts has no interval left but its bursts'
+        gaps and zeros; a frame held back 15 periods or more, ``delay=0.5:150``, comes one
+        COUNTER step ahead of the one furthest ahead, where ``pacepairs`` reads it: pace 1.27,
+        the frames heard in order 1.001; on a bus in order both are the same). The pace is then
+        the plain mean's of the pairs, which neither a receiver's bursts nor a reorder bias."""
         first_s = t_s if self._first_s is None else self._first_s  # (a log's first at 0.0)
         self.facts.decided_after_s = t_s - first_s
-        paces = [_pace_of(sum(self._intervals) / len(self._intervals)),
-                 _pace_of(_mean_period_s(self._intervals))]
-        self._intervals = []
+        paces = [_pace_of(sum(self._intervals) / len(self._intervals))]
+        for intervals in (self._intervals, self._in_order):
+            if intervals:
+                paces += [_pace_of(sum(intervals) / len(intervals)),
+                          _pace_of(_mean_period_s(intervals))]
+        self._intervals, self._in_order = [], []
         if any(LIVE_BAND[0] <= pace <= LIVE_BAND[1] for pace in paces):
             self.facts.pace = 1.0
             return
