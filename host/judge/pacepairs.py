@@ -17,7 +17,9 @@ closes the pair with each sequence neighbour heard before it: ``t - t_before`` (
 ``t_after - t`` (<= 0, heard out of order), each pair once. The intervals of consecutive pairs
 sum to their span, whatever the order the frames came in, so their mean is the period's
 (``delay=0.5:20`` at 1x: 10.0 ms, at ``--speed 2``: 5.0 ms). A pair whose earlier-heard frame
-is stamped later is none (the clock went back: a replay restarted)."""
+is stamped later is none (the clock went back: a replay restarted). A frame held back more than
+``BEHIND`` periods is read ahead (15 behind is one ahead to a 4-bit COUNTER): ``delay=0.5:150``
+reads 1.27x; ``livepace`` then also asks the frames heard in order."""
 
 from __future__ import annotations
 
