@@ -10,8 +10,10 @@ after it for a counter restart the firmware never made, and blamed a correct fir
 (issue #11: POSE WRONG 1109.8 mm, DISTANCE 237.9 mm; PASS at ``--speed 1``).
 
 ``LivePace`` measures the bus's pace from WHEEL_ENCODERS itself, the motor controller's cadence:
-the intervals between CRC-right frames one COUNTER step apart (no frame lost between them). It
-decides on the first ``PACE_INTERVALS``: their mean, and their mean with those over
+the intervals between CRC-right frames one COUNTER step apart (no frame lost between them), in
+whichever order they came (``host.judge.pacepairs``: a live bus reordered by ``delay=0.5:20`` was
+taken for a replay at ``--speed 0.7``, its times compressed, POSE WRONG on a correct firmware).
+It decides on the first ``PACE_INTERVALS``: their mean, and their mean with those over
 ``SILENCE_PERIODS`` mean periods left out (a silence of 17, 33, ... periods steps the COUNTER by
 one too); a bus is live unless both lie outside ``LIVE_BAND`` (no sender's clock is that far
 off). A live bus's times are kept as they are, for good. On another, every frame is stamped on
@@ -31,6 +33,7 @@ from dataclasses import dataclass
 import can
 from cantools.database.can import Database
 
+from odocan.host.judge.pacepairs import EncoderPairs
 from odocan.host.protocol.busfacts import ENC_COUNTER_MASK, ENC_CYCLE_S
 from odocan.host.protocol.decode import frame_key
 from odocan.host.protocol.e2e import e2e_messages
@@ -60,7 +63,9 @@ class LivePace:
         self._id = -1 if encoders is None or encoders.is_extended_frame else encoders.frame_id
         self._data_ids = None if config is None else config.data_ids
         self.facts = PaceFacts(pace=1.0 if self._data_ids is None else None)
+        self._pairs = EncoderPairs()  # the CRC-right ones' one-step intervals (pacepairs)
         self._last: tuple[float, int] | None = None  # (bus time, COUNTER) of the last CRC-right
+        self._in_order: list[float] = []  # one-step intervals of frames heard in turn
         self._first_s: float | None = None  # the bus time the first CRC-right one was heard
         self._intervals: list[float] = []
         self._origin = (0.0, 0.0)  # (bus time as heard, drive time) the map counts from
@@ -92,8 +97,9 @@ class LivePace:
         return stamped
 
     def _measure(self, t_s: float, data: bytes) -> None:
-        """One encoder frame heard: its interval from the last CRC-right one, when one COUNTER
-        step apart, measures (or narrows) the pace."""
+        """One encoder frame heard: the one-step intervals it closes (``pacepairs``, in any
+        order) measure (or narrow) the pace; while undecided, so does its interval from the
+        frame heard just before it when one COUNTER step after it (``_decide``)."""
         assert self._data_ids is not None
         counter = data[1] & ENC_COUNTER_MASK
         if crc8h2f_p02_one(data, self._data_ids[counter]) != data[0]:
@@ -101,26 +107,34 @@ class LivePace:
         if self._first_s is None:
             self._first_s = t_s
         last, self._last = self._last, (t_s, counter)
-        if last is None or (counter - last[1]) & ENC_COUNTER_MASK != 1 or t_s < last[0]:
-            return
-        self._sum_s, self._count = self._sum_s + t_s - last[0], self._count + 1
-        if self.facts.pace is None:
-            self._intervals.append(t_s - last[0])
-            if len(self._intervals) >= PACE_INTERVALS:
-                self._decide(t_s)
-        elif self._count >= NARROWED_AFTER:
-            self._repace(t_s, ENC_CYCLE_S * self._count / self._sum_s)
+        if last is not None and (counter - last[1]) & ENC_COUNTER_MASK == 1 and t_s >= last[0]:
+            self._in_order.append(t_s - last[0])
+        for interval_s in self._pairs.intervals(t_s, counter, data):
+            self._sum_s, self._count = self._sum_s + interval_s, self._count + 1
+            if self.facts.pace is None:
+                self._intervals.append(interval_s)
+                if len(self._intervals) >= PACE_INTERVALS:
+                    self._decide(t_s)
+            elif self.facts.pace != 1.0 and self._count >= NARROWED_AFTER:
+                self._repace(t_s, ENC_CYCLE_S * self._count / self._sum_s)
 
     def _decide(self, t_s: float) -> None:
-        """The pace from the intervals measured: a live bus's 1.0 unless both their mean and
-        their mean without silences (``_mean_period_s``) lie outside ``LIVE_BAND`` (a live bus
-        with a silence stepping the COUNTER by one stays live; a replay heard in bursts has
-        no interval left but its bursts' gaps and zeros). The pace is then their plain mean's,
-        which a receiver's bursts do not bias."""
-        self.facts.decided_after_s = t_s - (self._first_s or t_s)
-        paces = [_pace_of(sum(self._intervals) / len(self._intervals)),
-                 _pace_of(_mean_period_s(self._intervals))]
-        self._intervals = []
+        """The pace from the intervals measured: a live bus's 1.0 unless their mean and their
+        mean without silences (``_mean_period_s``) lie outside ``LIVE_BAND``, both for the pairs
+        in any order and for the frames heard in order (a live bus with a silence stepping the
+        COUNTER by one stays live; a replay heard in bursts has no interval left but its bursts'
+        gaps and zeros; a frame held back 15 periods or more, ``delay=0.5:150``, comes one
+        COUNTER step ahead of the one furthest ahead, where ``pacepairs`` reads it: pace 1.27,
+        the frames heard in order 1.001; on a bus in order both are the same). The pace is then
+        the plain mean's of the pairs, which neither a receiver's bursts nor a reorder bias."""
+        first_s = t_s if self._first_s is None else self._first_s  # (a log's first at 0.0)
+        self.facts.decided_after_s = t_s - first_s
+        paces = [_pace_of(sum(self._intervals) / len(self._intervals))]
+        for intervals in (self._intervals, self._in_order):
+            if intervals:
+                paces += [_pace_of(sum(intervals) / len(intervals)),
+                          _pace_of(_mean_period_s(intervals))]
+        self._intervals, self._in_order = [], []
         if any(LIVE_BAND[0] <= pace <= LIVE_BAND[1] for pace in paces):
             self.facts.pace = 1.0
             return
