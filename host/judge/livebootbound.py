@@ -21,6 +21,12 @@ POSE WRONG, the life started on the wrong frame:
   counted back to 2.71 s, a COUNTER lap late (the halt hid 16 lost frames, ``within_named``).
   A power-up pose heard less than half an encoder COUNTER lap after the summary, naming the
   frame the summary's own rule named, is its word too (``held_named``).
+* seed 12 (pmir 2.50 mm, 44.0 mrad beyond; kobuki 3.87 mm, 63.5 mrad): the frames of the new
+  life's first tick were held back, its boot summary said INIT and no power-up pose followed; the
+  firmware primed on the next frame it received (2.56 s: its mailbox keeps the oldest), but the
+  page (OK 9, LOST 15) counted back to 2.72 s, a lap late. An INIT firmware primes on a frame
+  after its summary, the earliest its mailbox kept: a count after the summary's next frame is
+  stepped back whole laps while it stays at or after that frame (``after_init``).
 """
 
 from __future__ import annotations
@@ -33,6 +39,7 @@ import numpy.typing as npt
 
 from odocan.host.judge.livewindow import CYCLE_S, HALF_LAP
 from odocan.host.judge.primed import within_named
+from odocan.host.protocol.busfacts import ENC_COUNTER_MASK
 
 if TYPE_CHECKING:
     from odocan.host.judge.bootnamed import LivePowerUp
@@ -44,12 +51,14 @@ HELD_POWERUP_S = HALF_LAP * CYCLE_S  # a power-up pose held back past its summar
 class BootWord(NamedTuple):
     """What a waiting boot knows of its frame (``livestart.Lives``): the frame (seq) its power-up
     pose named in the summary's tick (None: none), the summary's own rule's frame, the summary's
-    bus time (s) and the latest frame a sample of the old life was made of (-1: none)."""
+    bus time (s), the latest frame a sample of the old life was made of (-1: none) and whether
+    the summary said INIT (``unnamed`` then the frame after it)."""
 
     named: int | None
     unnamed: int
     summary_s: float
     floor: int
+    init: bool = False
 
 
 def old_life_floor(sampled: Iterable[int], guess: int) -> int:
@@ -74,9 +83,24 @@ def bounded_start(encoders: tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]],
     count lands at or before the old life's ``floor``; ``at`` when no power-up pose named one."""
     named = word.named if word.named is not None else held_named(powerup, word)
     if named is None:
-        return at
+        return after_init(encoders, at, word.unnamed) if word.init else at
     stepped = within_named(encoders, at, named)
     return named if stepped <= word.floor < named else stepped
+
+
+def after_init(encoders: tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]], at: int,
+               earliest: int) -> int:
+    """A count page's frame ``at`` of a firmware whose boot summary said INIT, stepped back
+    whole COUNTER laps to the earliest frame of its COUNTER at or after ``earliest`` (the
+    frame after the summary: it primed on one it received after, a halt hiding whole laps
+    from its ENC_E2E_LOST); ``at`` when none is there."""
+    positions, counter = encoders
+    i = int(np.searchsorted(positions, at))
+    if at <= earliest or i >= len(positions) or positions[i] != at:
+        return at
+    same = np.flatnonzero((positions >= earliest) & (positions < at)
+                          & ((counter - counter[i]) & ENC_COUNTER_MASK == 0))
+    return int(positions[same[0]]) if len(same) else at
 
 
 def power_up_pose(pose: FramePose) -> bool:

@@ -93,6 +93,7 @@ class Lives:
         self.boot_unnamed = -1  # ... the guess without it (its first pose after not counting on)
         self.boot_tick_named = False  # ... that pose heard in the boot summary's tick
         self.boot_floor = -1  # ... the old life's latest sampled frame (``livebootbound``)
+        self.boot_init = False  # ... its boot summary said INIT (``livebootbound``)
         self.held: dict[int, Sample] = {}  # ... as settled (unjudged), by encoder frame
         self.pending: FramePose | None = None  # the first pose, heard before the integrator
         self.backlog_counts: list[Counted] = []  # the frames since the pending pose's
@@ -144,12 +145,15 @@ class Lives:
     def drop_backlog(self) -> None:
         self.pending, self.backlog_counts, self.backlog_poses = None, [], []
 
-    def await_boot(self, guess: int, now_s: float, unnamed: int | None = None) -> None:
+    def await_boot(self, guess: int, now_s: float, unnamed: int | None = None,
+                   init: bool = False) -> None:
         """A reboot: the new life's samples wait for the frame it primed on (``guess`` until
         its first count page names it) up to ``BOOT_COUNT_WAIT_S`` after ``now_s``;
         ``unnamed``: its power-up pose named ``guess`` (``bootnamed``), the page's word not
-        taken over it once the first pose after the summary counted on from it, else this."""
+        taken over it once the first pose after the summary counted on from it, else this;
+        ``init``: its boot summary said INIT (``livebootbound.after_init``)."""
         self.boot = (guess, now_s + BOOT_COUNT_WAIT_S)
+        self.boot_init = init
         self.boot_named = unnamed is not None
         pose = self._tracker.powerup.latest  # the named pose in the summary's tick: the boot's
         self.boot_tick_named = self.boot_named and pose is not None and \
@@ -251,7 +255,7 @@ class Lives:
         if self.boot is None:
             return at
         word = BootWord(self.boot[0] if self.boot_tick_named else None, self.boot_unnamed,
-                        self.boot[1] - BOOT_COUNT_WAIT_S, self.boot_floor)
+                        self.boot[1] - BOOT_COUNT_WAIT_S, self.boot_floor, self.boot_init)
         return bounded_start(encoders, at, word, self._tracker.powerup)
 
     def _named(self) -> bool:

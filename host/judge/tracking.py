@@ -429,9 +429,9 @@ class PoseTracker:
             return
         unnamed = latest if primed_now else latest + 1
         if named is None:
-            self.lives.await_boot(unnamed, self.now_s)
+            self.lives.await_boot(unnamed, self.now_s, init=not primed_now)
         else:  # its word once the next pose counts on from it (bootnamed)
-            self.lives.await_boot(named, self.now_s, unnamed)
+            self.lives.await_boot(named, self.now_s, unnamed, not primed_now)
 
     def withdraw_from(self, t_s: float) -> None:
         """A reboot told late (its boot summary held back, or told by the first pose after it:
