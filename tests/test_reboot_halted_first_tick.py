@@ -26,23 +26,18 @@ halted S seconds after its first tick, its mailbox full). Three faults of the li
   halt is left out and the position placed again at the next (``livebootstall``).
 
 The start is checked independently: the heading is an exact function of the counts since the
-frame primed on (``tests/independent_checker.py``'s rule, float64 here, cantools decoding), so
-the firmware's own HEADING tells which frame it primed on, whatever it merged.
+frame primed on (``tests/boot_headings.py``: ``tests/independent_checker.py``'s rule, float64,
+cantools), so the firmware's own HEADING tells which frame it primed on, whatever it merged.
 """
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
-import can
 import pytest
 
 from odocan.host.cli.app import main
-from odocan.sim.contract import DBC_PATH
-from odocan.sim.robot import load
-from tests.dbc_typed import integers, load_can_dbc
-from tests.independent_checker import HEADING_LSB_RAD
+from tests.boot_headings import headings_off_lsb
 from tests.judges_cli import assert_live_pass, assert_tamper_wrong_live
 
 ROBOT, REBOOT_S = "pmir", 5.0
@@ -64,42 +59,10 @@ def drives(tmp_path_factory: pytest.TempPathFactory) -> dict[float, Path]:
     return out
 
 
-def _headings_off_lsb(log: Path) -> tuple[int, float]:
-    """The new life's samples (ODOM_POSE_X after the reset's power-up pose) and their largest
-    heading error (LSB) against the heading of the counts since the frame that pose names."""
-    db = load_can_dbc(DBC_PATH)
-    geometry = load(ROBOT).firmware_params()
-    per_count_rad = 2 * math.pi / (geometry["counts_per_rev"] * geometry["wheelbase_nm"])
-    wrap = 1 << geometry["counter_bits"]
-    encoders: list[tuple[int, int, int]] = []  # (COUNTER, left, right) in bus order
-    primed: tuple[int, int] | None = None
-    worst, samples = 0.0, 0
-    with can.LogReader(str(log)) as reader:
-        for msg in reader:
-            message = db.get_message_by_frame_id(msg.arbitration_id)
-            name, s = message.name, integers(message, msg.data, scaling=False)
-            if name == "WHEEL_ENCODERS":
-                encoders.append((s["COUNTER"], s["LEFT_COUNT"], s["RIGHT_COUNT"]))
-            elif name == "ODOM_POSE_X" and msg.timestamp >= REBOOT_S:
-                named = next(e for e in reversed(encoders) if e[0] == s["ENC_COUNTER"])
-                if primed is None:  # the power-up pose: (0, 0, 0) at the frame it names
-                    assert (s["COUNTER"], s["X"], s["HEADING"]) == (0, 0, 0), s
-                    primed = named[1], named[2]
-                    continue
-                d_left = (named[1] - primed[0] + wrap // 2) % wrap - wrap // 2
-                d_right = (named[2] - primed[1] + wrap // 2) % wrap - wrap // 2
-                heading = per_count_rad * (geometry["wheel_radius_right_nm"] * d_right
-                                           - geometry["wheel_radius_left_nm"] * d_left)
-                off = (s["HEADING"] * HEADING_LSB_RAD - heading + math.pi) % (2 * math.pi)
-                worst = max(worst, abs(off - math.pi) / HEADING_LSB_RAD)
-                samples += 1
-    return samples, worst
-
-
 @pytest.mark.parametrize("halt_s", list(HALTS_S))
 def test_the_firmware_primed_where_its_power_up_pose_named(
         drives: dict[float, Path], halt_s: float) -> None:
-    samples, worst_lsb = _headings_off_lsb(drives[halt_s])
+    samples, worst_lsb = headings_off_lsb(ROBOT, drives[halt_s], REBOOT_S)
     assert samples > 150
     assert worst_lsb <= 1.0, worst_lsb
 
