@@ -129,7 +129,7 @@ class LivePace:
         the plain mean's of the pairs, which neither a receiver's bursts nor a reorder bias."""
         first_s = t_s if self._first_s is None else self._first_s  # (a log's first at 0.0)
         self.facts.decided_after_s = t_s - first_s
-        paces = [_pace_of(sum(self._intervals) / len(self._intervals))]
+        paces: list[float] = []  # the pairs' plain mean's first (``_repace``)
         for intervals in (self._intervals, self._in_order):
             if intervals:
                 paces += [_pace_of(sum(intervals) / len(intervals)),
