@@ -377,6 +377,8 @@ class LivePowerUp:
         self.last = -1  # the COUNTER of the latest pose heard
         self.chain: tuple[int, int] | None = None  # the latest power-up pose's run (``ran_on_to``)
         self.held_s: float | None = None  # a held-back summary's power-up pose: its bus time s
+        # the latest power-up pose that restarted the sequence: its bus time s, named seq
+        self.restarted_at: tuple[float, int] | None = None
 
     def heard(self, counter: int, x: float, heading: float, enc_counter: int, t_s: float,
               rows: Sequence[Sequence[float]]) -> None:
@@ -396,10 +398,13 @@ class LivePowerUp:
         if not is_powerup_pose(counter, x, heading):
             self.latest = (t_s, None, enc_counter)
             return
-        if 0 <= self.previous != busfacts.ENC_COUNTER_MASK:  # restarted, not wrapped
+        restarted = 0 <= self.previous != busfacts.ENC_COUNTER_MASK  # not wrapped
+        if restarted:
             self.chain = (0, enc_counter)
         tail = [row for row in list(rows)[-NAMED_SPAN:] if int(row[2]) == enc_counter]
         self.latest = (t_s, int(tail[-1][0]) if tail else None, enc_counter)
+        if restarted and tail:  # kept past the later poses of COUNTER 0 (``held_tick_word``)
+            self.restarted_at = (t_s, int(tail[-1][0]))
 
     def _run_on(self, counter: int, enc_counter: int) -> None:
         """``ran_on_to`` live: a pose after the latest power-up pose counts on from it, or ends

@@ -15,6 +15,7 @@ from odocan.host.judge.liveadopted import UNHEARD_BOOT
 from odocan.host.judge.livebootbound import (
     BootWord,
     bounded_start,
+    held_tick_word,
     old_life_floor,
     power_up_pose,
 )
@@ -180,7 +181,19 @@ class Lives:
         if self.boot[0] < 0:
             self.finish_first(False)
         else:
-            self.finish_boot(self.boot[0] if self._named() else self.boot_unnamed)
+            self.finish_boot(self.boot[0] if self._named() else self._held_or_unnamed())
+
+    def _held_or_unnamed(self) -> int:
+        """A boot whose wait ended with no count page: the frame its power-up pose, held back
+        just past the summary, names when it came in the summary's tick
+        (``livebootbound.held_tick_word``), else the summary's own rule's."""
+        assert self.boot is not None
+        window = self._tracker.window
+        word = BootWord(None, self.boot_unnamed, self.boot[1] - BOOT_COUNT_WAIT_S,
+                        self.boot_floor, self.boot_init)
+        held = held_tick_word(self._tracker.powerup, word, (
+            window.col("seq").astype(np.int64), window.col("t_s").astype(np.float64)))
+        return self.boot_unnamed if held is None else held
 
     def on_counts(self, ok: int, lost: int, proven: bool) -> None:
         """``PoseTracker.on_enc_counts``' start: the page ends a wait, or proves a power-up; the
