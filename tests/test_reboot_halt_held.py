@@ -2,7 +2,7 @@
 past the frames after its power-up pose: no judge may blame the correct firmware (issue #11,
 rule 5).
 
-Lockstep drives pmir ``--scenario random --duration 7 --faults
+Lockstep drives pmir and kobuki ``--scenario random --duration 7 --faults
 reboot=2.5:0.05,stall=2.56:0.3,delay=0.2:30`` (as ``tests/test_reboot_halt_delay.py``). Seeds 13
 and 15: the power-up pose (2.551 s) names COUNTER 15 at 2.55 s, the summary (UPTIME 0) was held
 back 30 ms to 2.581 s, and the firmware's first pose after it came 0.29-0.32 s later (the halt),
@@ -43,50 +43,54 @@ from tests.judges_cli import both_analyses, fails_by_position, live_judges, rais
 from tests.test_reboot_halt_delay import FAULTS, REBOOT_S, _headings_off_lsb
 
 SEEDS = (13, 15, 17)
+Drive = tuple[str, int]  # robot, seed
+DRIVES: tuple[Drive, ...] = tuple((robot, seed) for robot in ("pmir", "kobuki") for seed in SEEDS)
+CASES = [pytest.param(d, id=f"{d[0]}-{d[1]}") for d in DRIVES]
 
 
 @pytest.fixture(scope="module")
-def drives(tmp_path_factory: pytest.TempPathFactory) -> dict[int, Path]:
-    """The lockstep drives (``SEEDS``), each log's path (analyze's verdict judged below)."""
+def drives(tmp_path_factory: pytest.TempPathFactory) -> dict[Drive, Path]:
+    """The lockstep drives (``DRIVES``), each log's path (analyze's verdict judged below)."""
     out = {}
-    for seed in SEEDS:
-        log = tmp_path_factory.mktemp(f"pmir{seed}") / "drive.log"
-        main(["run", "--robot", "pmir", "--scenario", "random", "--seed", str(seed),
+    for robot, seed in DRIVES:
+        log = tmp_path_factory.mktemp(f"{robot}{seed}") / "drive.log"
+        main(["run", "--robot", robot, "--scenario", "random", "--seed", str(seed),
               "--duration", "7", "--faults", FAULTS, "--firmware", "python", "--log", str(log)])
-        out[seed] = log
+        out[robot, seed] = log
     return out
 
 
-@pytest.mark.parametrize("seed", SEEDS)
+@pytest.mark.parametrize("drive", CASES)
 def test_the_firmware_primed_where_its_power_up_pose_named(
-        drives: dict[int, Path], seed: int) -> None:
-    samples, worst_lsb = _headings_off_lsb("pmir", drives[seed])
+        drives: dict[Drive, Path], drive: Drive) -> None:
+    samples, worst_lsb = _headings_off_lsb(drive[0], drives[drive])
     assert samples > 150
     assert worst_lsb <= 1.0, worst_lsb
 
 
-@pytest.mark.parametrize("seed", SEEDS)
-def test_both_analyses_pass(drives: dict[int, Path], seed: int) -> None:
-    """Before: seed 13 FAIL 4.7369 mm (DISTANCE 168.7 mm off), seed 15 FAIL 243.5 mm."""
-    assert both_analyses(drives[seed]) == [0, 0]
+@pytest.mark.parametrize("drive", CASES)
+def test_both_analyses_pass(drives: dict[Drive, Path], drive: Drive) -> None:
+    """Before: pmir 13 FAIL 4.7369 mm (DISTANCE 168.7 mm off), pmir 15 FAIL 243.5 mm; kobuki 13
+    and 15 FAIL (DISTANCE 164.6 mm off)."""
+    assert both_analyses(drives[drive]) == [0, 0]
 
 
-@pytest.mark.parametrize("seed", SEEDS)
-def test_the_live_judges_pass_the_correct_firmware(drives: dict[int, Path], seed: int) -> None:
-    """Before: seeds 13, 15, 17: 7.3, 9.4, 16.8 mm beyond (monitor and bridge alike); now 0.098,
-    0.061, 0.062 mm."""
-    for judge in live_judges("pmir", drives[seed]):
+@pytest.mark.parametrize("drive", CASES)
+def test_the_live_judges_pass_the_correct_firmware(drives: dict[Drive, Path], drive: Drive) -> None:
+    """Before: seeds 13, 15, 17: pmir 7.3, 9.4, 16.8 mm beyond (monitor and bridge alike), kobuki
+    10.3, 13.7, 22.2 mm; now pmir 0.098, 0.061, 0.062 mm, kobuki 0.084, 0.063, 0.056 mm."""
+    for judge in live_judges(drive[0], drives[drive]):
         tracker = judge.tracker
         assert tracker.reference_starts >= 2
         assert tracker.max_beyond_allowance_m <= POSITION_LSB_M, tracker.max_beyond_allowance_m
         assert tracker.vs_reference.max_dheading_rad <= HEADING_LSB_RAD
 
 
-@pytest.mark.parametrize("seed", SEEDS)
+@pytest.mark.parametrize("drive", CASES)
 def test_x_10_mm_off_after_the_reset_is_wrong(
-        drives: dict[int, Path], seed: int, tmp_path: Path) -> None:
+        drives: dict[Drive, Path], drive: Drive, tmp_path: Path) -> None:
     tampered = tmp_path / "tampered.log"
-    assert raise_x_10_mm(drives[seed], tampered, REBOOT_S + 1.0) > 100
+    assert raise_x_10_mm(drives[drive], tampered, REBOOT_S + 1.0) > 100
     assert fails_by_position(tampered, tmp_path) == []
-    for judge in live_judges("pmir", tampered):
+    for judge in live_judges(drive[0], tampered):
         assert judge.tracker.max_beyond_allowance_m > 9e-3
