@@ -25,6 +25,7 @@ from odocan.host.mqtt.telemetry import RobotTelemetry
 from odocan.sim.contract import DBC_PATH
 from odocan.sim.robot import RobotProfile, load
 from tests.fw_watch import Watch, watched
+from tests.independent_checker import HEADING_LSB_RAD, POSITION_LSB_M
 from tests.log_edit import raise_raw, raise_raw_once
 
 STREAMS = ("never", "always")
@@ -164,3 +165,22 @@ def fed_judges(profile: RobotProfile, messages: Iterable[can.Message],
         monitor.feed(msg, now_s=msg.timestamp)
         bridge.feed(msg)
     return monitor, bridge
+
+
+def assert_live_pass(robot: str, log: Path, starts: int = 2) -> None:
+    """The monitor and the bridge fed ``log`` (a correct firmware's) started the reference at
+    least ``starts`` times and judged every pose within 1 LSB beyond the allowance and in
+    heading."""
+    for judge in live_judges(robot, log):
+        tracker = judge.tracker
+        assert tracker.reference_starts >= starts
+        assert tracker.max_beyond_allowance_m <= POSITION_LSB_M, tracker.max_beyond_allowance_m
+        assert tracker.vs_reference.max_dheading_rad <= HEADING_LSB_RAD
+
+
+def assert_tamper_wrong_live(robot: str, log: Path, tampered: Path, from_s: float) -> None:
+    """``log`` with X raised 10 mm from ``from_s`` on (``raise_x_10_mm``, over 100 frames) is
+    more than 9 mm beyond the allowance for the monitor and the bridge."""
+    assert raise_x_10_mm(log, tampered, from_s) > 100
+    for judge in live_judges(robot, tampered):
+        assert judge.tracker.max_beyond_allowance_m > 9e-3

@@ -31,8 +31,8 @@ from odocan.host.cli.app import main
 from odocan.sim.contract import DBC_PATH
 from odocan.sim.robot import load
 from tests.dbc_typed import integers, load_can_dbc
-from tests.independent_checker import HEADING_LSB_RAD, POSITION_LSB_M
-from tests.judges_cli import both_analyses, live_judges, raise_x_10_mm
+from tests.independent_checker import HEADING_LSB_RAD
+from tests.judges_cli import assert_live_pass, assert_tamper_wrong_live, both_analyses
 
 ROBOTS = ("pmir", "kobuki")
 FAULTS = "reboot=3:0.1,delay=0.3:55"
@@ -116,17 +116,10 @@ def test_both_analyses_pass(drives: dict[str, Path], robot: str) -> None:
 def test_the_live_judges_pass_the_correct_firmware(drives: dict[str, Path], robot: str) -> None:
     """Before: pmir 23.87 mm beyond and 119.4 mrad, kobuki 20.94 mm and 156.2 mrad (the page
     counted back a lap early); now pmir 0.0471 mm, kobuki 0.0534 mm, as ``analyze``."""
-    for judge in live_judges(robot, drives[robot]):
-        tracker = judge.tracker
-        assert tracker.reference_starts >= 2
-        assert tracker.max_beyond_allowance_m <= POSITION_LSB_M, tracker.max_beyond_allowance_m
-        assert tracker.vs_reference.max_dheading_rad <= HEADING_LSB_RAD
+    assert_live_pass(robot, drives[robot])
 
 
 @pytest.mark.parametrize("robot", ROBOTS)
 def test_x_10_mm_off_after_the_reset_is_wrong_live(
         drives: dict[str, Path], robot: str, tmp_path: Path) -> None:
-    tampered = tmp_path / "tampered.log"
-    assert raise_x_10_mm(drives[robot], tampered, REBOOT_S + 1.0) > 100
-    for judge in live_judges(robot, tampered):
-        assert judge.tracker.max_beyond_allowance_m > 9e-3
+    assert_tamper_wrong_live(robot, drives[robot], tmp_path / "tampered.log", REBOOT_S + 1.0)

@@ -26,24 +26,19 @@ halted S seconds after its first tick, its mailbox full). Three faults of the li
   halt is left out and the position placed again at the next (``livebootstall``).
 
 The start is checked independently: the heading is an exact function of the counts since the
-frame primed on (``tests/independent_checker.py``'s rule, float64 here, cantools decoding), so
-the firmware's own HEADING tells which frame it primed on, whatever it merged.
+frame primed on (``tests/boot_headings.py``: ``tests/independent_checker.py``'s rule, float64,
+cantools), so the firmware's own HEADING tells which frame it primed on, whatever it merged.
 """
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
-import can
 import pytest
 
 from odocan.host.cli.app import main
-from odocan.sim.contract import DBC_PATH
-from odocan.sim.robot import load
-from tests.dbc_typed import integers, load_can_dbc
-from tests.independent_checker import HEADING_LSB_RAD, POSITION_LSB_M
-from tests.judges_cli import live_judges, raise_x_10_mm
+from tests.boot_headings import headings_off_lsb
+from tests.judges_cli import assert_live_pass, assert_tamper_wrong_live
 
 ROBOT, REBOOT_S = "pmir", 5.0
 HALTS_S = (0.2, 0.3, 0.4)  # a lap hidden (ENC_E2E_LOST 3 and 13 of 19 and 29 dropped), two
@@ -64,42 +59,10 @@ def drives(tmp_path_factory: pytest.TempPathFactory) -> dict[float, Path]:
     return out
 
 
-def _headings_off_lsb(log: Path) -> tuple[int, float]:
-    """The new life's samples (ODOM_POSE_X after the reset's power-up pose) and their largest
-    heading error (LSB) against the heading of the counts since the frame that pose names."""
-    db = load_can_dbc(DBC_PATH)
-    geometry = load(ROBOT).firmware_params()
-    per_count_rad = 2 * math.pi / (geometry["counts_per_rev"] * geometry["wheelbase_nm"])
-    wrap = 1 << geometry["counter_bits"]
-    encoders: list[tuple[int, int, int]] = []  # (COUNTER, left, right) in bus order
-    primed: tuple[int, int] | None = None
-    worst, samples = 0.0, 0
-    with can.LogReader(str(log)) as reader:
-        for msg in reader:
-            message = db.get_message_by_frame_id(msg.arbitration_id)
-            name, s = message.name, integers(message, msg.data, scaling=False)
-            if name == "WHEEL_ENCODERS":
-                encoders.append((s["COUNTER"], s["LEFT_COUNT"], s["RIGHT_COUNT"]))
-            elif name == "ODOM_POSE_X" and msg.timestamp >= REBOOT_S:
-                named = next(e for e in reversed(encoders) if e[0] == s["ENC_COUNTER"])
-                if primed is None:  # the power-up pose: (0, 0, 0) at the frame it names
-                    assert (s["COUNTER"], s["X"], s["HEADING"]) == (0, 0, 0), s
-                    primed = named[1], named[2]
-                    continue
-                d_left = (named[1] - primed[0] + wrap // 2) % wrap - wrap // 2
-                d_right = (named[2] - primed[1] + wrap // 2) % wrap - wrap // 2
-                heading = per_count_rad * (geometry["wheel_radius_right_nm"] * d_right
-                                           - geometry["wheel_radius_left_nm"] * d_left)
-                off = (s["HEADING"] * HEADING_LSB_RAD - heading + math.pi) % (2 * math.pi)
-                worst = max(worst, abs(off - math.pi) / HEADING_LSB_RAD)
-                samples += 1
-    return samples, worst
-
-
 @pytest.mark.parametrize("halt_s", list(HALTS_S))
 def test_the_firmware_primed_where_its_power_up_pose_named(
         drives: dict[float, Path], halt_s: float) -> None:
-    samples, worst_lsb = _headings_off_lsb(drives[halt_s])
+    samples, worst_lsb = headings_off_lsb(ROBOT, drives[halt_s], REBOOT_S)
     assert samples > 150
     assert worst_lsb <= 1.0, worst_lsb
 
@@ -110,17 +73,10 @@ def test_the_live_judges_pass_the_correct_firmware(
     """Before: POSE WRONG, 94 mm and 311 mrad off (both faults), 0.21 mm (the allowance); at
     0.4 s 0.5243 mm for an allowance of 0.1243 mm (the halt unseen while the life waited for its
     start, ``livebootstall``)."""
-    for judge in live_judges(ROBOT, drives[halt_s]):
-        tracker = judge.tracker
-        assert tracker.reference_starts >= 2
-        assert tracker.max_beyond_allowance_m <= POSITION_LSB_M, tracker.max_beyond_allowance_m
-        assert tracker.vs_reference.max_dheading_rad <= HEADING_LSB_RAD
+    assert_live_pass(ROBOT, drives[halt_s])
 
 
 @pytest.mark.parametrize("halt_s", list(HALTS_S))
 def test_x_10_mm_off_after_the_reset_is_wrong_live(
         drives: dict[float, Path], halt_s: float, tmp_path: Path) -> None:
-    tampered = tmp_path / "tampered.log"
-    assert raise_x_10_mm(drives[halt_s], tampered, REBOOT_S + 1.0) > 100
-    for judge in live_judges(ROBOT, tampered):
-        assert judge.tracker.max_beyond_allowance_m > 9e-3
+    assert_tamper_wrong_live(ROBOT, drives[halt_s], tmp_path / "tampered.log", REBOOT_S + 1.0)

@@ -23,6 +23,7 @@ its times untouched.
 
 from __future__ import annotations
 
+import math
 import random
 from pathlib import Path
 
@@ -151,3 +152,17 @@ def test_a_replay_heard_in_bursts_at_speed_20_passes() -> None:
     monitor.release_held()
     assert monitor.pace.pace == pytest.approx(20.0, rel=0.02)
     assert monitor.tracker.wrongs.count == 0, monitor.tracker.max_beyond_allowance_m
+
+
+@pytest.mark.parametrize("step_s", [0.0, -ENC_CYCLE_S / 8])
+def test_frames_stamped_alike_or_backwards_keep_finite_times(drive: Path, step_s: float) -> None:
+    """A recorder that stamped every frame alike, or whose clock ran backwards: the intervals'
+    mean is zero or below, no pace (``LivePace._repace``); the frames keep finite times. Found by
+    ``tests/test_host_fuzz.py``: a pace of infinity stamped a frame NaN (0 x inf), and the
+    monitor raised ValueError in ``livefill`` on it."""
+    pace = LivePace(database())
+    with can.LogReader(str(drive)) as reader:
+        for k, msg in enumerate(reader):
+            msg.timestamp = k * step_s
+            assert math.isfinite(pace.stamped(msg).timestamp), k
+    assert pace.facts.pace is None or 0.0 < pace.facts.pace < math.inf

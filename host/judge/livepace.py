@@ -115,7 +115,7 @@ class LivePace:
                 self._intervals.append(interval_s)
                 if len(self._intervals) >= PACE_INTERVALS:
                     self._decide(t_s)
-            elif self.facts.pace != 1.0 and self._count >= NARROWED_AFTER:
+            elif self.facts.pace != 1.0 and self._count >= NARROWED_AFTER and self._sum_s > 0:
                 self._repace(t_s, ENC_CYCLE_S * self._count / self._sum_s)
 
     def _decide(self, t_s: float) -> None:
@@ -142,7 +142,11 @@ class LivePace:
 
     def _repace(self, t_s: float, pace: float) -> None:
         """From bus time ``t_s`` on, the drive's clock runs ``pace`` times the bus's (the map
-        stays continuous: it counts from ``t_s``'s drive time)."""
+        stays continuous: it counts from ``t_s``'s drive time). A pace that is no finite
+        positive factor (the intervals' mean zero or below: frames stamped alike, or a clock
+        going back, which pairs in any order can sum to) is none: still measuring."""
+        if not 0.0 < pace < math.inf:
+            return
         origin_t, origin_drive = self._origin
         self._origin = (t_s, origin_drive + (t_s - origin_t) * self.pace)
         self.facts.pace = pace
