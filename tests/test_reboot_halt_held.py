@@ -27,7 +27,7 @@ untold live: seed 13 1.48 mm, the first placement after the halt asking 1.52 mm 
   word stands when that frame came less than an encoder cycle before the summary's rule's
   (``livebootbound.held_tick_word``); 0.062 mm.
 
-The firmware is checked independently (``_headings_off_lsb``: cantools, float64): its HEADING
+The firmware is checked independently (``tests/boot_headings.py``: cantools, float64): its HEADING
 within 1 LSB of the counts since the frame its power-up pose named.
 """
 
@@ -38,9 +38,10 @@ from pathlib import Path
 import pytest
 
 from odocan.host.cli.app import main
+from tests.boot_headings import headings_off_lsb
 from tests.independent_checker import HEADING_LSB_RAD, POSITION_LSB_M
 from tests.judges_cli import both_analyses, fails_by_position, live_judges, raise_x_10_mm
-from tests.test_reboot_halt_delay import FAULTS, REBOOT_S, _headings_off_lsb
+from tests.test_reboot_halt_delay import FAULTS, REBOOT_S
 
 SEEDS = (13, 15, 17)
 Drive = tuple[str, int]  # robot, seed
@@ -63,7 +64,7 @@ def drives(tmp_path_factory: pytest.TempPathFactory) -> dict[Drive, Path]:
 @pytest.mark.parametrize("drive", CASES)
 def test_the_firmware_primed_where_its_power_up_pose_named(
         drives: dict[Drive, Path], drive: Drive) -> None:
-    samples, worst_lsb = _headings_off_lsb(drive[0], drives[drive])
+    samples, worst_lsb = headings_off_lsb(drive[0], drives[drive], REBOOT_S)
     assert samples > 150
     assert worst_lsb <= 1.0, worst_lsb
 
