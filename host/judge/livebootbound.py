@@ -27,6 +27,12 @@ POSE WRONG, the life started on the wrong frame:
   page (OK 9, LOST 15) counted back to 2.72 s, a lap late. An INIT firmware primes on a frame
   after its summary, the earliest its mailbox kept: a count after the summary's next frame is
   stepped back whole laps while it stays at or after that frame (``after_init``).
+* seed 17 (pmir 16.8 mm, 97.4 mrad beyond; ``analyze`` PASS): the power-up pose held back 30 ms
+  past its summary named a COUNTER 12 held back too, heard in the summary's tick just before the
+  COUNTER 15 the summary's rule named; the halt kept its count page from counting, the wait
+  ended on that rule's frame (seq order: after the named one). Its word stands when the frame it
+  names came less than an encoder cycle before that one, its COUNTER 0 restarting the sequence
+  (``held_tick_word``); 0.062 mm (``tests/test_reboot_halt_held.py``).
 """
 
 from __future__ import annotations
@@ -74,6 +80,22 @@ def held_named(powerup: LivePowerUp, word: BootWord) -> int | None:
     if latest is None or latest[1] is None or latest[1] != word.unnamed:
         return None
     return latest[1] if 0.0 <= latest[0] - word.summary_s < HELD_POWERUP_S else None
+
+
+def held_tick_word(powerup: LivePowerUp, word: BootWord,
+                   times: tuple[npt.NDArray[np.int64], npt.NDArray[np.float64]]) -> int | None:
+    """The frame (seq) a power-up pose heard after the summary (held back less than
+    ``HELD_POWERUP_S``, its COUNTER 0 restarting the sequence) names, when the firmware drained
+    it in the summary's tick: heard less than an encoder cycle before the summary's own rule's
+    frame (``times``: the window's seqs and bus times); else None (module docstring, seed 17)."""
+    pose = powerup.restarted_at
+    if pose is None or not 0.0 <= pose[0] - word.summary_s < HELD_POWERUP_S:
+        return None
+    seqs, t_s = times
+    named, unnamed = np.flatnonzero(seqs == pose[1]), np.flatnonzero(seqs == word.unnamed)
+    if not len(named) or not len(unnamed) or pose[1] > word.unnamed:
+        return None
+    return pose[1] if float(t_s[unnamed[0]] - t_s[named[0]]) < CYCLE_S else None
 
 
 def bounded_start(encoders: tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]], at: int,

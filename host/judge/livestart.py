@@ -15,6 +15,7 @@ from odocan.host.judge.liveadopted import UNHEARD_BOOT
 from odocan.host.judge.livebootbound import (
     BootWord,
     bounded_start,
+    held_tick_word,
     old_life_floor,
     power_up_pose,
 )
@@ -173,14 +174,39 @@ class Lives:
             self.page = None
             window = self._tracker.window
             encoders = (window.col("seq").astype(np.int64), window.col("counter").astype(np.int64))
-            at = counted_start(encoders, after, ok, lost)
+            at = self._halted_named(counted_start(encoders, after, ok, lost))
             if at is not None:
                 self.finish_boot(self._within_named(encoders, at))
                 return
         if self.boot[0] < 0:
             self.finish_first(False)
         else:
-            self.finish_boot(self.boot[0] if self._named() else self.boot_unnamed)
+            self.finish_boot(self.boot[0] if self._named() else self._held_or_unnamed())
+
+    def _halted_named(self, at: int | None) -> int | None:
+        """A count page's frame ``at``, or the frame the waiting boot's power-up pose named when
+        its first pose after the summary, late, counted on from it by its COUNTER alone: the MCU
+        halted right after its first tick (``bootnamed.counts_on_after``), its page counting
+        over frames its mailbox overran. Its life waited on (its halt told, ``livebootstall``)."""
+        boot = self.boot
+        return boot[0] if boot is not None and self.boot_named and \
+            self._tracker.powerup.halted else at
+
+    def _held_or_unnamed(self) -> int:
+        """A boot whose wait ended with no count page: its power-up pose's frame after a halt
+        (``_halted_named``); the frame that pose, held back just past the summary, names when it
+        came in the summary's tick (``livebootbound.held_tick_word``); else the summary's own
+        rule's."""
+        assert self.boot is not None
+        halted = self._halted_named(None)
+        if halted is not None:
+            return halted
+        window = self._tracker.window
+        word = BootWord(None, self.boot_unnamed, self.boot[1] - BOOT_COUNT_WAIT_S,
+                        self.boot_floor, self.boot_init)
+        held = held_tick_word(self._tracker.powerup, word, (
+            window.col("seq").astype(np.int64), window.col("t_s").astype(np.float64)))
+        return self.boot_unnamed if held is None else held
 
     def on_counts(self, ok: int, lost: int, proven: bool) -> None:
         """``PoseTracker.on_enc_counts``' start: the page ends a wait, or proves a power-up; the
@@ -230,6 +256,7 @@ class Lives:
         at = counted_start(encoders, sent, ok, lost)
         if at is None:  # the window lacks it from there: where the page was heard
             at = counted_start(encoders, after, ok, lost)
+        at = self._halted_named(at)
         if at is not None:
             self.finish_boot(self._within_named(encoders, at))
 
