@@ -118,6 +118,7 @@ from odocan.host.judge.compare import (
 )
 from odocan.host.judge.configs import config_cuts, cut_configs, first_integrator, in_force
 from odocan.host.judge.distance import DistanceJudge, check_distance, twin_paths
+from odocan.host.judge.e2estepbound import bounded
 from odocan.host.judge.evidencechoice import chosen_seen
 from odocan.host.judge.finalstate import firmware_fields, latched_per_firmware
 from odocan.host.judge.gapseen import Seen, seen_in_log
@@ -204,6 +205,7 @@ class Analysis:
     passed: bool = False
 
 
+@bounded  # the robot's step bound for the E2E checks' skip proofs (e2e_bound)
 @aheadcheck.checked  # a pose naming an encoder frame not yet sent: FAIL
 @floored  # fewer than half the poses judged: no PASS
 def analyze(
@@ -406,12 +408,10 @@ def _analyze_life(
     )
     report = {
         "robot": robot_dict(robot),
-        "integrator": integrator,
-        "integrator_source": source,
+        "integrator": integrator, "integrator_source": source,
         "reference_start": "set pose" if start_pose else (
             "power-up" if ref_all.exact_start else "fitted"),
-        "scenario": scenario,
-        "seed": seed,
+        "scenario": scenario, "seed": seed,
         "sim_seconds": covered_s(frames, db), "first_frame_s": reportfacts.first_frame_s(frames),
         "wall_seconds": wall_seconds,
         "realtime_factor": realtime(covered_s(frames, db), wall_seconds),

@@ -35,7 +35,7 @@ import numpy as np
 
 from odocan.host.io.frames import concat_frames
 from odocan.host.io.logs import CHUNK_FRAMES, FrameArrays, iter_log, read_log, warn_on_stderr
-from odocan.host.judge import acrosscut, namesahead, stallrestart
+from odocan.host.judge import acrosscut, e2estepbound, namesahead, stallrestart
 from odocan.host.judge.analysis import Tolerance, analyze
 from odocan.host.judge.breaks import placed_offsets
 from odocan.host.judge.configs import ConfigPages, in_force
@@ -110,6 +110,7 @@ class FrameCount:
     frames: int = 0
 
 
+@e2estepbound.bounded  # the robot's step bound for the E2E checks' skip proofs (e2e_bound)
 def analyze_file(
     path: str | Path,
     robot: RobotProfile,

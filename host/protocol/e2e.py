@@ -40,7 +40,7 @@ fatal; messages without ``E2EDataIDs`` are taken unchecked and counted there as 
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -50,6 +50,7 @@ from odocan.host.io.logs import FLAG_ERROR, FLAG_REMOTE, FrameArrays
 from odocan.host.protocol.busfacts import ENC_COUNTER_MASK
 from odocan.host.protocol.dbcplan import default_plan
 from odocan.host.protocol.decode import frame_groups, frame_keys
+from odocan.host.protocol.e2e_bound import beyond_bound
 from odocan.host.protocol.e2e_config import (  # re-exported (their old home)
     COUNTER_LAP as COUNTER_LAP,
 )
@@ -432,7 +433,8 @@ def _settled(frames: FrameArrays, index: npt.NDArray[np.intp], counter: npt.NDAr
         if decided is not None:
             all_decided(decided, index)
         return status
-    evidence = pose_evidence(frames, index, counter, crc_ok, poses)
+    evidence = replace(pose_evidence(frames, index, counter, crc_ok, poses),
+                       beyond=beyond_bound(frames, index))  # e2e_bound
     released = recorder_releases(frames.timestamp_s, frame_keys(frames) == config.key,
                                  config.cycle_s)[index]
     def run_with(reading: npt.NDArray[np.int8] | None, proofs: Evidence

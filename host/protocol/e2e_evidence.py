@@ -58,6 +58,7 @@ import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
 from odocan.host.protocol.busfacts import ENC_COUNTER_MASK, POSE_PERIOD_S
+from odocan.host.protocol.e2e_bound import Beyond, by_counts, exact
 from odocan.host.protocol.e2e_crosslate import crossed_late_of
 from odocan.host.protocol.e2e_cycles import new_cycles
 from odocan.host.protocol.e2e_implausible import Readings, by_stamps
@@ -91,10 +92,11 @@ IntArray = npt.NDArray[np.int64]
 @dataclass(frozen=True)
 class Evidence:
     """Encoder frames (indices into one message's frames) the firmware's poses prove it took
-    or skipped."""
+    or skipped; ``beyond``: a step (frame, frame, periods) beyond its bound (``e2e_bound``)."""
 
     taken: frozenset[int]
     skipped: frozenset[int]
+    beyond: Beyond | None = None
 
 
 def narrow_periods(dt_s: npt.NDArray[np.float64], step: IntArray, cycle_s: float,
@@ -334,7 +336,8 @@ def settle(crc_ok: npt.NDArray[np.bool_], counter: IntArray,
             windows = windows_at.at(j)
             which = chosen[j] if chosen[j] >= 0 else int(late[j - 1]) if j else 0
             code = _by_window_or_evidence(j, delta, windows[which], evidence)
-            if code == S_WRONG and anchored and _bound_skip(j, delta, windows, evidence):
+            if code == S_WRONG and anchored and _bound_skip(j, delta, windows, evidence,
+                                                            taken[-1]):
                 code = S_LOST  # taken by the E2E check, refused by the plausibility bound
             if j in evidence.taken and delta > max(windows):  # the host's last is not its
                 code = _taken_back(j, taken, counters, ok, cums, max_delta_init, evidence,
@@ -346,7 +349,7 @@ def settle(crc_ok: npt.NDArray[np.bool_], counter: IntArray,
         if code != S_WRONG:
             taken.append(j)
             anchored = j in evidence.taken or (
-                anchored and (delta == 1 or _exact(delta, windows_at.at(j))))
+                anchored and (delta == 1 or exact(delta, windows_at.at(j))))
             waiting, last = False, counters[j]
             windows_at.reset(j, max_delta_init)
             last_s = stamps[j] if stamps else math.nan
@@ -388,27 +391,20 @@ def _retaken(j: int, taken: list[int], evidence: Evidence, status: npt.NDArray[n
     return S_OK if step == 1 else S_LOST
 
 
-def _bound_skip(j: int, delta: int, windows: list[int], evidence: Evidence) -> bool:
+def _bound_skip(j: int, delta: int, windows: list[int], evidence: Evidence, last: int) -> bool:
     """Whether frame ``j``, ``delta`` COUNTERs after the host's last taken frame (the firmware E2E
     check's last: proven taken, or reached from such a frame by steps the readings' one window
     takes), proven skipped, was rather taken by the E2E check and refused by the plausibility bound
-    (``e2e_implausible``): the three readings' windows are one and take it (``_exact``), so the
+    (``e2e_implausible``): the three readings' windows are one and take it (``exact``), so the
     stamps say the check took it. Such a frame moves the check's COUNTER on, and the frames on time
     after it are its repeats or out of sequence (issue #11: kobuki, seed 3, ``delay=0.5:150``: the
     late COUNTER 5 of 4.20 s, sent 4.05 s, 2 after the late 3 the check took after the on-time 2;
     the bound refused both, and the firmware refused the on-time 5 of 4.21 s as REPEATED. The host
     read the skip as the check's and took that 5, 278 counts of path the firmware never drove:
-    ODOM_TWIST DISTANCE 17.0 mm off a right firmware)."""
-    return j in evidence.skipped and _exact(delta, windows)
-
-
-def _exact(delta: int, windows: list[int]) -> bool:
-    """Whether the three readings' ``windows`` are one (the stamps since the last frame taken
-    are the bus's: a starved recorder's would read otherwise) and take a frame ``delta``
-    COUNTERs on (issue #11: on a starved capture of kobuki, seed 3, ``delay=0.1:15,seed=7``,
-    the COUNTER 12 of 3.35 s, 2 after the proven 10, every reading took and the firmware's
-    check refused: the robot standing, no bound refuses a step; its windows read 4, 4 and 2)."""
-    return windows[0] == windows[1] == windows[2] >= delta
+    ODOM_TWIST DISTANCE 17.0 mm off a right firmware). Or every window takes it and its counts
+    from ``last`` say the bound refused it (``e2e_bound.by_counts``)."""
+    return j in evidence.skipped and (exact(delta, windows) or by_counts(
+        evidence.beyond, delta, windows, last, j))
 
 
 def _by_window_or_evidence(j: int, delta: int, window: int, evidence: Evidence) -> int:

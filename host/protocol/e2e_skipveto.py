@@ -24,6 +24,7 @@ count (a span that agreed never leaves it), else the settled ones stand.
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import replace
 
 import numpy as np
 import numpy.typing as npt
@@ -79,7 +80,7 @@ def by_page_skips(run_with: SettleWith, settled: Statuses, strict: Statuses,
     dropped = contradicted_skips(enc_pos, settled, strict, evidence, pages)
     if not dropped:
         return settled
-    trial = run_with(Evidence(evidence.taken, evidence.skipped - dropped))
+    trial = run_with(replace(evidence, skipped=evidence.skipped - dropped))
     before, after = (exact_surplus(enc_pos, settled, pages),
                      exact_surplus(enc_pos, trial, pages))
     changed = after != before
