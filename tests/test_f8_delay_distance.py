@@ -104,9 +104,9 @@ def test_both_analyses_pass_its_distance(drive: Drive, tmp_path: Path) -> None:
 
 @pytest.mark.parametrize("judge", ["run", "analyze"])
 def test_run_and_both_analyses_pass_it(drive: Drive, judge: str) -> None:
-    """Before (strict xfails): kobuki 2 position 7.862 mm beyond the allowance (and the
-    stall-resume rule 11.69 mm at 4.44 s), kobuki 7 0.150 mm and 5.98 mrad (run and both
-    analyses)."""
+    """Before (strict xfails): kobuki 2 position 7.862 mm beyond the allowance, 16.29 mrad
+    (and the stall-resume rule 11.69 mm at 4.44 s), kobuki 7 0.150 mm and 5.98 mrad (run and
+    both analyses). After: 0.042 mm / 0.048 mrad and 0.048 mm / 0.048 mrad."""
     name, log, _, code = drive
     if judge == "run":
         assert code == 0, name

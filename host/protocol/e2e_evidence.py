@@ -40,7 +40,8 @@ The evidence also decides where the three readings agree but it speaks otherwise
 last frame is then not the firmware's (a jittered stamp widened the host's window by a period in
 a lock-out, and it took a frame the firmware refused: every later verdict of the lock-out was
 against the wrong COUNTER). A frame proven skipped is refused, unless the readings' one window
-takes it after a frame the firmware's check took last: then its plausibility bound refused it
+takes it after a frame the firmware's check took last, or every window takes it and its counts
+from there are beyond the robot's bound (``e2e_bound``): then its plausibility bound refused it
 (``_bound_skip``); a frame proven taken that every window refuses takes back the host's frames
 since the firmware's last (``e2e_retract``).
 
