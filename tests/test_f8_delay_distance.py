@@ -59,7 +59,7 @@ DRIVES = {"pmir7": ("pmir", 7), "kobuki2": ("kobuki", 2), "kobuki7": ("kobuki", 
 X_FROM_S = {"pmir7": 8.5, "kobuki2": 4.0, "kobuki7": 5.0}  # X +10 mm from then on
 DISTANCE_FROM_S = {"pmir7": 7.0, "kobuki2": 4.0}  # DISTANCE +10 mm, across the sample left out
 Drive = tuple[str, Path, Watch, int]
-LIVE_BLIND_DISTANCE_DRIVES = ("pmir7", "kobuki7")
+LIVE_BLIND_DISTANCE_CASES = {("pmir7", 1), ("pmir7", -1), ("kobuki7", 1)}  # (drive, sign)
 
 KOBUKI_POSE = pytest.mark.xfail(strict=True, reason=(
     "kobuki 2: position 7.862 mm beyond the allowance and the stall-resume rule 11.69 mm at "
@@ -75,7 +75,7 @@ LIVE_POSE = pytest.mark.xfail(strict=True, reason=(
     "4 at 11.70-11.76 s: 71.2 mm DISTANCE beyond; pmir 2 at 5.36 s: POSE 25.6 mm beyond)"))
 
 LIVE_BLIND_DISTANCE = pytest.mark.xfail(strict=True, reason=(
-    "DISTANCE 10 mm off (either way; pmir 7 from 8.5 s, kobuki 7 from 5 s): both live judges "
+    "DISTANCE 10 mm off (pmir 7 from 8.5 s either way, kobuki 7 +10 mm from 5 s): both live judges "
     "PASS it (0.0 mm excess) where both analyses FAIL it: their allowances between samples grow "
     "with every gap (drop=0.1) and the pages withdraw too few of them live (pmir 7: up to "
     "9.7 m above, 1.0 m below by 9 s); pmir 1, 20 s, from 10 s too. Main FAILed these logs "
@@ -140,7 +140,7 @@ def test_distance_10_mm_off_fails_the_live_judges(drive: Drive, lsb: int, tmp_pa
     late twists named where sent, those naming a refused frame left out, hide no such
     error)."""
     name, log, _, _ = drive
-    if name in LIVE_BLIND_DISTANCE_DRIVES:
+    if (name, 1 if lsb > 0 else -1) in LIVE_BLIND_DISTANCE_CASES:
         request.applymarker(LIVE_BLIND_DISTANCE)
     tampered = tmp_path / "t.log"
     assert raise_raw(log, tampered, "ODOM_TWIST", DISTANCE_SPAN, lsb, X_FROM_S[name],

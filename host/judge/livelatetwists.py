@@ -16,8 +16,9 @@ live DISTANCE FAILed a correct firmware by 66.89 mm where ``analyze`` PASSed).
 ``livelatehalves.named_sent`` from the latest encoder frame heard before its send; held (its
 ENC_COUNTER the previous accepted twist's, its own COUNTER one on, sent less than
 ``SILENCE_CYCLES`` cycles after it), the name that twist's run began with; else the tracker's
-rule where heard. A held name a COUNTER lap or more behind the latest encoder frame is left out
-(``samples.lapped_out``). State: the previous twist alone (bounded).
+rule where heard. A held name a COUNTER lap or more behind the latest encoder frame (in the
+sender's periods, not the frames heard: ``_periods_since``) is left out (``samples.lapped_out``).
+State: the previous twist alone (bounded).
 """
 
 from __future__ import annotations
@@ -66,16 +67,21 @@ class TwistNames:
         else:
             run = named_sent(tracker.window.rows, enc_counter, sent_s) if late else heard()
         self._prev = (enc_counter, counter, sent_s, run)
-        if held and run >= 0 and _latest_seq(tracker, sent_s) - run >= ENC_COUNTER_LAP:
+        if held and run >= 0 and _periods_since(tracker, run, sent_s) >= ENC_COUNTER_LAP:
             return -1  # carried over a lap or more of frames (samples.lapped_out)
         return run
 
 
-def _latest_seq(tracker: PoseTracker, sent_s: float) -> int:
-    """The latest encoder frame (seq) heard before bus time ``sent_s`` among the window's
-    latest rows (one low enough to lap nothing when none is)."""
-    rows = tracker.window.rows
-    j = -1
-    while -j <= len(rows) and rows[j][3] >= sent_s:
-        j -= 1
-    return int(rows[j][0]) if -j <= len(rows) else -ENC_COUNTER_LAP  # none: not lapped
+def _periods_since(tracker: PoseTracker, seq: int, sent_s: float) -> int:
+    """The sender's periods (the placer's numbering, ``samples.sender_seq``'s) from encoder
+    frame ``seq`` to the latest heard before bus time ``sent_s``, among the window's latest rows
+    (a frame older than those lies more rows back than a lap: a lap then). The tracker's seq
+    counts frames heard: a lap of the sender's after a bus-off is a few of them (pmir random 4,
+    halted 200 ms then 100 ms bus-off: 5 frames heard, 16 periods)."""
+    total = 0
+    for row in reversed(tracker.window.rows):
+        if int(row[0]) <= seq:
+            return total
+        if row[3] < sent_s:
+            total += int(row[6])
+    return ENC_COUNTER_LAP
