@@ -34,7 +34,7 @@ from typing import TYPE_CHECKING, Any
 
 from odocan.host.judge.bootnamed import HELD_WINDOW_S
 from odocan.host.judge.livefreshboot import TWIN_S, init_restart
-from odocan.host.judge.livelatehalves import POSE_NAMES
+from odocan.host.judge.livelatehalves import LATE_NAMES
 from odocan.host.judge.livetwins import refused_encoders
 from odocan.host.judge.livewindow import CYCLE_S, HALF_LAP
 from odocan.host.judge.swappedskips import LATE_BEHIND
@@ -172,12 +172,12 @@ def refused_named(tracker: PoseTracker, can_id: int, name: str, signals: Callabl
     """A frame of message ``name`` E2E refused (``status``) with its CRC right, heard at bus
     time ``t_s``: a WHEEL_ENCODERS frame to ``refused_frame`` (``signals``: its raw signals,
     decoded when asked), an ODOM_POSE_Y counted as sent (``livestall.StallRule.pose_refused``:
-    the hold evidence's quiet); a pose half read in its sender's sequence
+    the hold evidence's quiet); a pose half or twist read in its sender's sequence
     (``livelatehalves``)."""
     if name == "WHEEL_ENCODERS":
         refused_frame(tracker, can_id, signals(), t_s, status)
         return
-    if name in POSE_NAMES:
+    if name in LATE_NAMES:
         tracker.late.refused(name, t_s, int(signals()["COUNTER"]))
     if name == "ODOM_POSE_Y":
         tracker.stall.pose_refused(t_s)

@@ -25,10 +25,12 @@ judged after, where ``analyze`` lets it fall 1.52 m: a DISTANCE 2.3 m short PASS
 
 A sample (ODOM_TWIST) names its encoder frame by the tracker's rule for a pose half
 (``samples.match_encoder`` over its window: the sender's steps, the age bound, the held and
-queued rules, resolved when the sample is heard): the first naming each frame is judged (not
-the first after a silence, a life's first measured from its ODOM_STATUS: ``livefirst``), and
-each resend right after it (``host.judge.resentdistance``; a sample naming none, or a frame
-before the last named, or a frame with a twin, is left out). Its offset interval
+queued rules, resolved when the sample is heard; one held back on the bus where it was sent, a
+repeated ENC_COUNTER carried by send times: ``livelatetwists``, as ``analyze`` names them): the
+first naming each frame is judged (not the first after a silence, a life's first measured
+from its ODOM_STATUS: ``livefirst``), and each resend right after it
+(``host.judge.resentdistance``; a sample naming none, or a frame before the last named, or a
+frame with a twin, or one the step gate refused, ``refusednames``, is left out). Its offset interval
 [r - upper, r + lower] must meet every earlier one of the life (``distance`` module
 docstring); in the first life, once the tracker has proven a power-up at frame 0 (its
 reference's exact start; or the first page came before any frame: it primes on the first), the
@@ -55,6 +57,7 @@ from odocan.host.judge.distance import (
     gap_extra_m,
 )
 from odocan.host.judge.livedistgaps import HeldGaps, exact_bound_m
+from odocan.host.judge.livelatetwists import TwistNames
 from odocan.host.judge.livepose import RestartLog, StepGate
 from odocan.host.judge.liveresent import may_alias_live
 from odocan.host.judge.liveskip import WAIT_FRAMES, LiveSkips
@@ -143,10 +146,12 @@ class LiveDistance:
             self._end_life(from_s)  # status had asked for the verdict before the reboot)
         self._held = HeldGaps()
         self._frames: dict[int, tuple[int, int, int, float]] = {}  # seq: units, n, c, up
+        self._refused: set[int] = set()  # those of them the gate refused (refusednames)
         self._sums: tuple[int, int, int, float] = (0, 0, 0, 0.0)
         self._gate: StepGate | None = None
         self._twists = Columns(("pos", "enc_counter", "counter", "t_s"), HALF_WINDOW)
         self.named = -1  # the encoder frame the last twist named (-1: none)
+        self._names = TwistNames()  # where each names, a late one where sent (livelatetwists)
         self._last_e = -1  # the last frame judged
         self._running = -1  # the largest frame named
         self._judged_last = False  # the last twist was judged (a resend of it is too)
@@ -187,6 +192,9 @@ class LiveDistance:
         periods = tracker.placer.periods
         step = self._gate.step((seq, counter, left, right, periods, uptime, t_s))
         d_left, d_right = step if step is not None else (0, 0)
+        if step is None and self._gate.prev != (counter, left, right):  # refused: refusednames
+            self._refused.add(seq)
+        self._refused.discard(seq - KEPT_FRAMES)
         m_left, m_right = self._m
         signed_m = 0.5 * (d_left * m_left + d_right * m_right)
         ds_m = abs(signed_m)
@@ -244,8 +252,10 @@ class LiveDistance:
         """An accepted ODOM_TWIST (``counter``: its own E2E COUNTER): judge its DISTANCE at the
         encoder frame it names (not the first after a stall: ``distance.DistanceJudge.take``)."""
         pos = tracker.take_place()  # its place among the frames heard
-        self._twists.append(pos, enc_counter, counter, t_s)
-        e = self.named = tracker.named(self._twists, pos)[0]  # (livetwist takes it)
+        sent_s = self._names.sent_s(tracker, t_s, counter)  # held back on the bus: livelatetwists
+        self._twists.append(pos, enc_counter, counter, sent_s)
+        e = self.named = self._names.name(tracker, enc_counter, counter, t_s, sent_s, lambda: (
+            tracker.named(self._twists, pos)[0]))  # (livetwist takes it)
         e = -1 if e >= 0 and tracker.twins.twinned(e) else e
         resend = (e >= 0 and e == self._running and self._judged_last  # resentdistance.py
                   and not may_alias_live(e, t_s, tracker))
@@ -259,8 +269,8 @@ class LiveDistance:
         at = self._frames.get(e)
         self._judged_last = not (self.suspended or quiet or not (first or resend) or at is None
                                  or t_s >= self._until_s())  # (a conflict from then: follow)
-        if not self._judged_last or at is None:
-            return
+        if not self._judged_last or at is None or e in self._refused:
+            return  # (naming a frame the gate refused: the firmware's chain, refusednames)
         if self._stalls >= 0 and tracker.stall.stalls > self._stalls and self._last_e >= 0:
             # merged since the last sample (its path kept: a 3 s stall outlives the frames
             # kept, and the allowance was unbounded, a DISTANCE 20 m short then PASSed)

@@ -30,15 +30,18 @@ from odocan.host.judge.livewindow import CYCLE_S, HALF_LAP
 from odocan.host.protocol.busfacts import ENC_COUNTER_MASK, POSE_PERIOD_S
 
 POSE_NAMES = {"ODOM_POSE_X": "x", "ODOM_POSE_Y": "y"}  # message -> the tracker's half name
+# ... and the messages read late besides (``livelatetwists``: the twists, named where sent too)
+LATE_NAMES = {**POSE_NAMES, "ODOM_TWIST": "twist"}
 
 
 class LateHalves:
-    """One ``LateScan`` per pose message, fed each CRC-right frame once, in bus order."""
+    """One ``LateScan`` per pose message (and ODOM_TWIST: ``LATE_NAMES``), fed each CRC-right
+    frame once, in bus order."""
 
     def __init__(self, period_s: float = POSE_PERIOD_S) -> None:
         self.period_s = period_s
-        self._scans = {"x": LateScan(period_s), "y": LateScan(period_s)}
-        self._last_s = {"x": -math.inf, "y": -math.inf}  # each half's latest bus time
+        self._scans = {half: LateScan(period_s) for half in LATE_NAMES.values()}
+        self._last_s = {half: -math.inf for half in LATE_NAMES.values()}  # each's latest bus time
 
     def heard(self, half: str, t_s: float, counter: int) -> float | None:
         """A CRC-right frame of pose half ``half`` ("x", "y") at bus time ``t_s`` with E2E
@@ -61,9 +64,9 @@ class LateHalves:
         self._scans = {half: LateScan(self.period_s) for half in self._scans}
 
     def refused(self, name: str, t_s: float, counter: int) -> None:
-        """A CRC-right frame of message ``name`` the host's E2E refused: a pose half's read in
-        its sequence too (``sent_places`` reads every CRC-right frame)."""
-        half = POSE_NAMES.get(name)
+        """A CRC-right frame of message ``name`` the host's E2E refused: a pose half's (or
+        twist's) read in its sequence too (``sent_places`` reads every CRC-right frame)."""
+        half = LATE_NAMES.get(name)
         if half is not None:
             self.heard(half, t_s, counter)
 

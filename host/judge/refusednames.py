@@ -20,9 +20,10 @@ the reference; kobuki seed 2, 10 s, the firmware re-primed on a frame the host n
 one before the reference's, and named a frame of the reference's restart run 11.9 mm above it.
 Such a sample is left out (its information is the firmware's chain, not the reference's); the
 samples before and after it still pin the value, so a DISTANCE off by 10 mm from some time on
-still FAILs. The live DISTANCE judge (``livedistance``) does not apply this rule yet: under this
-mix it names a twist whose ENC_COUNTER held across a lap a lap late and FAILs earlier
-(tests/test_f8_delay_distance.py)."""
+still FAILs. The live DISTANCE judge (``livedistance``) applies it too: a twist naming a frame
+its own step gate refused is left out (pmir figure8 seed 7, 20 s: the live judges FAILed the
+correct firmware by 66.66 mm there, after their naming of late twists was made ``analyze``'s,
+``livelatetwists``; tests/test_f8_delay_distance.py)."""
 
 from __future__ import annotations
 
