@@ -23,8 +23,11 @@ are re-placed there, and the stall's placement keeps the merge allowance of the 
 halt: up to ``FIFO_SPAN`` after the last sample's) nor ``r`` exactly (the first sample after
 a stall is left out: ``stalls.after_stalls``; ``r`` is at most ``R_SPAN`` frames before the
 next one): of those pairs the one whose re-primed path best meets the first samples after the
-stall is taken (``_chosen``), then judged as every step is. The event is reported (``detail``)
-and the firmware's own DEGRADED state stands (``finalstate``). The summaries around the stall
+stall is taken (``_chosen``), then judged as every step is. ``f`` may also be followed by a
+late frame the host's E2E refused and the resumed firmware's wide-open window took from its FIFO
+(``fifolate``: one step back in time, put in as the step into f + 1; kobuki halted 2 s under
+``delay=0.3:55`` FAILed the correct firmware by 2.0 mm, 13.4 mrad without it). The event is
+reported (``detail``) and the firmware's own DEGRADED state stands (``finalstate``). The summaries around the stall
 are read by their gap, not by where a recorder's stamps put them (``around``: ODOM_STATUS
 stamped up to ``LATE_S`` late).
 

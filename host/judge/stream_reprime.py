@@ -16,7 +16,8 @@ only when the firmware's summaries hold such a word: ``stallreprime.any_declared
 per stall break, that window: the rows of the reference's increments (the stream's, element for
 element the whole log's), the samples' values, the encoder counts b - 1 .. b - 1 + FIFO_SPAN
 (the placement's allowance, ``breakspan.break_allowance`` on them) and the break's bus time
-(``stallreprime.declared_at``). ``_chosen`` then runs on exactly the whole judge's numbers.
+(``stallreprime.declared_at``), and the refused CRC-right encoder frames after b - 1 ..
+b - 1 + FIFO_SPAN (``fifolate``). ``_chosen`` then runs on exactly the whole judge's numbers.
 The placing passes after it integrate with those steps left out
 (``stream.StreamReference.left_out``).
 
