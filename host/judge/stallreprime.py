@@ -27,9 +27,9 @@ stall is taken (``_chosen``), then judged as every step is. ``f`` may also be fo
 late frame the host's E2E refused and the resumed firmware's wide-open window took from its FIFO
 (``fifolate``: one step back in time, put in as the step into f + 1; kobuki halted 2 s under
 ``delay=0.3:55`` FAILed the correct firmware by 2.0 mm, 13.4 mrad without it). The event is
-reported (``detail``) and the firmware's own DEGRADED state stands (``finalstate``). The summaries around the stall
-are read by their gap, not by where a recorder's stamps put them (``around``: ODOM_STATUS
-stamped up to ``LATE_S`` late).
+reported (``detail``) and the firmware's own DEGRADED state stands (``finalstate``). The
+summaries around the stall are read by their gap, not by where a recorder's stamps put them
+(``around``: ODOM_STATUS stamped up to ``LATE_S`` late).
 
 A firmware whose word was latched before the stall (COUNTER_RESET set on both summaries around
 it: sticky until a set-pose, it says nothing new) re-primes there all the same: its rule
