@@ -360,7 +360,7 @@ def _analyze_life(
     losses = firmware_losses(frames, accepted, decoder, enc, power_up and start_pose is None)
     ref_all = build_reference(enc, onboard, robot, integrator, power_up=power_up, cut=backlog,
                          max_wheel_speed_mm_s=max_wheel_speed_mm_s, breaks=stalls,
-                         lossy=[first for first, _, _ in losses],
+                         lossy=[first for first, _, _ in losses], late=halves.refused,
                          slack_m=tolerance.position_m, start_pose=start_pose,
                          reprime_lost=power_up_lost(frames, accepted, decoder, enc, stalls),
                          seen=(seen := chosen_seen(  # an evidenceless ambiguous gap

@@ -24,6 +24,7 @@ from odocan.host.judge.ctrlrestart import (
     young_counts,
 )
 from odocan.host.judge.cutreprime import Backlog, cut_reprime
+from odocan.host.judge.fifolate import Judged, Refused
 from odocan.host.judge.fitsegments import fit_segments
 from odocan.host.judge.gapfill import gap_allowance_at
 from odocan.host.judge.gapreceived import received_at
@@ -104,6 +105,7 @@ def build_reference(
     reprime_lost: dict[int, int] | None = None,
     cut: Backlog | None = None,
     lossy: Sequence[int] = (),
+    late: Refused | None = None,
 ) -> Reference:
     """Integrate the encoder deltas from the first on-board sample on; the position placed
     again after gaps and after the stalls' ``breaks`` (within ``breaks.bound_offsets``' bound,
@@ -115,7 +117,7 @@ def build_reference(
     ENC_E2E_LOST by break (``reprimecount.power_up_lost``); ``cut``: a set-pose's life whose
     first sample names a backlog frame (``cutreprime``: its re-prime may come after the APPLY);
     ``lossy``: the frames the firmware's loss spans start after (``losses.firmware_losses``),
-    where a fitted start's samples end (``fitsegments``)."""
+    where a fitted start's samples end (``fitsegments``); ``late``: ``fifolate``'s frames."""
     bits = min(robot.counter_bits, WIRE_COUNTER_BITS)
     exact_at_first = power_up or start_pose is not None
     e0 = 0 if exact_at_first else int(onboard.enc[0])  # at power-up: pose 0 at the first frame
@@ -132,7 +134,8 @@ def build_reference(
     least = least_of(geometry, bits, max_wheel_speed_mm_s)
     reprimes = stall_reprimes(declared_stalls(breaks, enc, e0, seen.resets, least), onboard, e0,
                               (rel_x, rel_y, rel_h), start_pose or (
-        (0.0, 0.0, 0.0) if power_up else None), reprime_lost)  # stallreprime: as it said
+        (0.0, 0.0, 0.0) if power_up else None), reprime_lost,
+        (enc, late, Judged(geometry, integrator, bits)))  # stallreprime: as it said
     reprimes |= cut_reprime(cut, start_pose, enc, onboard, seen.resets, least,
                             (rel_x, rel_y, rel_h))  # re-primed after the APPLY: cutreprime
     if reprimes:

@@ -23,10 +23,13 @@ are re-placed there, and the stall's placement keeps the merge allowance of the 
 halt: up to ``FIFO_SPAN`` after the last sample's) nor ``r`` exactly (the first sample after
 a stall is left out: ``stalls.after_stalls``; ``r`` is at most ``R_SPAN`` frames before the
 next one): of those pairs the one whose re-primed path best meets the first samples after the
-stall is taken (``_chosen``), then judged as every step is. The event is reported (``detail``)
-and the firmware's own DEGRADED state stands (``finalstate``). The summaries around the stall
-are read by their gap, not by where a recorder's stamps put them (``around``: ODOM_STATUS
-stamped up to ``LATE_S`` late).
+stall is taken (``_chosen``), then judged as every step is. ``f`` may also be followed by a
+late frame the host's E2E refused and the resumed firmware's wide-open window took from its FIFO
+(``fifolate``: one step back in time, put in as the step into f + 1; kobuki halted 2 s under
+``delay=0.3:55`` FAILed the correct firmware by 2.0 mm, 13.4 mrad without it). The event is
+reported (``detail``) and the firmware's own DEGRADED state stands (``finalstate``). The
+summaries around the stall are read by their gap, not by where a recorder's stamps put them
+(``around``: ODOM_STATUS stamped up to ``LATE_S`` late).
 
 A firmware whose word was latched before the stall (COUNTER_RESET set on both summaries around
 it: sticky until a set-pose, it says nothing new) re-primes there all the same: its rule
@@ -59,7 +62,9 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from odocan.host.judge.fifolate import Judged, LateStep, after_frames, late_steps
 from odocan.host.judge.nearthreshold import COUNTER_RESET_BIT, Resets
+from odocan.host.judge.refusedenc import Refused
 from odocan.host.judge.reprimecount import kept_pairs
 from odocan.host.judge.samples import (
     HEADING_LSB_RAD,
@@ -104,6 +109,7 @@ class Reprime:
     r: int
     stall_s: float
     sure: bool = True  # declared (or surely re-primed); False: the samples chose it (unsure)
+    late: tuple[int, int] = (0, 0)  # a late frame's step taken after f (``fifolate``), counts
 
 
 def detail(stall_s: float, sure: bool = True) -> str:
@@ -228,16 +234,21 @@ def said_reset(mask: IntArray, i: int, sent_s: FloatArray | None = None) -> bool
 def stall_reprimes(declared: dict[int, Declared], onboard: Poses, e0: int,
                    rel: tuple[FloatArray, FloatArray, FloatArray],
                    start: tuple[float, float, float] | None,
-                   lost: dict[int, int] | None = None) -> dict[int, Reprime]:
+                   lost: dict[int, int] | None = None,
+                   fifo: tuple[Encoders, Refused | None, Judged] | None = None,
+                   ) -> dict[int, Reprime]:
     """Per declared stall (``declared_stalls``, frames from ``e0``) the pair (f, r) chosen
     (module docstring), from the reference's path from the start (``rel``: x, y m, heading rad
     per frame from e0, the fine steps) and the on-board samples; ``start``: the exact start
     pose at e0 (power-up, set-pose), None when fitted; ``lost``: per stall's break (absolute
-    frame) the first count page's ENC_E2E_LOST that pins its pairs (``reprimecount``). A stall
+    frame) the first count page's ENC_E2E_LOST that pins its pairs (``reprimecount``);
+    ``fifo``: the accepted frames, the log's refused CRC-right ones and how a step is
+    integrated, for the late frames f may be followed by (``fifolate``). A stall
     without samples after it, or without a sample or an exact start before it, is left to the
     exact rule, and so is an unsure one whose samples do not choose the re-prime (``_chosen``)."""
     at = onboard.enc - e0
     out: dict[int, Reprime] = {}
+    after_k = after_frames(fifo[1] if fifo else None, fifo[0].timestamp_s if fifo else rel[0])
     for b, (stall_s, sure) in sorted(declared.items()):
         before = np.flatnonzero(at < b)
         if len(before):
@@ -251,22 +262,31 @@ def stall_reprimes(declared: dict[int, Declared], onboard: Poses, e0: int,
         after = np.flatnonzero(at >= b)[:COMPARED]
         if len(after) == 0:
             continue
-        pair = _chosen(b, int(at[after[0]]), anchor, rel, (
+        first = int(at[after[0]])
+        late = [] if fifo is None or (lost or {}).get(b + e0) is not None else late_steps(
+            fifo[1], after_k, (b - 1, min(b - 1 + FIFO_SPAN, first - 1)),
+            (fifo[0].left, fifo[0].right), e0, fifo[2])
+        pair = _chosen(b, first, anchor, rel, (
             at[after], onboard.x_m[after], onboard.y_m[after], onboard.heading_rad[after]),
-            (lost or {}).get(b + e0), unsure=not sure)
+            (lost or {}).get(b + e0), unsure=not sure, late=late)
         if pair is not None:
-            out[b] = Reprime(pair[0], pair[1], stall_s, sure)
+            out[b] = Reprime(pair[0], pair[1], stall_s, sure, pair[2])
     return out
+
+
+Pair = tuple[int, int, tuple[int, int]]  # f, r, the late step after f (``Reprime.late``)
 
 
 def _chosen(b: int, first: int, anchor: tuple[int, float, float, float],
             rel: tuple[FloatArray, FloatArray, FloatArray],
             samples: tuple[IntArray, FloatArray, FloatArray, FloatArray],
-            lost: int | None = None, *, unsure: bool = False) -> tuple[int, int] | None:
+            lost: int | None = None, *, unsure: bool = False,
+            late: list[LateStep] | None = None) -> Pair | None:
     """The pair (f, r) whose re-primed path, placed on the ``anchor`` (frame from e0, its
     on-board x, y, heading), ends nearest the ``samples`` after (frames from e0, x, y,
     heading), in LSBs (the worst sample's position plus heading); ``first``: the first of
-    them; ``lost``: ENC_E2E_LOST, the pairs it allows only (``reprimecount.kept_pairs``).
+    them; ``lost``: ENC_E2E_LOST, the pairs it allows only (``reprimecount.kept_pairs``);
+    ``late``: late frames f may be followed by (``fifolate``: f is then their ``k``).
     ``unsure``: None unless that pair fits (``FIT_LSB``) or beats the exact heading's worst
     sample (LSBs; position left to the stall's placement: module docstring)."""
     rx, ry, rh = rel
@@ -274,26 +294,41 @@ def _chosen(b: int, first: int, anchor: tuple[int, float, float, float],
     turn0 = ah - float(rh[k0])
     cos0, sin0 = math.cos(turn0), math.sin(turn0)
     at, on_x, on_y, on_h = samples
-    best: tuple[float, int, int] | None = None
+    best: tuple[float, int, int, tuple[int, int]] | None = None
     pairs = [(f, r) for f in range(b - 1, min(b - 1 + FIFO_SPAN, first - 1) + 1)
              for r in range(max(f + 1, first - R_SPAN), first + 1)]
-    for f, r in kept_pairs(pairs, lost):
-        left = float(rh[r] - rh[f])  # the turn the re-prime left out
+    ends = [(f, r, _end(rel, f)) for f, r in kept_pairs(pairs, lost)]
+    ends += [(s.k, r, _end(rel, s.k, s)) for s in late or []
+             for r in range(max(s.k + 1, first - R_SPAN), first + 1)]
+    for f, r, (fx, fy, fh, step) in ends:
+        left = float(rh[r]) - fh  # the turn the re-prime left out
         c, s = math.cos(-left), math.sin(-left)
         dx, dy = rx[at] - rx[r], ry[at] - ry[r]
-        px = rx[f] - rx[k0] + c * dx - s * dy
-        py = ry[f] - ry[k0] + s * dx + c * dy
+        px = fx - rx[k0] + c * dx - s * dy
+        py = fy - ry[k0] + s * dx + c * dy
         ex = ax + cos0 * px - sin0 * py - on_x
         ey = ay + sin0 * px + cos0 * py - on_y
         eh = wrap_pi(turn0 + rh[at] - left - on_h)
         score = float(np.max(np.hypot(ex, ey) / POSITION_LSB_M
                              + np.abs(eh) / HEADING_LSB_RAD))
         if best is None or score < best[0]:
-            best = (score, f, r)
+            best = (score, f, r, step)
     if best is None or (unsure and best[0] > FIT_LSB
                         and best[0] >= _exact_lsb(turn0 + rh[at] - on_h)):
         return None
-    return best[1], best[2]
+    return best[1], best[2], best[3]
+
+
+def _end(rel: tuple[FloatArray, FloatArray, FloatArray], f: int,
+         late: LateStep | None = None) -> tuple[float, float, float, tuple[int, int]]:
+    """The reference's pose (x, y m, heading rad) where the firmware's last step before the
+    re-prime ended: at frame ``f``, or one ``late`` step after it; and that step's counts."""
+    x, y, h = float(rel[0][f]), float(rel[1][f]), float(rel[2][f])
+    if late is None:
+        return x, y, h, (0, 0)
+    c, s = math.cos(h), math.sin(h)
+    return (x + c * late.x_m - s * late.y_m, y + s * late.x_m + c * late.y_m,
+            h + late.turn_rad, (late.d_left, late.d_right))
 
 
 def _exact_lsb(heading_off_rad: FloatArray) -> float:
@@ -308,6 +343,7 @@ def left_out(d_left: IntArray, d_right: IntArray, reprimes: dict[int, Reprime]) 
     for rep in reprimes.values():
         d_left[rep.f : rep.r] = 0
         d_right[rep.f : rep.r] = 0
+        d_left[rep.f], d_right[rep.f] = rep.late  # the late frame's step into f + 1 (fifolate)
 
 
 def left_out_at(k: int, reprimes: dict[int, Reprime]) -> bool:

@@ -413,7 +413,7 @@ class StreamReference:
     _sums: tuple[int, int, float, float, float, float] = (0, 0, 0.0, 0.0, 0.0, 0.0)
     _count: int = 0  # encoder frames fed
     _origin_s: float | None = None  # the carried frame's doubt origin (``doubt_origin_s``)
-    left_out: tuple[tuple[int, int], ...] = ()  # re-primes' steps (f, r] (``stream_reprime``)
+    left_out: tuple[tuple[int, int, int, int], ...] = ()  # re-primes' (f, r], late (stream_reprime)
     last_steps: tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]] | None = None  # the
     # firmware's step into each frame of the last chunk fed (d_left, d_right; host.judge.distance)
     last_refused: npt.NDArray[np.bool_] | None = None  # its frames refused in a run (refusednames)
@@ -461,11 +461,15 @@ class StreamReference:
         """The steps into frames ``into`` with those a declared stall's re-prime left out
         zeroed (``left_out``: frames (f, r], ``stallreprime.left_out``), the reference's only."""
         held = np.zeros(len(into), dtype=np.bool_)
-        for f, r in self.left_out:
+        for f, r, _, _ in self.left_out:
             held |= (into > f) & (into <= r)
         if not held.any():
             return d_left, d_right
-        return np.where(held, 0, d_left), np.where(held, 0, d_right)
+        d_left, d_right = np.where(held, 0, d_left), np.where(held, 0, d_right)
+        for f, _, late_left, late_right in self.left_out:  # a late frame's step (fifolate)
+            d_left, d_right = (np.where(into == f + 1, late_left, d_left),
+                               np.where(into == f + 1, late_right, d_right))
+        return d_left, d_right
 
     def _integrate(
         self, d_left: npt.NDArray[np.int64], d_right: npt.NDArray[np.int64]

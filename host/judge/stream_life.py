@@ -142,7 +142,7 @@ def life_chunks(
     max_wheel_speed_mm_s: SpeedBound, info: LifeInfo | None = None,
     times_of: frozenset[int] = frozenset(),
     on_encoders: Callable[[Encoders], None] | None = None,
-    left_out: tuple[tuple[int, int], ...] = (), tap: ReprimeTap | None = None,
+    left_out: tuple[tuple[int, int, int, int], ...] = (), tap: ReprimeTap | None = None,
 ) -> Iterator[tuple[PlacedChunk, TruthChunk]]:
     """``placed_chunks`` with the truth samples beside them (``stream_truth.StreamTruth``),
     each with the reference's rows at its encoder frame; ``info`` filled at the end;

@@ -16,7 +16,8 @@ only when the firmware's summaries hold such a word: ``stallreprime.any_declared
 per stall break, that window: the rows of the reference's increments (the stream's, element for
 element the whole log's), the samples' values, the encoder counts b - 1 .. b - 1 + FIFO_SPAN
 (the placement's allowance, ``breakspan.break_allowance`` on them) and the break's bus time
-(``stallreprime.declared_at``). ``_chosen`` then runs on exactly the whole judge's numbers.
+(``stallreprime.declared_at``), and the refused CRC-right encoder frames after b - 1 ..
+b - 1 + FIFO_SPAN (``fifolate``). ``_chosen`` then runs on exactly the whole judge's numbers.
 The placing passes after it integrate with those steps left out
 (``stream.StreamReference.left_out``).
 
@@ -33,12 +34,15 @@ import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
 from odocan.host.judge.breakspan import break_allowance
+from odocan.host.judge.fifolate import Judged, LateStep, after_frames, late_step
 from odocan.host.judge.nearthreshold import Resets
 from odocan.host.judge.reference import Geometry
+from odocan.host.judge.refusedenc import Refused, refused_encoders
 from odocan.host.judge.samples import ENC_E2E_PAGE, Encoders
 from odocan.host.judge.stallreprime import (
     COMPARED,
     FIFO_SPAN,
+    Pair,
     Reprime,
     _chosen,
     any_declared,
@@ -66,6 +70,7 @@ class _Window:
     after: list[Sample] = field(default_factory=list)  # the first COMPARED samples from b
     counts: dict[str, list[int]] = field(
         default_factory=lambda: {"seq": [], "left": [], "right": []})  # b - 1 .. + FIFO_SPAN
+    late: list[tuple[int, int, int]] = field(default_factory=list)  # refused after those: k, L, R
 
 
 @dataclass
@@ -77,9 +82,10 @@ class StallReprimes:
     allowance_m: dict[int, float] = field(default_factory=dict)
 
     @property
-    def left_out(self) -> tuple[tuple[int, int], ...]:
-        """The steps left out: into the frames (f, r] from e0 (``stallreprime.left_out``)."""
-        return tuple((rep.f, rep.r) for _, rep in sorted(self.reprimes.items()))
+    def left_out(self) -> tuple[tuple[int, int, int, int], ...]:
+        """The steps left out: into the frames (f, r] from e0 (``stallreprime.left_out``), and
+        the late frame's step into f + 1 (``fifolate``)."""
+        return tuple((rep.f, rep.r, *rep.late) for _, rep in sorted(self.reprimes.items()))
 
 
 class ReprimeTap:
@@ -98,9 +104,16 @@ class ReprimeTap:
         """A chunk, its E2E verdicts and accepted encoder frames (``g``: their numbers)."""
         self.cycle_s = enc.cycle_s
         g0 = int(g[0]) if len(g) else 0  # the numbers run on: g0, g0 + 1, ...
+        refused: tuple[Refused, npt.NDArray[np.int64]] | None = None
         for w in self.windows:
             if w.b - 1 + FIFO_SPAN < g0 or w.b - 1 >= g0 + len(g):
                 continue
+            if refused is None:  # the late frames a resumed firmware may take (fifolate)
+                late = refused_encoders(chunk, accepted, self.decoder)
+                refused = late, g0 + after_frames(late, enc.timestamp_s)
+            w.late += [(int(k), int(left), int(right)) for k, left, right in zip(
+                *refused[1:], refused[0].left, refused[0].right, strict=True)
+                if w.b - 1 <= k <= w.b - 1 + FIFO_SPAN]
             if 0 <= w.b - g0 < len(g):
                 w.b_s = float(enc.timestamp_s[w.b - g0])
             for k in range(max(w.b - 1 - g0, 0), min(w.b + FIFO_SPAN - g0, len(g))):
@@ -155,10 +168,11 @@ class ReprimeTap:
             raise NotStreamable(BEFORE_PAGE)
         by_break = {w.b: w for w in self.windows}
         for b, (stall_s, sure) in sorted(declared.items()):
-            pair = _pair(by_break[b + e0], e0, start, unsure=not sure)
+            pair = _pair(by_break[b + e0], e0, start, Judged(geometry, integrator, bits),
+                         unsure=not sure)
             if pair is None:
                 continue
-            out.reprimes[b] = Reprime(pair[0] - e0, pair[1] - e0, stall_s, sure)
+            out.reprimes[b] = Reprime(pair[0] - e0, pair[1] - e0, stall_s, sure, pair[2])
             out.allowance_m[b + e0] = _allowance(by_break[b + e0], pair[0], geometry, bits,
                                                  integrator)
         return out
@@ -185,8 +199,8 @@ def _sample(chunk: PlacedChunk, k: int) -> Sample:
             float(chunk.rel_heading_rad[k]))
 
 
-def _pair(w: _Window, e0: int, start: tuple[float, float, float] | None, *,
-          unsure: bool = False) -> tuple[int, int] | None:
+def _pair(w: _Window, e0: int, start: tuple[float, float, float] | None, judged: Judged, *,
+          unsure: bool = False) -> Pair | None:
     """``stallreprime._chosen`` on the window (absolute frames): its frames laid out as
     one short path (the anchor, frames b - 1 .. first, the samples after), positions for
     frames (the pair's ranges lie in b - 1 .. first, contiguous there)."""
@@ -211,8 +225,17 @@ def _pair(w: _Window, e0: int, start: tuple[float, float, float] | None, *,
                np.array([s[1] for s in w.after]), np.array([s[2] for s in w.after]),
                np.array([s[3] for s in w.after]))
     pair = _chosen(position[w.b], position[w.first], (position[anchor[0]], *anchor[1:4]),
-                   (rx, ry, rh), samples, unsure=unsure)
-    return None if pair is None else (pair[0] - shift, pair[1] - shift)
+                   (rx, ry, rh), samples, unsure=unsure, late=_late(w, position, judged))
+    return None if pair is None else (pair[0] - shift, pair[1] - shift, pair[2])
+
+
+def _late(w: _Window, position: dict[int, int], judged: Judged) -> list[LateStep]:
+    """The window's late frames' steps (``fifolate``), their ``k`` laid out as ``_pair``'s."""
+    counts = w.counts
+    return [late_step(position[k], (left, right), (counts["left"][k - w.b + 1],
+                                                   counts["right"][k - w.b + 1]), judged)
+            for k, left, right in w.late
+            if k in position and k - w.b + 1 < len(counts["left"])]
 
 
 def _allowance(w: _Window, f: int, geometry: Geometry, bits: int, integrator: str) -> float:
