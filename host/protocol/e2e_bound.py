@@ -36,21 +36,21 @@ import numpy as np
 import numpy.typing as npt
 
 from odocan.host.io.logs import FrameArrays
+from odocan.host.protocol.decode import BulkDecoder
 
-# WHEEL_ENCODERS' LEFT_COUNT and RIGHT_COUNT (dbc/odocan.dbc: start bits 16 and 40, 24 bits,
-# little-endian): their first byte
-LEFT_BYTE, RIGHT_BYTE, COUNT_BYTES = 2, 5, 3
 Beyond = Callable[[int, int, int], bool]  # (frame a, frame b, periods): the step beyond the bound
 
 
 @dataclass(frozen=True)
 class StepBound:
-    """The firmware's per-period step bound in counts (left, right) and the counters' width on
-    the wire (bits, for the wrap-safe delta)."""
+    """The firmware's per-period step bound in counts (left, right), the counters' width on
+    the wire (bits, for the wrap-safe delta), and the decoder of the DBC the analysis reads
+    (WHEEL_ENCODERS' LEFT_COUNT and RIGHT_COUNT where that DBC puts them)."""
 
     left_counts: int
     right_counts: int
     bits: int
+    decoder: BulkDecoder
 
 
 _BOUND: ContextVar[StepBound | None] = ContextVar("e2e_step_bound", default=None)
@@ -66,18 +66,17 @@ def step_bound(bound: StepBound | None) -> Iterator[None]:
         _BOUND.reset(token)
 
 
-def _counts(frames: FrameArrays, index: npt.NDArray[np.intp], first: int) -> npt.NDArray[np.int64]:
-    data = frames.data[index].astype(np.int64)
-    return data[:, first] | (data[:, first + 1] << 8) | (data[:, first + 2] << 16)
-
-
 def beyond_bound(frames: FrameArrays, index: npt.NDArray[np.intp]) -> Beyond | None:
     """For the encoder frames ``index``: whether the step from frame ``a`` to frame ``b``
-    (positions in ``index``) is beyond the bound in force over ``periods``; None without one."""
+    (positions in ``index``) is beyond the bound in force over ``periods``; None without one
+    (or when ``index`` is not the DBC's WHEEL_ENCODERS frames)."""
     bound = _BOUND.get()
-    if bound is None or frames.data.shape[1] < RIGHT_BYTE + COUNT_BYTES:
+    if bound is None:
         return None
-    left, right = _counts(frames, index, LEFT_BYTE), _counts(frames, index, RIGHT_BYTE)
+    rows = bound.decoder.decode(frames, "WHEEL_ENCODERS")
+    if not np.array_equal(rows["index"], index):
+        return None
+    left, right = rows["LEFT_COUNT"].astype(np.int64), rows["RIGHT_COUNT"].astype(np.int64)
     half = 1 << (bound.bits - 1)
 
     def wrapped(d: int) -> int:
